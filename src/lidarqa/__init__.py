@@ -1,0 +1,30 @@
+"""lidarqa: how accurate is this LiDAR point cloud?
+
+Ground filtering (progressive TIN densification, segment-based PTD), geometry
+(planes, edges, corners) and accuracy assessment (line-segment Hausdorff
+matching, check points with ASPRS/NSSDA statistics, height error propagation
+with w-tests), with LAS/LAZ I/O, a command line and HTML reports.
+"""
+
+from __future__ import annotations
+
+from ._version import __version__
+from .errors import LidarQAError
+from .io import PointCloud, open, read, write  # noqa: A004
+
+__all__ = ["__version__", "LidarQAError", "PointCloud", "read", "write", "open", "show_versions"]
+
+
+def show_versions() -> dict[str, str]:
+    """Versions of lidarqa, Python and the libraries it uses (missing ones as None)."""
+    import importlib.metadata as md
+    import platform
+
+    out = {"lidarqa": __version__, "python": platform.python_version(), "platform": platform.platform()}
+    for dist in ("numpy", "scipy", "laspy", "lazrs", "pyproj", "numba", "startinpy", "shapely",
+                 "pyogrio", "matplotlib", "click", "rich", "dask", "distributed"):
+        try:
+            out[dist] = md.version(dist)
+        except md.PackageNotFoundError:
+            out[dist] = None
+    return out

@@ -1,0 +1,232 @@
+"""Shared plumbing of every command: options, JSON document, progress, outputs.
+
+The contract (issue #2): ``lidarqa COMMAND ... [--json PATH]`` writes
+``{"lidarqa_version", "command", "inputs", "parameters", "results"}``;
+human-readable text goes to stdout, progress to stderr (silenced by ``-q``),
+errors become one line on stderr and a non-zero exit.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import time
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import click
+import numpy as np
+
+from .._version import __version__
+from ..io._atomic import atomic_path, check_distinct, check_output
+
+__all__ = [
+    "Settings",
+    "common_options",
+    "settings",
+    "to_jsonable",
+    "json_document",
+    "write_json",
+    "prepare_outputs",
+    "Steps",
+    "echo",
+    "parse_int_list",
+    "INT_LIST",
+]
+
+
+@dataclass
+class Settings:
+    quiet: bool = False
+    verbose: int = 0
+    overwrite: bool = False
+    json_path: str | None = None
+
+
+def settings(ctx: click.Context | None = None) -> Settings:
+    """The merged global and per-command settings of the current invocation."""
+    ctx = ctx or click.get_current_context()
+    root = ctx.find_root()
+    if root.obj is None:
+        root.obj = Settings()
+    return root.obj
+
+
+def _merge_flag(name: str) -> Callable[[click.Context, click.Parameter, Any], Any]:
+    def callback(ctx: click.Context, param: click.Parameter, value: Any) -> Any:
+        s = settings(ctx)
+        if name == "verbose":
+            s.verbose = max(s.verbose, int(value or 0))
+        elif name == "json_path":
+            s.json_path = value
+        elif value:
+            setattr(s, name, True)
+        return value
+
+    return callback
+
+
+def common_options(func: Callable[..., Any]) -> Callable[..., Any]:
+    """Add ``--json PATH``, ``--overwrite``, ``-q`` and ``-v`` to a command.
+
+    The values land in :func:`settings`; the command function does not receive them.
+    """
+    opts = [
+        click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None,
+                     expose_value=False, callback=_merge_flag("json_path"),
+                     help="Also write the results as a JSON document to this path."),
+        click.option("--overwrite", is_flag=True, expose_value=False, callback=_merge_flag("overwrite"),
+                     help="Replace output files that already exist."),
+        click.option("-q", "--quiet", is_flag=True, expose_value=False, callback=_merge_flag("quiet"),
+                     help="No progress display."),
+        click.option("-v", "--verbose", count=True, expose_value=False, callback=_merge_flag("verbose"),
+                     help="Show tracebacks on errors."),
+    ]
+    for opt in reversed(opts):
+        func = opt(func)
+    return func
+
+
+def parse_int_list(value: str | None) -> list[int] | None:
+    """Parse ``"1,7,9"`` into ``[1, 7, 9]`` (None stays None)."""
+    if value is None or value == "":
+        return None
+    out = []
+    for token in str(value).split(","):
+        token = token.strip()
+        if not token:
+            continue
+        try:
+            out.append(int(token))
+        except ValueError:
+            raise click.BadParameter(f"expected comma-separated integers, got {value!r}") from None
+    return out
+
+
+class _IntList(click.ParamType):
+    name = "INT[,INT...]"
+
+    def convert(self, value: Any, param: Any, ctx: Any) -> list[int] | None:
+        if isinstance(value, list):
+            return value
+        return parse_int_list(value)
+
+
+INT_LIST = _IntList()
+
+
+def to_jsonable(obj: Any) -> Any:
+    """Convert numpy/dataclass/Path values to plain JSON types; NaN and inf become None."""
+    import dataclasses
+
+    if obj is None or isinstance(obj, bool | str):
+        return obj
+    if isinstance(obj, int | np.integer):
+        return int(obj)
+    if isinstance(obj, float | np.floating):
+        f = float(obj)
+        return f if math.isfinite(f) else None
+    if isinstance(obj, np.bool_):
+        return bool(obj)
+    if isinstance(obj, np.ndarray):
+        return [to_jsonable(v) for v in obj.tolist()]
+    if isinstance(obj, Path):
+        return str(obj)
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        return {f.name: to_jsonable(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
+    if isinstance(obj, Mapping):
+        return {str(k): to_jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple | set | frozenset):
+        return [to_jsonable(v) for v in obj]
+    if hasattr(obj, "to_dict"):
+        return to_jsonable(obj.to_dict())
+    return str(obj)
+
+
+def json_document(command: str, inputs: Any, parameters: Mapping[str, Any], results: Any) -> dict:
+    """The JSON document every command writes with ``--json``."""
+    return {
+        "lidarqa_version": __version__,
+        "command": command,
+        "inputs": to_jsonable(inputs),
+        "parameters": to_jsonable(dict(parameters)),
+        "results": to_jsonable(results),
+    }
+
+
+def write_json(doc: Any, path: str | Path, *, overwrite: bool = False) -> Path:
+    """Write a JSON document atomically (strict JSON: no NaN)."""
+    with atomic_path(path, overwrite=overwrite) as tmp:
+        tmp.write_text(json.dumps(to_jsonable(doc), indent=2, allow_nan=False) + "\n", encoding="utf-8")
+    return Path(path)
+
+
+def prepare_outputs(*outputs: str | Path | None, inputs: tuple = ()) -> None:
+    """Check every output (and the ``--json`` path) before any work starts.
+
+    Refuses an existing output without ``--overwrite`` and an output that is an input.
+    """
+    s = settings()
+    for out in (*outputs, s.json_path):
+        if out is None:
+            continue
+        check_output(out, overwrite=s.overwrite)
+        check_distinct(out, *[i for i in inputs if i is not None])
+
+
+def finish(command: str, *, inputs: Any, parameters: Mapping[str, Any], results: Any) -> dict:
+    """Write the ``--json`` document if asked; return it."""
+    s = settings()
+    doc = json_document(command, inputs, parameters, results)
+    if s.json_path:
+        write_json(doc, s.json_path, overwrite=s.overwrite)
+    return doc
+
+
+def echo(text: str = "") -> None:
+    """Human-readable output on stdout."""
+    click.echo(text)
+
+
+class Steps:
+    """Progress display for the steps of a long command (rich, on stderr).
+
+    ``with steps("Reading input"):`` shows a spinner while the step runs and a
+    tick with its duration afterwards; nothing is shown with ``-q``. For loops
+    with a known length use :meth:`track`.
+    """
+
+    def __init__(self, quiet: bool | None = None) -> None:
+        if quiet is None:
+            try:
+                quiet = settings().quiet
+            except RuntimeError:
+                quiet = True
+        self.quiet = quiet
+        self._console = None
+        if not quiet:
+            from rich.console import Console
+
+            self._console = Console(stderr=True)
+
+    @contextlib.contextmanager
+    def __call__(self, description: str) -> Iterator[None]:
+        if self._console is None:
+            yield
+            return
+        t0 = time.perf_counter()
+        with self._console.status(description + " ..."):
+            yield
+        self._console.print(f"[green]✓[/green] {description} [dim]({time.perf_counter() - t0:.1f} s)[/dim]")
+
+    def track(self, iterable: Any, description: str, total: int | None = None) -> Iterator[Any]:
+        if self._console is None:
+            yield from iterable
+            return
+        from rich.progress import track
+
+        yield from track(iterable, description=description, total=total, console=self._console,
+                         transient=True)

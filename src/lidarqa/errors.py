@@ -1,0 +1,91 @@
+"""Exceptions and warnings raised by lidarqa.
+
+Every error lidarqa raises on purpose derives from :class:`LidarQAError`, so
+callers (and the command line) can catch one class. Most also derive from the
+matching builtin (``ValueError``, ``OSError``) so generic handlers still work.
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "LidarQAError",
+    "InvalidPointsError",
+    "OptionError",
+    "ReadError",
+    "LasReadError",
+    "WriteError",
+    "OutputExistsError",
+    "CRSMismatchError",
+    "DegenerateGeometryError",
+    "EstimationError",
+    "ConfigError",
+    "TilingError",
+    "MissingDependencyError",
+    "LidarQAWarning",
+    "DegenerateGeometryWarning",
+    "DataQualityWarning",
+]
+
+
+class LidarQAError(Exception):
+    """Root of every error raised by lidarqa."""
+
+
+class InvalidPointsError(LidarQAError, ValueError):
+    """Point array of the wrong shape or dtype, empty, or with NaN/inf."""
+
+
+class OptionError(LidarQAError, ValueError):
+    """An option value out of range or not one of the allowed choices."""
+
+
+class ReadError(LidarQAError, OSError):
+    """An input file is missing, unreadable or malformed."""
+
+
+class LasReadError(ReadError):
+    """A LAS/LAZ file could not be read (wraps laspy errors)."""
+
+
+class WriteError(LidarQAError, OSError):
+    """An output could not be written."""
+
+
+class OutputExistsError(WriteError, FileExistsError):
+    """The output exists and overwriting was not requested."""
+
+
+class CRSMismatchError(LidarQAError, ValueError):
+    """Two datasets that must share a CRS do not."""
+
+
+class DegenerateGeometryError(LidarQAError, ValueError):
+    """Geometry too degenerate to compute (collinear, parallel, too few points)."""
+
+
+class EstimationError(LidarQAError, ValueError):
+    """A least-squares or robust estimation could not be carried out."""
+
+
+class ConfigError(LidarQAError, ValueError):
+    """An assessment configuration is invalid (unknown key, wrong type, ...)."""
+
+
+class TilingError(LidarQAError):
+    """Tiled processing could not be set up or merged."""
+
+
+class MissingDependencyError(LidarQAError, ImportError):
+    """An optional dependency (extra) is needed but not installed."""
+
+
+class LidarQAWarning(UserWarning):
+    """Base class of lidarqa warnings."""
+
+
+class DegenerateGeometryWarning(LidarQAWarning):
+    """Some geometry was skipped because it was degenerate."""
+
+
+class DataQualityWarning(LidarQAWarning):
+    """The input data is usable but suspicious (partly-zero return numbers, few points...)."""

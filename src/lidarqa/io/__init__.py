@@ -1,0 +1,79 @@
+"""Reading and writing point clouds and vector data.
+
+``read`` dispatches on the file extension: ``.las``/``.laz`` through laspy,
+``.csv``/``.txt``/``.xyz``/``.pts`` as text tables, ``.ply`` as PLY.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from ..errors import ReadError, WriteError
+from ._atomic import atomic_path, check_distinct, check_output
+from .las import LasReader, las_header_summary, read_las, write_las
+from .pointcloud import PointCloud
+from .text import read_text, write_text
+
+__all__ = [
+    "PointCloud",
+    "LasReader",
+    "read",
+    "write",
+    "open",
+    "read_las",
+    "write_las",
+    "read_text",
+    "write_text",
+    "atomic_path",
+    "check_output",
+    "check_distinct",
+    "las_header_summary",
+    "CLOUD_SUFFIXES",
+]
+
+_LAS = {".las", ".laz"}
+_TEXT = {".csv", ".txt", ".xyz", ".pts"}
+_PLY = {".ply"}
+CLOUD_SUFFIXES = _LAS | _TEXT | _PLY
+
+
+def read(path: str | os.PathLike) -> PointCloud:
+    """Read a point cloud (LAS/LAZ, CSV/XYZ text, PLY) into a :class:`PointCloud`.
+
+    Examples
+    --------
+    >>> import lidarqa
+    >>> cloud = lidarqa.read("tests/data/samp24-utm.laz")  # doctest: +SKIP
+    >>> cloud.xyz.shape  # doctest: +SKIP
+    (7492, 3)
+    """
+    suffix = Path(path).suffix.lower()
+    if suffix in _LAS:
+        return read_las(path)
+    if suffix in _TEXT:
+        return read_text(path)
+    if suffix in _PLY:
+        from .ply import read_ply
+
+        return read_ply(path)
+    raise ReadError(
+        f"cannot tell the format of {path}: expected one of {', '.join(sorted(CLOUD_SUFFIXES))}"
+    )
+
+
+def write(cloud: PointCloud, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
+    """Write a cloud; the format follows the extension (``.las``, ``.laz``, ``.csv``)."""
+    suffix = Path(path).suffix.lower()
+    if suffix in _LAS:
+        return write_las(cloud, path, overwrite=overwrite)
+    if suffix in {".csv", ".txt", ".xyz"}:
+        return write_text(cloud, path, overwrite=overwrite)
+    raise WriteError(f"cannot write point clouds as {suffix!r}: use .las, .laz or .csv")
+
+
+def open(path: str | os.PathLike) -> LasReader:  # noqa: A001 - mirrors laspy.open
+    """Open a LAS/LAZ file for chunked reading: ``for chunk in r.chunks(n)``."""
+    if Path(path).suffix.lower() not in _LAS:
+        raise ReadError(f"chunked reading needs a .las or .laz file, got {path}")
+    return LasReader(path)

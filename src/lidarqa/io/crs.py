@@ -1,0 +1,103 @@
+"""CRS helpers: EPSG codes, vertical units, height conversion, CRS comparison."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ..errors import CRSMismatchError
+
+__all__ = ["crs_epsg", "crs_name", "vertical_unit", "z_to_metres_factor", "heights_to_metres",
+           "ensure_same_crs", "parse_crs"]
+
+
+def parse_crs(value: Any) -> Any:
+    """A pyproj CRS from an EPSG int, 'EPSG:xxxx', WKT or a CRS (None stays None)."""
+    if value is None or value == "":
+        return None
+    from pyproj import CRS
+    from pyproj.exceptions import CRSError
+
+    from ..errors import OptionError
+
+    try:
+        return CRS.from_user_input(value)
+    except CRSError as exc:
+        raise OptionError(f"not a CRS: {value!r} ({exc})") from exc
+
+
+def crs_epsg(crs: Any) -> int | None:
+    """The EPSG code of `crs` (of a compound CRS as a whole, else None)."""
+    if crs is None:
+        return None
+    try:
+        code = crs.to_epsg(min_confidence=70)
+    except Exception:
+        code = None
+    return int(code) if code is not None else None
+
+
+def crs_name(crs: Any) -> str | None:
+    return None if crs is None else str(crs.name)
+
+
+def _vertical_axis(crs: Any) -> Any:
+    if crs is None:
+        return None
+    candidates = [crs]
+    if crs.is_compound:
+        candidates = list(crs.sub_crs_list)
+    for c in candidates:
+        for axis in c.axis_info:
+            if axis.direction in ("up", "down"):
+                return axis
+    return None
+
+
+def vertical_unit(crs: Any) -> tuple[str | None, float | None]:
+    """Name and metre factor of the vertical axis (e.g. ``("US survey foot", 0.3048006)``).
+
+    ``(None, None)`` when the CRS has no vertical axis. A 2D projected CRS is
+    assumed to carry heights in its horizontal unit only by :func:`z_to_metres_factor`.
+    """
+    axis = _vertical_axis(crs)
+    if axis is None:
+        return None, None
+    return str(axis.unit_name), float(axis.unit_conversion_factor)
+
+
+def z_to_metres_factor(crs: Any) -> float:
+    """Factor that turns z values into metres (1.0 when unknown or already metres)."""
+    _, factor = vertical_unit(crs)
+    return 1.0 if factor is None else factor
+
+
+def heights_to_metres(xyz: np.ndarray, crs: Any) -> np.ndarray:
+    """A copy of `xyz` with z converted to metres according to the CRS's vertical unit."""
+    out = np.array(xyz, dtype=np.float64, copy=True)
+    out[:, 2] *= z_to_metres_factor(crs)
+    return out
+
+
+def ensure_same_crs(a: Any, b: Any, *, what: tuple[str, str] = ("test", "reference"),
+                    allow_missing: bool = True) -> None:
+    """Raise :class:`CRSMismatchError` if two datasets declare different CRSs.
+
+    A dataset without a CRS is accepted when `allow_missing` (the user vouches
+    for it). Equality ignores naming differences (pyproj's ``equals`` with
+    ``ignore_axis_order``).
+    """
+    if a is None or b is None:
+        if allow_missing:
+            return
+        raise CRSMismatchError(f"{what[0 if a is None else 1]} data has no CRS")
+    try:
+        same = a.equals(b, ignore_axis_order=True)
+    except Exception:
+        same = a == b
+    if not same:
+        raise CRSMismatchError(
+            f"{what[0]} CRS ({crs_name(a)}) differs from {what[1]} CRS ({crs_name(b)}); "
+            "reproject one of them first (or ask for reprojection)"
+        )

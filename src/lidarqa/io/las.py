@@ -1,0 +1,309 @@
+"""LAS/LAZ reading and lossless writing. The only module that imports laspy."""
+
+from __future__ import annotations
+
+import copy
+import os
+import warnings
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import InvalidPointsError, LasReadError, WriteError
+from ._atomic import atomic_path, check_output
+from .pointcloud import PointCloud
+
+__all__ = ["LasSource", "LasReader", "read_las", "write_las", "open_las", "las_header_summary"]
+
+_XYZ = ("X", "Y", "Z", "x", "y", "z")
+
+
+@dataclass(eq=False)
+class LasSource:
+    """What is needed to write a cloud back exactly as it was read."""
+
+    header: Any  # laspy.LasHeader (with its VLRs)
+    records: np.ndarray  # raw packed point records (structured array)
+    evlrs: Any
+    point_format_id: int
+    version: str
+
+    def subset(self, idx: Any) -> LasSource:
+        return LasSource(self.header, self.records[idx], self.evlrs, self.point_format_id, self.version)
+
+    @property
+    def scales(self) -> np.ndarray:
+        return np.asarray(self.header.scales, dtype=float)
+
+    @property
+    def offsets(self) -> np.ndarray:
+        return np.asarray(self.header.offsets, dtype=float)
+
+
+def _laspy():
+    import laspy
+
+    return laspy
+
+
+def _check_input(path: str | os.PathLike) -> Path:
+    p = Path(path)
+    if not p.exists():
+        raise LasReadError(f"input {p} does not exist")
+    if p.is_dir():
+        raise LasReadError(f"input {p} is a directory, not a point cloud file")
+    size = p.stat().st_size
+    if size == 0:
+        raise LasReadError(f"input {p} is empty (0 bytes)")
+    return p
+
+
+def _check_record_count(p: Path, header: Any) -> None:
+    """An uncompressed LAS must hold exactly header.point_count records."""
+    if header.are_points_compressed:
+        return
+    size = p.stat().st_size
+    start = int(header.offset_to_point_data)
+    end = size
+    evlr_start = getattr(header, "start_of_first_evlr", 0) or 0
+    if getattr(header, "number_of_evlrs", 0) and evlr_start > start:
+        end = evlr_start
+    rec = int(header.point_format.size)
+    available = (end - start) // rec if rec else 0
+    remainder = (end - start) - available * rec
+    if available != header.point_count or remainder not in (0,):
+        raise LasReadError(
+            f"input {p}: header declares {header.point_count} points but the file holds "
+            f"{available} record(s) of {rec} bytes (+{remainder} stray bytes); the file is "
+            "truncated or its header is wrong"
+        )
+
+
+def _crs_of(header: Any) -> Any:
+    try:
+        return header.parse_crs()
+    except Exception:  # a broken CRS VLR must not make the points unreadable
+        warnings.warn("could not parse the file's CRS VLR; CRS left unset", stacklevel=3)
+        return None
+
+
+def _cloud_from_points(points: Any, header: Any, evlrs: Any, path: Path) -> PointCloud:
+    names = [n for n in points.point_format.dimension_names if n not in _XYZ]
+    xyz = np.empty((len(points), 3), dtype=np.float64)
+    xyz[:, 0] = points.x
+    xyz[:, 1] = points.y
+    xyz[:, 2] = points.z
+    fields = {name: np.array(points[name]) for name in names}
+    source = LasSource(
+        header=header,
+        records=points.array,
+        evlrs=evlrs,
+        point_format_id=int(header.point_format.id),
+        version=str(header.version),
+    )
+    return PointCloud(xyz=xyz, fields=fields, crs=_crs_of(header), source=source, path=str(path))
+
+
+def read_las(path: str | os.PathLike) -> PointCloud:
+    """Read a whole LAS or LAZ file (LAS 1.0-1.4, any point format).
+
+    Raises
+    ------
+    LasReadError
+        Missing, empty, not LAS, truncated, or a header whose point count
+        disagrees with the records.
+    """
+    laspy = _laspy()
+    p = _check_input(path)
+    try:
+        with laspy.open(str(p)) as reader:
+            header = reader.header
+            _check_record_count(p, header)
+            las = reader.read()
+    except LasReadError:
+        raise
+    except Exception as exc:  # laspy, lazrs and struct errors alike
+        raise LasReadError(f"cannot read {p} as LAS/LAZ: {_reason(exc)}") from exc
+    if len(las.points) != las.header.point_count:
+        raise LasReadError(
+            f"input {p}: header declares {las.header.point_count} points but "
+            f"{len(las.points)} could be read"
+        )
+    return _cloud_from_points(las.points, las.header, getattr(las, "evlrs", None), p)
+
+
+def _reason(exc: BaseException) -> str:
+    text = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+    return text[:200]
+
+
+class LasReader:
+    """Streaming access to a LAS/LAZ file: header facts and chunks of points.
+
+    Use through :func:`lidarqa.io.open`::
+
+        with lidarqa.open("big.laz") as r:
+            for chunk in r.chunks(5_000_000):
+                ...
+    """
+
+    def __init__(self, path: str | os.PathLike) -> None:
+        laspy = _laspy()
+        self.path = _check_input(path)
+        try:
+            self._reader = laspy.open(str(self.path))
+        except Exception as exc:
+            raise LasReadError(f"cannot read {self.path} as LAS/LAZ: {_reason(exc)}") from exc
+        self.header = self._reader.header
+        _check_record_count(self.path, self.header)
+        self.crs = _crs_of(self.header)
+
+    @property
+    def n_points(self) -> int:
+        return int(self.header.point_count)
+
+    @property
+    def bounds(self) -> tuple[float, float, float, float, float, float]:
+        mn, mx = self.header.mins, self.header.maxs
+        return (float(mn[0]), float(mn[1]), float(mn[2]), float(mx[0]), float(mx[1]), float(mx[2]))
+
+    @property
+    def dimension_names(self) -> list[str]:
+        return list(self.header.point_format.dimension_names)
+
+    def chunks(self, chunk_size: int = 5_000_000) -> Iterator[PointCloud]:
+        """Yield successive clouds of at most `chunk_size` points."""
+        if chunk_size <= 0:
+            raise InvalidPointsError(f"chunk_size must be > 0, got {chunk_size}")
+        seen = 0
+        try:
+            for points in self._reader.chunk_iterator(int(chunk_size)):
+                seen += len(points)
+                yield _cloud_from_points(points, self.header, None, self.path)
+        except Exception as exc:
+            if isinstance(exc, LasReadError | GeneratorExit):
+                raise
+            raise LasReadError(f"cannot read {self.path}: {_reason(exc)}") from exc
+        if seen != self.n_points:
+            raise LasReadError(
+                f"input {self.path}: header declares {self.n_points} points but {seen} could be read"
+            )
+
+    def close(self) -> None:
+        self._reader.close()
+
+    def __enter__(self) -> LasReader:
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+
+def open_las(path: str | os.PathLike) -> LasReader:
+    """Open a LAS/LAZ file for streaming (see :class:`LasReader`)."""
+    return LasReader(path)
+
+
+def _new_las(cloud: PointCloud) -> Any:
+    """Build a fresh LAS 1.4 / PDRF 6 (or 7 with RGB) for a cloud with no LAS source."""
+    laspy = _laspy()
+    has_rgb = all(c in cloud.fields for c in ("red", "green", "blue"))
+    header = laspy.LasHeader(point_format=7 if has_rgb else 6, version="1.4")
+    mins = cloud.xyz.min(axis=0) if len(cloud) else np.zeros(3)
+    header.offsets = np.floor(mins)
+    header.scales = np.array([0.001, 0.001, 0.001])
+    std = set(header.point_format.dimension_names)
+    extra = []
+    for name, values in cloud.fields.items():
+        if name not in std:
+            dt = np.asarray(values).dtype
+            if dt == bool:
+                dt = np.dtype(np.uint8)
+            extra.append(laspy.ExtraBytesParams(name=name, type=dt))
+    if extra:
+        header.add_extra_dims(extra)
+    if cloud.crs is not None:
+        try:
+            header.add_crs(cloud.crs)
+        except Exception:
+            warnings.warn("could not store the CRS in the LAS header", stacklevel=3)
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = cloud.x, cloud.y, cloud.z
+    for name, values in cloud.fields.items():
+        values = np.asarray(values)
+        las[name] = values.astype(np.uint8) if values.dtype == bool else values
+    return las
+
+
+def _las_from_source(cloud: PointCloud) -> Any:
+    laspy = _laspy()
+    src: LasSource = cloud.source
+    header = copy.deepcopy(src.header)
+    records = np.array(src.records, copy=True)
+    points = laspy.PackedPointRecord(records, header.point_format)
+    las = laspy.LasData(header=header, points=points)
+    if src.evlrs is not None:
+        las.evlrs = copy.deepcopy(src.evlrs)
+    # Only touch what changed, so unchanged values keep their exact raw integers.
+    current = np.column_stack([np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)])
+    if current.shape != cloud.xyz.shape or not np.array_equal(current, cloud.xyz):
+        try:
+            las.x, las.y, las.z = cloud.x, cloud.y, cloud.z
+        except Exception as exc:
+            raise WriteError(f"coordinates do not fit the file's scale/offset: {_reason(exc)}") from exc
+    dims = set(las.point_format.dimension_names)
+    for name, values in cloud.fields.items():
+        if name not in dims:
+            raise WriteError(f"field {name!r} is not a dimension of the source point format")
+        old = np.asarray(las[name])
+        if not np.array_equal(old, values):
+            las[name] = np.asarray(values)
+    return las
+
+
+def write_las(
+    cloud: PointCloud,
+    path: str | os.PathLike,
+    *,
+    overwrite: bool = False,
+    compress: bool | None = None,
+) -> Path:
+    """Write `cloud` to LAS or LAZ, atomically.
+
+    A cloud read from LAS/LAZ keeps its header, VLRs, EVLRs, point format,
+    scales, offsets and every dimension; unchanged values keep their exact raw
+    integers, so a read-write cycle reproduces the point records bit for bit.
+
+    Parameters
+    ----------
+    compress : bool, optional
+        LAZ or LAS; by default from the extension (``.laz`` compresses).
+    overwrite : bool, default False
+        Replace an existing file.
+    """
+    target = check_output(path, overwrite=overwrite)
+    if compress is None:
+        compress = target.suffix.lower() == ".laz"
+    las = _las_from_source(cloud) if cloud.source is not None else _new_las(cloud)
+    with atomic_path(target, overwrite=overwrite) as tmp:
+        try:
+            las.write(str(tmp), do_compress=bool(compress))
+        except Exception as exc:
+            raise WriteError(f"cannot write {target}: {_reason(exc)}") from exc
+    return target
+
+
+def las_header_summary(cloud_or_reader: Any) -> dict[str, Any]:
+    """Version, point format, scales, offsets and software of a LAS source."""
+    header = cloud_or_reader.source.header if hasattr(cloud_or_reader, "source") else cloud_or_reader.header
+    return {
+        "version": str(header.version),
+        "point_format": int(header.point_format.id),
+        "scales": [float(s) for s in header.scales],
+        "offsets": [float(o) for o in header.offsets],
+        "generating_software": str(getattr(header, "generating_software", "")).strip("\x00 "),
+        "n_vlrs": len(header.vlrs),
+    }

@@ -1,0 +1,120 @@
+"""Text point clouds: XYZ / CSV / TXT with a header naming the columns."""
+
+from __future__ import annotations
+
+import csv
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InvalidPointsError, ReadError
+from ._atomic import atomic_path
+from .pointcloud import PointCloud
+
+__all__ = ["read_text", "write_text", "sniff_header"]
+
+
+def _open_checked(path: str | os.PathLike) -> Path:
+    p = Path(path)
+    if not p.exists():
+        raise ReadError(f"input {p} does not exist")
+    if p.is_dir():
+        raise ReadError(f"input {p} is a directory, not a file")
+    if p.stat().st_size == 0:
+        raise ReadError(f"input {p} is empty (0 bytes)")
+    return p
+
+
+def _is_number(token: str) -> bool:
+    try:
+        float(token)
+    except ValueError:
+        return False
+    return True
+
+
+def sniff_header(path: str | os.PathLike) -> tuple[list[str] | None, str | None]:
+    """Column names (lower-cased, quotes stripped) and delimiter of a text table.
+
+    Returns ``(None, delimiter)`` when the first line is all numbers (no header).
+    A delimiter of None means runs of white space.
+    """
+    p = _open_checked(path)
+    with p.open("r", encoding="utf-8-sig", errors="replace") as fh:
+        first = ""
+        for line in fh:
+            if line.strip() and not line.lstrip().startswith("#"):
+                first = line.strip()
+                break
+    if not first:
+        raise ReadError(f"input {p} has no data lines")
+    delim: str | None = None
+    for cand in (",", ";", "\t", "|"):
+        if cand in first:
+            delim = cand
+            break
+    tokens = next(csv.reader([first], delimiter=delim)) if delim else first.split()
+    tokens = [t.strip().strip('"').strip("'") for t in tokens]
+    if all(_is_number(t) for t in tokens):
+        return None, delim
+    return [t.lower() for t in tokens], delim
+
+
+def read_text(path: str | os.PathLike) -> PointCloud:
+    """Read an XYZ/CSV/TXT point table.
+
+    The first line names the columns (``x, y, z`` required, case-insensitive;
+    every other numeric column becomes a field). A file whose first line is all
+    numbers has no header: its first three columns are x, y, z.
+
+    Raises
+    ------
+    ReadError
+        Missing or empty file, no x/y/z columns, non-numeric values.
+    InvalidPointsError
+        NaN or infinite coordinates.
+    """
+    p = _open_checked(path)
+    names, delim = sniff_header(p)
+    skip = 0 if names is None else 1
+    try:
+        data = np.loadtxt(p, delimiter=delim, skiprows=skip, comments="#", ndmin=2, dtype=np.float64,
+                          encoding="utf-8-sig", quotechar='"')
+    except ValueError as exc:
+        raise ReadError(f"cannot read {p} as a numeric table: {str(exc).splitlines()[0][:160]}") from exc
+    if names is None:
+        if data.shape[1] < 3:
+            raise ReadError(f"input {p} needs at least 3 columns (x, y, z), found {data.shape[1]}")
+        names = ["x", "y", "z"] + [f"col{i}" for i in range(3, data.shape[1])]
+    missing = [c for c in ("x", "y", "z") if c not in names]
+    if missing:
+        raise ReadError(
+            f"input {p} has no column(s) {', '.join(missing)}; header is: {', '.join(names)}"
+        )
+    if data.shape[1] != len(names):
+        raise ReadError(f"input {p}: header has {len(names)} columns but rows have {data.shape[1]}")
+    cols = {name: data[:, i] for i, name in enumerate(names)}
+    xyz = np.column_stack([cols.pop("x"), cols.pop("y"), cols.pop("z")])
+    if not np.isfinite(xyz).all():
+        bad = int((~np.isfinite(xyz)).any(axis=1).sum())
+        raise InvalidPointsError(f"input {p} has {bad} row(s) with NaN or infinite coordinates")
+    fields = {}
+    for name, col in cols.items():
+        if np.all(np.isfinite(col)) and np.all(col == np.round(col)) and col.size and np.abs(col).max() < 2**31:
+            fields[name] = col.astype(np.int64)
+        else:
+            fields[name] = col
+    return PointCloud(xyz=xyz, fields=fields, crs=None, source=None, path=str(p))
+
+
+def write_text(cloud: PointCloud, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
+    """Write a cloud as CSV with a header ``x,y,z,<fields>``, atomically."""
+    names = ["x", "y", "z", *cloud.fields]
+    cols = [cloud.x, cloud.y, cloud.z, *(np.asarray(v) for v in cloud.fields.values())]
+    with atomic_path(path, overwrite=overwrite) as tmp:
+        with tmp.open("w", encoding="utf-8", newline="") as fh:
+            fh.write(",".join(names) + "\n")
+            table = np.column_stack([c.astype(np.float64) for c in cols]) if len(cloud) else np.empty((0, len(cols)))
+            np.savetxt(fh, table, delimiter=",", fmt="%.17g")
+    return Path(path)

@@ -1,0 +1,387 @@
+"""3D line segments and point lists: CSV, GeoPackage, GeoJSON.
+
+CSV is handled with the standard library; GeoPackage and GeoJSON need the
+``vector`` extra (shapely + pyogrio), imported lazily.
+
+- Segments CSV: ``id,x1,y1,z1,x2,y2,z2`` then any attribute columns.
+- Points CSV: ``id,x,y,z`` (``z`` optional where noted) then attributes.
+- GeoPackage/GeoJSON: LineString Z / Point Z features with an ``id`` field.
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import InvalidPointsError, ReadError, WriteError
+from ._atomic import atomic_path
+
+__all__ = ["Segments", "PointSet", "read_segments", "write_segments", "read_points", "write_points",
+           "VECTOR_SUFFIXES"]
+
+VECTOR_SUFFIXES = {".csv", ".gpkg", ".geojson", ".json"}
+
+
+@dataclass(eq=False)
+class Segments:
+    """A set of 3D line segments.
+
+    Attributes
+    ----------
+    ids : ndarray of shape (n,)
+        Identifiers (int or str).
+    start, end : ndarray of shape (n, 3)
+        Endpoints.
+    attributes : dict of str to ndarray of shape (n,)
+    crs : pyproj.CRS or None
+    """
+
+    ids: np.ndarray
+    start: np.ndarray
+    end: np.ndarray
+    attributes: dict[str, np.ndarray] = field(default_factory=dict)
+    crs: Any = None
+
+    def __post_init__(self) -> None:
+        self.start = np.asarray(self.start, dtype=np.float64).reshape(-1, 3)
+        self.end = np.asarray(self.end, dtype=np.float64).reshape(-1, 3)
+        self.ids = np.asarray(self.ids)
+        n = len(self.start)
+        if self.end.shape != (n, 3) or self.ids.shape != (n,):
+            raise InvalidPointsError("segments: ids, start and end must have the same length")
+        for k, v in self.attributes.items():
+            if len(v) != n:
+                raise InvalidPointsError(f"segments: attribute {k!r} has {len(v)} values for {n} segments")
+
+    def __len__(self) -> int:
+        return len(self.start)
+
+    @property
+    def lengths(self) -> np.ndarray:
+        return np.linalg.norm(self.end - self.start, axis=1)
+
+    @property
+    def endpoints(self) -> np.ndarray:
+        """(n, 2, 3) array of endpoint pairs."""
+        return np.stack([self.start, self.end], axis=1)
+
+    def subset(self, index: Any) -> Segments:
+        return Segments(self.ids[index], self.start[index], self.end[index],
+                        {k: np.asarray(v)[index] for k, v in self.attributes.items()}, self.crs)
+
+
+@dataclass(eq=False)
+class PointSet:
+    """Named 3D points (check points, corners, map points). z may be NaN when unknown."""
+
+    ids: np.ndarray
+    xyz: np.ndarray
+    attributes: dict[str, np.ndarray] = field(default_factory=dict)
+    crs: Any = None
+
+    def __post_init__(self) -> None:
+        self.xyz = np.asarray(self.xyz, dtype=np.float64).reshape(-1, 3)
+        self.ids = np.asarray(self.ids)
+        n = len(self.xyz)
+        if self.ids.shape != (n,):
+            raise InvalidPointsError("points: ids and xyz must have the same length")
+        for k, v in self.attributes.items():
+            if len(v) != n:
+                raise InvalidPointsError(f"points: attribute {k!r} has {len(v)} values for {n} points")
+
+    def __len__(self) -> int:
+        return len(self.xyz)
+
+    def subset(self, index: Any) -> PointSet:
+        return PointSet(self.ids[index], self.xyz[index],
+                        {k: np.asarray(v)[index] for k, v in self.attributes.items()}, self.crs)
+
+
+# --------------------------------------------------------------------- helpers
+
+
+def _check_file(path: str | os.PathLike) -> Path:
+    p = Path(path)
+    if not p.exists():
+        raise ReadError(f"input {p} does not exist")
+    if p.is_dir():
+        raise ReadError(f"input {p} is a directory, not a file")
+    if p.stat().st_size == 0:
+        raise ReadError(f"input {p} is empty (0 bytes)")
+    return p
+
+
+def _suffix(path: str | os.PathLike) -> str:
+    s = Path(path).suffix.lower()
+    if s not in VECTOR_SUFFIXES:
+        raise ReadError(f"unsupported vector format {s!r} for {path}: use .csv, .gpkg or .geojson")
+    return s
+
+
+def _convert_column(values: list[str]) -> np.ndarray:
+    try:
+        arr = np.array([float(v) if v.strip() != "" else np.nan for v in values], dtype=np.float64)
+    except ValueError:
+        return np.array(values, dtype=object)
+    if arr.size and np.all(np.isfinite(arr)) and np.all(arr == np.round(arr)) and np.abs(arr).max() < 2**53:
+        return arr.astype(np.int64)
+    return arr
+
+
+def _read_csv_table(p: Path) -> dict[str, np.ndarray]:
+    with p.open("r", encoding="utf-8-sig", newline="") as fh:
+        sample = fh.read(4096)
+        fh.seek(0)
+        delim = ";" if sample.count(";") > sample.count(",") else ","
+        rows = [r for r in csv.reader(fh, delimiter=delim) if r and not r[0].lstrip().startswith("#")]
+    if not rows:
+        raise ReadError(f"input {p} has no rows")
+    header = [h.strip().lower() for h in rows[0]]
+    body = rows[1:]
+    for i, r in enumerate(body, start=2):
+        if len(r) != len(header):
+            raise ReadError(f"input {p} line {i}: {len(r)} values for {len(header)} columns")
+    cols = list(zip(*body, strict=True)) if body else [() for _ in header]
+    return {h: _convert_column(list(c)) for h, c in zip(header, cols, strict=True)}
+
+
+def _need(table: dict, names: tuple[str, ...], p: Path) -> None:
+    missing = [n for n in names if n not in table]
+    if missing:
+        raise ReadError(f"input {p} lacks column(s) {', '.join(missing)}; has: {', '.join(table)}")
+
+
+def _floats(table: dict, name: str, p: Path) -> np.ndarray:
+    col = table[name]
+    if col.dtype == object:
+        raise ReadError(f"input {p}: column {name!r} is not numeric")
+    return col.astype(np.float64)
+
+
+def _ids(table: dict, n: int) -> np.ndarray:
+    if "id" in table:
+        return table["id"]
+    return np.arange(n)
+
+
+def _check_unique(ids: np.ndarray, p: Path) -> None:
+    u, c = np.unique(ids.astype(str), return_counts=True)
+    if (c > 1).any():
+        raise ReadError(f"input {p}: duplicate id(s) {', '.join(u[c > 1][:5])}")
+
+
+def _gis():
+    from .._validate import require
+
+    return require("pyogrio", "vector"), require("shapely", "vector")
+
+
+# --------------------------------------------------------------------- segments
+
+
+def read_segments(path: str | os.PathLike) -> Segments:
+    """Read 3D line segments from CSV (``id,x1,y1,z1,x2,y2,z2``), GeoPackage or GeoJSON.
+
+    Multi-vertex LineStrings are split into their consecutive segments (ids
+    ``<id>.<k>``). Raises :class:`ReadError` for a missing/empty file, missing
+    columns or 2D geometry, and :class:`InvalidPointsError` for NaN coordinates.
+    """
+    p = _check_file(path)
+    suffix = _suffix(p)
+    crs = None
+    if suffix == ".csv":
+        table = _read_csv_table(p)
+        _need(table, ("x1", "y1", "z1", "x2", "y2", "z2"), p)
+        start = np.column_stack([_floats(table, c, p) for c in ("x1", "y1", "z1")])
+        end = np.column_stack([_floats(table, c, p) for c in ("x2", "y2", "z2")])
+        ids = _ids(table, len(start))
+        attrs = {k: v for k, v in table.items() if k not in {"id", "x1", "y1", "z1", "x2", "y2", "z2"}}
+    else:
+        pyogrio, shapely = _gis()
+        try:
+            meta, _, geoms, field_data = pyogrio.raw.read(str(p))
+        except Exception as exc:
+            raise ReadError(f"cannot read {p}: {exc}") from exc
+        crs = _crs_from_meta(meta)
+        names = [n.lower() for n in meta["fields"]]
+        geoms = shapely.from_wkb(geoms)
+        starts, ends, ids_l, rows = [], [], [], []
+        base_ids = field_data[names.index("id")] if "id" in names else np.arange(len(geoms))
+        for i, g in enumerate(geoms):
+            if g is None or g.is_empty:
+                continue
+            if not g.has_z:
+                raise ReadError(f"input {p}: feature {base_ids[i]} has no z (LineString Z expected)")
+            parts = list(getattr(g, "geoms", [g]))
+            k = 0
+            for part in parts:
+                c = np.asarray(part.coords)
+                for a, b in zip(c[:-1], c[1:], strict=True):
+                    starts.append(a)
+                    ends.append(b)
+                    single = len(parts) == 1 and len(c) == 2
+                    ids_l.append(base_ids[i] if single else f"{base_ids[i]}.{k}")
+                    rows.append(i)
+                    k += 1
+        start = np.asarray(starts, dtype=float).reshape(-1, 3)
+        end = np.asarray(ends, dtype=float).reshape(-1, 3)
+        ids = np.asarray(ids_l) if ids_l else np.empty(0, dtype=np.int64)
+        rows_a = np.asarray(rows, dtype=np.int64)
+        attrs = {n: np.asarray(field_data[j])[rows_a] for j, n in enumerate(names) if n != "id"}
+    if len(start) and not (np.isfinite(start).all() and np.isfinite(end).all()):
+        raise InvalidPointsError(f"input {p} has segments with NaN or infinite coordinates")
+    _check_unique(ids, p)
+    return Segments(ids=ids, start=start, end=end, attributes=attrs, crs=crs)
+
+
+def write_segments(segments: Segments, path: str | os.PathLike, *, overwrite: bool = False,
+                   layer: str = "segments") -> Path:
+    """Write segments as CSV, GeoPackage or GeoJSON (LineString Z), atomically."""
+    suffix = Path(path).suffix.lower()
+    if suffix not in VECTOR_SUFFIXES:
+        raise WriteError(f"cannot write segments as {suffix!r}: use .csv, .gpkg or .geojson")
+    if len(segments) and not (np.isfinite(segments.start).all() and np.isfinite(segments.end).all()):
+        raise WriteError("refusing to write segments with NaN coordinates")
+    if suffix == ".csv":
+        cols = {"id": segments.ids}
+        for i, c in enumerate(("x1", "y1", "z1")):
+            cols[c] = segments.start[:, i]
+        for i, c in enumerate(("x2", "y2", "z2")):
+            cols[c] = segments.end[:, i]
+        cols.update(segments.attributes)
+        return _write_csv(cols, path, overwrite=overwrite)
+    _, shapely = _gis()
+    geoms = shapely.linestrings(segments.endpoints) if len(segments) else np.empty(0, dtype=object)
+    return _write_ogr(geoms, {"id": segments.ids, **segments.attributes}, segments.crs, path,
+                      overwrite=overwrite, layer=layer, geometry_type="LineString Z")
+
+
+# ----------------------------------------------------------------------- points
+
+
+def read_points(path: str | os.PathLike, *, require_z: bool = True) -> PointSet:
+    """Read a point list from CSV (``id,x,y,z``), GeoPackage or GeoJSON (Point Z).
+
+    With ``require_z=False`` a missing z column / 2D geometry gives z = NaN.
+    """
+    p = _check_file(path)
+    suffix = _suffix(p)
+    crs = None
+    if suffix == ".csv":
+        table = _read_csv_table(p)
+        _need(table, ("x", "y") + (("z",) if require_z else ()), p)
+        x, y = _floats(table, "x", p), _floats(table, "y", p)
+        z = _floats(table, "z", p) if "z" in table else np.full(len(x), np.nan)
+        xyz = np.column_stack([x, y, z])
+        ids = _ids(table, len(xyz))
+        attrs = {k: v for k, v in table.items() if k not in {"id", "x", "y", "z"}}
+    else:
+        pyogrio, shapely = _gis()
+        try:
+            meta, _, geoms, field_data = pyogrio.raw.read(str(p))
+        except Exception as exc:
+            raise ReadError(f"cannot read {p}: {exc}") from exc
+        crs = _crs_from_meta(meta)
+        names = [n.lower() for n in meta["fields"]]
+        geoms = shapely.from_wkb(geoms)
+        if len(geoms) and not all(g is not None and g.geom_type == "Point" for g in geoms):
+            raise ReadError(f"input {p}: expected Point features")
+        if require_z and len(geoms) and not all(g.has_z for g in geoms):
+            raise ReadError(f"input {p}: points have no z (Point Z expected)")
+        xyz = shapely.get_coordinates(geoms, include_z=True) if len(geoms) else np.empty((0, 3))
+        ids = field_data[names.index("id")] if "id" in names else np.arange(len(xyz))
+        attrs = {n: np.asarray(field_data[j]) for j, n in enumerate(names) if n != "id"}
+    finite = np.isfinite(xyz[:, :2]).all() and (not require_z or np.isfinite(xyz[:, 2]).all())
+    if len(xyz) and not finite:
+        raise InvalidPointsError(f"input {p} has points with NaN or infinite coordinates")
+    _check_unique(np.asarray(ids), p)
+    return PointSet(ids=np.asarray(ids), xyz=xyz, attributes=attrs, crs=crs)
+
+
+def write_points(points: PointSet, path: str | os.PathLike, *, overwrite: bool = False,
+                 layer: str = "points") -> Path:
+    """Write a point list as CSV, GeoPackage or GeoJSON (Point Z), atomically."""
+    suffix = Path(path).suffix.lower()
+    if suffix not in VECTOR_SUFFIXES:
+        raise WriteError(f"cannot write points as {suffix!r}: use .csv, .gpkg or .geojson")
+    if suffix == ".csv":
+        cols = {"id": points.ids, "x": points.xyz[:, 0], "y": points.xyz[:, 1], "z": points.xyz[:, 2]}
+        cols.update(points.attributes)
+        return _write_csv(cols, path, overwrite=overwrite)
+    _, shapely = _gis()
+    geoms = shapely.points(points.xyz) if len(points) else np.empty(0, dtype=object)
+    return _write_ogr(geoms, {"id": points.ids, **points.attributes}, points.crs, path,
+                      overwrite=overwrite, layer=layer, geometry_type="Point Z")
+
+
+# ------------------------------------------------------------------- writers
+
+
+def _fmt(v: Any) -> str:
+    if isinstance(v, float | np.floating):
+        return "" if not np.isfinite(v) else repr(float(v))
+    if isinstance(v, bool | np.bool_):
+        return "true" if v else "false"
+    return str(v)
+
+
+def _write_csv(cols: dict[str, Any], path: str | os.PathLike, *, overwrite: bool) -> Path:
+    names = list(cols)
+    arrays = [np.asarray(cols[n]) for n in names]
+    with atomic_path(path, overwrite=overwrite) as tmp:
+        with tmp.open("w", encoding="utf-8", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(names)
+            for row in zip(*arrays, strict=True):
+                w.writerow([_fmt(v) for v in row])
+    return Path(path)
+
+
+def _write_ogr(geoms: Any, fields: dict[str, Any], crs: Any, path: str | os.PathLike, *,
+               overwrite: bool, layer: str, geometry_type: str) -> Path:
+    pyogrio, shapely = _gis()
+    suffix = Path(path).suffix.lower()
+    driver = "GPKG" if suffix == ".gpkg" else "GeoJSON"
+    names = list(fields)
+    arrays = []
+    for n in names:
+        a = np.asarray(fields[n])
+        if a.dtype == object or a.dtype.kind in "US":
+            a = a.astype(str).astype(object)
+        elif a.dtype == bool:
+            a = a.astype(np.int32)
+        arrays.append(a)
+    wkb = shapely.to_wkb(geoms, output_dimension=3) if len(geoms) else np.empty(0, dtype=object)
+    crs_wkt = crs.to_wkt() if crs is not None else None
+    import warnings
+
+    with atomic_path(path, overwrite=overwrite) as tmp:
+        target = tmp.with_suffix(suffix)  # drivers pick the format from the extension
+        try:
+            with warnings.catch_warnings():
+                warnings.filterwarnings("ignore", message=".*'crs' was not provided.*")
+                pyogrio.raw.write(str(target), wkb, geometry_type=geometry_type, field_data=arrays,
+                                  fields=names, crs=crs_wkt, driver=driver, layer=layer,
+                                  encoding="UTF-8")
+            os.replace(target, tmp)
+        finally:
+            if target.exists():
+                target.unlink()
+    return Path(path)
+
+
+def _crs_from_meta(meta: dict) -> Any:
+    wkt = meta.get("crs")
+    if not wkt:
+        return None
+    from pyproj import CRS
+
+    try:
+        return CRS.from_user_input(wkt)
+    except Exception:
+        return None
