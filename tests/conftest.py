@@ -1,17 +1,11 @@
-"""Shared fixtures: paths to bundled and shared real data."""
+"""Shared fixtures: paths to bundled and shared real data (constants live in datapaths.py)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 import pytest
-
-REPO = Path(__file__).resolve().parents[1]
-DATA = REPO / "tests" / "data"
-SHARED = REPO.parent / "shared" / "lidar-data"
-HAS_SHARED = SHARED.is_dir()
-
-needs_shared = pytest.mark.skipif(not HAS_SHARED, reason="../shared/lidar-data is not present")
+from datapaths import DATA, HAS_SHARED, SHARED
 
 
 @pytest.fixture(scope="session")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from ._common import Steps, common_options, echo, finish, prepare_outputs
+from ._common import Steps, common_options, echo, finish, prepare_outputs, settings
 
 
 @click.command()
@@ -39,3 +39,63 @@ def info(path: str) -> None:
                                  ("valid" if r["valid"] else
                                   f"present, {r['n_zero_return_number']:,} zero / {r['n_invalid']:,} invalid")))
     finish("info", inputs={"path": path}, parameters={}, results=d)
+
+
+def _station(value: str | None) -> tuple[float, float, float]:
+    if not value:
+        return (0.0, 0.0, 0.0)
+    try:
+        parts = [float(v) for v in value.split(",")]
+    except ValueError:
+        raise click.BadParameter(f"expected X,Y,Z, got {value!r}") from None
+    if len(parts) != 3:
+        raise click.BadParameter(f"expected X,Y,Z, got {value!r}")
+    return parts[0], parts[1], parts[2]
+
+
+@click.command()
+@click.argument("observations", type=click.Path(dir_okay=True))
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
+              help="Point list (.csv/.gpkg/.geojson) or point cloud (.las/.laz).")
+@click.option("--station", default=None, help="Station position X,Y,Z in metres (default 0,0,0).")
+@click.option("--orientation", type=float, default=0.0, show_default=True,
+              help="Azimuth of the instrument's zero direction, in the angle unit.")
+@click.option("--instrument-height", type=float, default=0.0, show_default=True, help="Metres.")
+@click.option("--angle-unit", type=click.Choice(["deg", "gon", "rad"]), default="deg", show_default=True)
+@click.option("--crs", default=None, help="CRS of the output (EPSG code or WKT).")
+@common_options
+def polar(observations: str, output: str, station: str | None, orientation: float,
+          instrument_height: float, angle_unit: str, crs: str | None) -> None:
+    """Convert polar scanner observations (distance, azimuth, elevation/zenith) to X, Y, Z."""
+    from pathlib import Path
+
+    import numpy as np
+
+    from ..io import PointCloud, write
+    from ..io.crs import parse_crs
+    from ..io.polar import Station, read_polar_csv
+    from ..io.vector import PointSet, write_points
+
+    prepare_outputs(output, inputs=(observations,))
+    x0, y0, z0 = _station(station)
+    st = Station(x0, y0, z0, orientation, instrument_height)
+    target_crs = parse_crs(crs)
+    ids, xyz = read_polar_csv(observations, station=st, angle_unit=angle_unit)
+    from ..errors import WriteError
+    from ..io._atomic import check_output
+    from ..io.vector import VECTOR_SUFFIXES
+
+    suffix = Path(output).suffix.lower()
+    check_output(output, overwrite=settings().overwrite)
+    if suffix in {".las", ".laz"}:
+        write(PointCloud(xyz=xyz, fields={"point_source_id": np.zeros(len(xyz), np.uint16)},
+                         crs=target_crs), output, overwrite=settings().overwrite)
+    elif suffix in VECTOR_SUFFIXES:
+        write_points(PointSet(ids=ids, xyz=xyz, crs=target_crs), output, overwrite=settings().overwrite)
+    else:
+        raise WriteError(f"cannot write {suffix!r}: use .csv, .gpkg, .geojson, .las or .laz")
+    echo(f"{len(xyz):,} observations converted -> {output}")
+    finish("polar", inputs={"observations": observations},
+           parameters={"station": [x0, y0, z0], "orientation": orientation,
+                       "instrument_height": instrument_height, "angle_unit": angle_unit, "crs": crs},
+           results={"n_points": len(xyz), "output": output})

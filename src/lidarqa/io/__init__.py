@@ -38,8 +38,18 @@ _PLY = {".ply"}
 CLOUD_SUFFIXES = _LAS | _TEXT | _PLY
 
 
-def read(path: str | os.PathLike) -> PointCloud:
+def read(path: str | os.PathLike, *, z_to_metres: bool = False) -> PointCloud:
     """Read a point cloud (LAS/LAZ, CSV/XYZ text, PLY) into a :class:`PointCloud`.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The format follows the extension.
+    z_to_metres : bool, default False
+        Convert heights to metres when the CRS declares another vertical unit
+        (e.g. US survey feet in a compound CRS). The converted cloud keeps only
+        the horizontal part of a compound CRS and is detached from its LAS
+        source scaling: writing it creates new records.
 
     Examples
     --------
@@ -50,16 +60,31 @@ def read(path: str | os.PathLike) -> PointCloud:
     """
     suffix = Path(path).suffix.lower()
     if suffix in _LAS:
-        return read_las(path)
-    if suffix in _TEXT:
-        return read_text(path)
-    if suffix in _PLY:
+        cloud = read_las(path)
+    elif suffix in _TEXT:
+        cloud = read_text(path)
+    elif suffix in _PLY:
         from .ply import read_ply
 
-        return read_ply(path)
-    raise ReadError(
-        f"cannot tell the format of {path}: expected one of {', '.join(sorted(CLOUD_SUFFIXES))}"
-    )
+        cloud = read_ply(path)
+    else:
+        raise ReadError(
+            f"cannot tell the format of {path}: expected one of {', '.join(sorted(CLOUD_SUFFIXES))}"
+        )
+    if z_to_metres:
+        from .crs import z_to_metres_factor
+
+        factor = z_to_metres_factor(cloud.crs)
+        if factor != 1.0:
+            cloud.xyz = cloud.xyz.copy()
+            cloud.xyz[:, 2] *= factor
+            # The source scaling and the vertical CRS no longer describe z: keep the horizontal
+            # CRS only, and write new records if the cloud is saved.
+            cloud.source = None
+            if cloud.crs is not None and cloud.crs.is_compound:
+                cloud.crs = cloud.crs.sub_crs_list[0]
+    return cloud
+
 
 
 def write(cloud: PointCloud, path: str | os.PathLike, *, overwrite: bool = False) -> Path:

@@ -8,7 +8,7 @@ import numpy as np
 
 from ..errors import CRSMismatchError
 
-__all__ = ["crs_epsg", "crs_name", "vertical_unit", "z_to_metres_factor", "heights_to_metres",
+__all__ = ["crs_epsg", "crs_name", "vertical_unit", "z_to_metres_factor", "heights_to_metres", "reproject",
            "ensure_same_crs", "parse_crs"]
 
 
@@ -101,3 +101,23 @@ def ensure_same_crs(a: Any, b: Any, *, what: tuple[str, str] = ("test", "referen
             f"{what[0]} CRS ({crs_name(a)}) differs from {what[1]} CRS ({crs_name(b)}); "
             "reproject one of them first (or ask for reprojection)"
         )
+
+
+def reproject(xyz: np.ndarray, source: Any, target: Any) -> np.ndarray:
+    """Transform coordinates between two CRSs (3D when both have a vertical axis).
+
+    Use this explicitly before comparing datasets whose CRSs differ; lidarqa
+    never reprojects silently.
+    """
+    from pyproj import Transformer
+
+    from ..errors import CRSMismatchError
+
+    if source is None or target is None:
+        raise CRSMismatchError("cannot reproject: both datasets need a CRS")
+    t = Transformer.from_crs(source, target, always_xy=True)
+    x, y, z = t.transform(xyz[:, 0], xyz[:, 1], xyz[:, 2])
+    out = np.column_stack([x, y, z])
+    if not np.isfinite(out).all():
+        raise CRSMismatchError("reprojection produced non-finite coordinates (outside the CRS area?)")
+    return out

@@ -30,9 +30,12 @@ class LasSource:
     evlrs: Any
     point_format_id: int
     version: str
+    raw_header: bytes = b""  # the file's first 227 bytes: restored verbatim when points are unchanged
+    is_subset: bool = False
 
     def subset(self, idx: Any) -> LasSource:
-        return LasSource(self.header, self.records[idx], self.evlrs, self.point_format_id, self.version)
+        return LasSource(self.header, self.records[idx], self.evlrs, self.point_format_id,
+                         self.version, self.raw_header, True)
 
     @property
     def scales(self) -> np.ndarray:
@@ -90,7 +93,19 @@ def _crs_of(header: Any) -> Any:
         return None
 
 
-def _cloud_from_points(points: Any, header: Any, evlrs: Any, path: Path) -> PointCloud:
+def _raw_header(path: Path) -> bytes:
+    with path.open("rb") as fh:
+        return fh.read(_HEADER_FIXED_END)
+
+
+# Byte ranges of the public header block that laspy recomputes on write; restored from the
+# source when a cloud is written back unchanged (creation day/year; max/min x, y, z).
+_RESTORE_RANGES = ((90, 94), (179, 227))
+_HEADER_FIXED_END = 227
+
+
+def _cloud_from_points(points: Any, header: Any, evlrs: Any, path: Path,
+                       raw_header: bytes = b"", is_subset: bool = False) -> PointCloud:
     names = [n for n in points.point_format.dimension_names if n not in _XYZ]
     xyz = np.empty((len(points), 3), dtype=np.float64)
     xyz[:, 0] = points.x
@@ -103,6 +118,8 @@ def _cloud_from_points(points: Any, header: Any, evlrs: Any, path: Path) -> Poin
         evlrs=evlrs,
         point_format_id=int(header.point_format.id),
         version=str(header.version),
+        raw_header=raw_header,
+        is_subset=is_subset,
     )
     return PointCloud(xyz=xyz, fields=fields, crs=_crs_of(header), source=source, path=str(path))
 
@@ -132,7 +149,7 @@ def read_las(path: str | os.PathLike) -> PointCloud:
             f"input {p}: header declares {las.header.point_count} points but "
             f"{len(las.points)} could be read"
         )
-    return _cloud_from_points(las.points, las.header, getattr(las, "evlrs", None), p)
+    return _cloud_from_points(las.points, las.header, getattr(las, "evlrs", None), p, _raw_header(p))
 
 
 def _reason(exc: BaseException) -> str:
@@ -182,7 +199,7 @@ class LasReader:
         try:
             for points in self._reader.chunk_iterator(int(chunk_size)):
                 seen += len(points)
-                yield _cloud_from_points(points, self.header, None, self.path)
+                yield _cloud_from_points(points, self.header, None, self.path, is_subset=True)
         except Exception as exc:
             if isinstance(exc, LasReadError | GeneratorExit):
                 raise
@@ -288,9 +305,23 @@ def write_las(
     if compress is None:
         compress = target.suffix.lower() == ".laz"
     las = _las_from_source(cloud) if cloud.source is not None else _new_las(cloud)
+    src = cloud.source
+    unchanged = (
+        src is not None
+        and not src.is_subset
+        and len(src.raw_header) == _HEADER_FIXED_END
+        and las.points.array.tobytes() == np.asarray(src.records).tobytes()
+    )
     with atomic_path(target, overwrite=overwrite) as tmp:
         try:
-            las.write(str(tmp), do_compress=bool(compress))
+            # laspy infers compression from a path's suffix (ours is ".part"); give it a stream.
+            with tmp.open("wb") as fh:
+                las.write(fh, do_compress=bool(compress))
+            if unchanged:
+                with tmp.open("r+b") as fh:
+                    for a, b in _RESTORE_RANGES:
+                        fh.seek(a)
+                        fh.write(src.raw_header[a:b])
         except Exception as exc:
             raise WriteError(f"cannot write {target}: {_reason(exc)}") from exc
     return target

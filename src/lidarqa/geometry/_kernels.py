@@ -1,0 +1,480 @@
+"""Numba kernels of the geometry package (private).
+
+Everything here works on centred, canonically sorted float64 coordinates and
+trusts its inputs; validation happens in the public modules.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+# ----------------------------------------------------------------- eigen / fits
+
+
+@njit(cache=True)
+def eigvals_sym3(a00, a01, a02, a11, a12, a22):
+    """Eigenvalues (descending) of a symmetric 3x3 matrix, closed form (Smith 1961)."""
+    p1 = a01 * a01 + a02 * a02 + a12 * a12
+    if p1 <= 1e-300:
+        e = np.array([a00, a11, a22])
+        e.sort()
+        return e[2], e[1], e[0]
+    q = (a00 + a11 + a22) / 3.0
+    p2 = (a00 - q) ** 2 + (a11 - q) ** 2 + (a22 - q) ** 2 + 2.0 * p1
+    p = math.sqrt(p2 / 6.0)
+    b00 = (a00 - q) / p
+    b11 = (a11 - q) / p
+    b22 = (a22 - q) / p
+    b01 = a01 / p
+    b02 = a02 / p
+    b12 = a12 / p
+    detb = (b00 * (b11 * b22 - b12 * b12) - b01 * (b01 * b22 - b12 * b02)
+            + b02 * (b01 * b12 - b11 * b02))
+    r = detb / 2.0
+    if r <= -1.0:
+        phi = math.pi / 3.0
+    elif r >= 1.0:
+        phi = 0.0
+    else:
+        phi = math.acos(r) / 3.0
+    e1 = q + 2.0 * p * math.cos(phi)
+    e3 = q + 2.0 * p * math.cos(phi + 2.0 * math.pi / 3.0)
+    e2 = 3.0 * q - e1 - e3
+    return e1, e2, e3
+
+
+@njit(cache=True)
+def planarity_knn(pts, knn):
+    """lambda3 / (lambda1+lambda2+lambda3) of each point's k-neighbourhood (N,)."""
+    n, k = knn.shape
+    out = np.empty(n)
+    for i in range(n):
+        mx = 0.0
+        my = 0.0
+        mz = 0.0
+        for a in range(k):
+            j = knn[i, a]
+            mx += pts[j, 0]
+            my += pts[j, 1]
+            mz += pts[j, 2]
+        mx /= k
+        my /= k
+        mz /= k
+        c00 = c01 = c02 = c11 = c12 = c22 = 0.0
+        for a in range(k):
+            j = knn[i, a]
+            dx = pts[j, 0] - mx
+            dy = pts[j, 1] - my
+            dz = pts[j, 2] - mz
+            c00 += dx * dx
+            c01 += dx * dy
+            c02 += dx * dz
+            c11 += dy * dy
+            c12 += dy * dz
+            c22 += dz * dz
+        tr = c00 + c11 + c22
+        if tr <= 0.0:
+            out[i] = 1.0  # all points equal: worst possible planarity
+            continue
+        e1, e2, e3 = eigvals_sym3(c00, c01, c02, c11, c12, c22)
+        v = e3 / tr
+        out[i] = v if v > 0.0 else 0.0
+    return out
+
+
+@njit(cache=True)
+def canonical_normal(nx, ny, nz):
+    """Flip a unit normal so n_z >= 0 (if 0: n_x >= 0, then n_y >= 0)."""
+    flip = False
+    if nz < 0.0:
+        flip = True
+    elif nz == 0.0:
+        if nx < 0.0:
+            flip = True
+        elif nx == 0.0 and ny < 0.0:
+            flip = True
+    if flip:
+        return -nx, -ny, -nz
+    return nx, ny, nz
+
+
+@njit(cache=True)
+def normal_from_moments(n, sx, sy, sz, sxx, sxy, sxz, syy, syz, szz):
+    """TLS normal (canonical sign) and mean from first/second moment sums."""
+    mx = sx / n
+    my = sy / n
+    mz = sz / n
+    c = np.empty((3, 3))
+    c[0, 0] = sxx / n - mx * mx
+    c[0, 1] = sxy / n - mx * my
+    c[0, 2] = sxz / n - mx * mz
+    c[1, 1] = syy / n - my * my
+    c[1, 2] = syz / n - my * mz
+    c[2, 2] = szz / n - mz * mz
+    c[1, 0] = c[0, 1]
+    c[2, 0] = c[0, 2]
+    c[2, 1] = c[1, 2]
+    w, v = np.linalg.eigh(c)
+    nx, ny, nz = canonical_normal(v[0, 0], v[1, 0], v[2, 0])
+    return nx, ny, nz, mx, my, mz
+
+
+@njit(cache=True)
+def fit_subset(pts, idx, m, ox, oy, oz):
+    """TLS plane of pts[idx[:m]] relative to origin o: (nx, ny, nz, mx, my, mz) with mean in the o-frame."""
+    sx = sy = sz = sxx = sxy = sxz = syy = syz = szz = 0.0
+    for a in range(m):
+        j = idx[a]
+        x = pts[j, 0] - ox
+        y = pts[j, 1] - oy
+        z = pts[j, 2] - oz
+        sx += x
+        sy += y
+        sz += z
+        sxx += x * x
+        sxy += x * y
+        sxz += x * z
+        syy += y * y
+        syz += y * z
+        szz += z * z
+    return normal_from_moments(float(m), sx, sy, sz, sxx, sxy, sxz, syy, syz, szz)
+
+
+# ------------------------------------------------------------------ PRNG
+
+
+@njit(cache=True)
+def splitmix64(state):
+    """One step of splitmix64: returns (new_state, random uint64 as int64 bits)."""
+    state = (state + np.uint64(0x9E3779B97F4A7C15)) & np.uint64(0xFFFFFFFFFFFFFFFF)
+    z = state
+    z = ((z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)) & np.uint64(0xFFFFFFFFFFFFFFFF)
+    z = ((z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)) & np.uint64(0xFFFFFFFFFFFFFFFF)
+    z = z ^ (z >> np.uint64(31))
+    return state, z
+
+
+# ------------------------------------------------------------------ grid search
+
+
+@njit(cache=True)
+def grid_neighbours(pts, q, r2, cx, cy, cz, nyz, nz, cell_keys, cell_start, order, out):
+    """Indices of points within sqrt(r2) of pts[q] (excluding q) into out; returns count."""
+    m = 0
+    ix = cx[q]
+    iy = cy[q]
+    iz = cz[q]
+    px = pts[q, 0]
+    py = pts[q, 1]
+    pz = pts[q, 2]
+    ncell = cell_keys.shape[0]
+    for dx in range(-1, 2):
+        for dy in range(-1, 2):
+            for dz in range(-1, 2):
+                jz = iz + dz
+                if jz < 0 or jz >= nz:
+                    continue
+                key = (ix + dx) * nyz + (iy + dy) * nz + jz
+                c = np.searchsorted(cell_keys, key)
+                if c >= ncell or cell_keys[c] != key:
+                    continue
+                for a in range(cell_start[c], cell_start[c + 1]):
+                    j = order[a]
+                    if j == q:
+                        continue
+                    ddx = pts[j, 0] - px
+                    ddy = pts[j, 1] - py
+                    ddz = pts[j, 2] - pz
+                    if ddx * ddx + ddy * ddy + ddz * ddz <= r2:
+                        out[m] = j
+                        m += 1
+    return m
+
+
+def build_grid(pts: np.ndarray, cell: float):
+    """A hashed voxel grid of cell size `cell` (m) over `pts` (NumPy, vectorised).
+
+    Returns (cx, cy, cz, nyz, nz, cell_keys, cell_start, order, max_count).
+    Cells are keyed (ix+1)*nyz + (iy+1)*nz + iz so the +-1 neighbours never wrap.
+    """
+    lo = pts.min(axis=0)
+    ijk = np.floor((pts - lo) / cell).astype(np.int64)
+    cx = ijk[:, 0] + 1
+    cy = ijk[:, 1] + 1
+    cz = ijk[:, 2]
+    ny = int(cy.max()) + 2
+    nz = int(cz.max()) + 1
+    nyz = ny * nz
+    key = cx * nyz + cy * nz + cz
+    order = np.argsort(key, kind="stable")
+    ks = key[order]
+    brk = np.flatnonzero(np.diff(ks)) + 1
+    starts = np.concatenate([[0], brk, [len(ks)]]).astype(np.int64)
+    cell_keys = ks[starts[:-1]]
+    max_count = int(np.diff(starts).max()) if len(starts) > 1 else 0
+    return cx, cy, cz, nyz, nz, cell_keys, starts, order, max_count
+
+
+# ------------------------------------------------------------------ seeds
+
+
+@njit(cache=True)
+def _count_within(pts, cand, m, nx, ny, nz, mx, my, mz, ox, oy, oz, dist, flag):
+    """Count cand points within dist of the plane (n, mean m in the o-frame); set flag."""
+    cnt = 0
+    for a in range(m):
+        j = cand[a]
+        d = nx * (pts[j, 0] - ox - mx) + ny * (pts[j, 1] - oy - my) + nz * (pts[j, 2] - oz - mz)
+        if abs(d) <= dist:
+            flag[a] = True
+            cnt += 1
+        else:
+            flag[a] = False
+    return cnt
+
+
+@njit(cache=True)
+def hough_directions(step_deg):
+    """Unit normals on the upper hemisphere in steps of step_deg (tilt 0..90, azimuth 0..360)."""
+    nt = int(math.floor(90.0 / step_deg + 1e-9)) + 1
+    na = int(math.ceil(360.0 / step_deg - 1e-9))
+    out = np.empty((1 + (nt - 1) * na, 3))
+    out[0, 0] = 0.0
+    out[0, 1] = 0.0
+    out[0, 2] = 1.0
+    m = 1
+    for t in range(1, nt):
+        phi = math.radians(t * step_deg)
+        for a in range(na):
+            psi = math.radians(a * step_deg)
+            if abs(phi - math.pi / 2) < 1e-12 and psi >= math.pi - 1e-12:
+                continue  # antipodal duplicate of a horizontal normal
+            out[m, 0] = math.sin(phi) * math.cos(psi)
+            out[m, 1] = math.sin(phi) * math.sin(psi)
+            out[m, 2] = math.cos(phi)
+            m += 1
+    return out[:m]
+
+
+@njit(cache=True)
+def _seed_plane(pts, i, cand, m, method, seed_dist, dirs, rng_seed, flag, tmp):
+    """Plane of a seed around trial point i: (ok, nx, ny, nz, mx, my, mz) in the frame of pts[i]."""
+    ox = pts[i, 0]
+    oy = pts[i, 1]
+    oz = pts[i, 2]
+    if method == 0:  # pca
+        nx, ny, nz, mx, my, mz = fit_subset(pts, cand, m, ox, oy, oz)
+        c = _count_within(pts, cand, m, nx, ny, nz, mx, my, mz, ox, oy, oz, seed_dist, flag)
+    elif method == 1:  # hough
+        rmax = 0.0
+        for a in range(m):
+            j = cand[a]
+            d = math.sqrt((pts[j, 0] - ox) ** 2 + (pts[j, 1] - oy) ** 2 + (pts[j, 2] - oz) ** 2)
+            if d > rmax:
+                rmax = d
+        half = int(math.ceil(rmax / seed_dist)) + 1
+        nb = 2 * half + 1
+        acc = np.zeros(nb, dtype=np.int64)
+        best = -1
+        best_d = 0
+        best_b = 0
+        for d in range(dirs.shape[0]):
+            ux = dirs[d, 0]
+            uy = dirs[d, 1]
+            uz = dirs[d, 2]
+            for b in range(nb):
+                acc[b] = 0
+            for a in range(m):
+                j = cand[a]
+                r = ux * (pts[j, 0] - ox) + uy * (pts[j, 1] - oy) + uz * (pts[j, 2] - oz)
+                b = int(math.floor(r / seed_dist + 0.5)) + half
+                acc[b] += 1
+            for b in range(nb):
+                if acc[b] > best:
+                    best = acc[b]
+                    best_d = d
+                    best_b = b
+        ux = dirs[best_d, 0]
+        uy = dirs[best_d, 1]
+        uz = dirs[best_d, 2]
+        rho = (best_b - half) * seed_dist
+        k = 0
+        for a in range(m):
+            j = cand[a]
+            r = ux * (pts[j, 0] - ox) + uy * (pts[j, 1] - oy) + uz * (pts[j, 2] - oz)
+            if abs(r - rho) <= seed_dist:
+                tmp[k] = j
+                k += 1
+        if k < 3:
+            return False, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0
+        nx, ny, nz, mx, my, mz = fit_subset(pts, tmp, k, ox, oy, oz)
+        c = _count_within(pts, cand, m, nx, ny, nz, mx, my, mz, ox, oy, oz, seed_dist, flag)
+        return c >= 3, nx, ny, nz, mx, my, mz
+    else:  # ransac, 200 three-point hypotheses
+        state = np.uint64(rng_seed) * np.uint64(0x2545F4914F6CDD1D) + np.uint64(i)
+        best = -1
+        bnx = 0.0
+        bny = 0.0
+        bnz = 1.0
+        bmx = 0.0
+        bmy = 0.0
+        bmz = 0.0
+        for _ in range(200):
+            state, r1 = splitmix64(state)
+            state, r2 = splitmix64(state)
+            state, r3 = splitmix64(state)
+            a1 = cand[int(r1 % np.uint64(m))]
+            a2 = cand[int(r2 % np.uint64(m))]
+            a3 = cand[int(r3 % np.uint64(m))]
+            ex = pts[a2, 0] - pts[a1, 0]
+            ey = pts[a2, 1] - pts[a1, 1]
+            ez = pts[a2, 2] - pts[a1, 2]
+            fx = pts[a3, 0] - pts[a1, 0]
+            fy = pts[a3, 1] - pts[a1, 1]
+            fz = pts[a3, 2] - pts[a1, 2]
+            nx = ey * fz - ez * fy
+            ny = ez * fx - ex * fz
+            nz = ex * fy - ey * fx
+            nn = math.sqrt(nx * nx + ny * ny + nz * nz)
+            if nn <= 1e-12:
+                continue
+            nx /= nn
+            ny /= nn
+            nz /= nn
+            mx = pts[a1, 0] - ox
+            my = pts[a1, 1] - oy
+            mz = pts[a1, 2] - oz
+            c = _count_within(pts, cand, m, nx, ny, nz, mx, my, mz, ox, oy, oz, seed_dist, flag)
+            if c > best:
+                best = c
+                bnx, bny, bnz, bmx, bmy, bmz = nx, ny, nz, mx, my, mz
+        if best < 3:
+            return False, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0
+        _count_within(pts, cand, m, bnx, bny, bnz, bmx, bmy, bmz, ox, oy, oz, seed_dist, flag)
+        k = 0
+        for a in range(m):
+            if flag[a]:
+                tmp[k] = cand[a]
+                k += 1
+        nx, ny, nz, mx, my, mz = fit_subset(pts, tmp, k, ox, oy, oz)
+        c = _count_within(pts, cand, m, nx, ny, nz, mx, my, mz, ox, oy, oz, seed_dist, flag)
+        return c >= 3, nx, ny, nz, mx, my, mz
+    if method == 0:
+        # one refit on the inliers of the first fit, then recount
+        k = 0
+        for a in range(m):
+            if flag[a]:
+                tmp[k] = cand[a]
+                k += 1
+        if k < 3:
+            return False, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0
+        nx, ny, nz, mx, my, mz = fit_subset(pts, tmp, k, ox, oy, oz)
+        c = _count_within(pts, cand, m, nx, ny, nz, mx, my, mz, ox, oy, oz, seed_dist, flag)
+    return c >= 3, nx, ny, nz, mx, my, mz
+
+
+# ------------------------------------------------------------------ growing
+
+
+@njit(cache=True)
+def surface_growing_kernel(pts, trial_order, knn, knn_k, method, seed_dist, min_seed_points, dirs,
+                           rng_seed, grow_r2, grow_dist, refit_growth, min_segment_size,
+                           cx, cy, cz, nyz, nz_cells, cell_keys, cell_start, order, max_cell):
+    """Surface growing over canonically ordered points; returns labels (N,) int64."""
+    n = pts.shape[0]
+    labels = np.full(n, -1, dtype=np.int64)
+    queue = np.empty(n, dtype=np.int64)
+    cand = np.empty(knn_k, dtype=np.int64)
+    tmp = np.empty(knn_k, dtype=np.int64)
+    flag = np.zeros(knn_k, dtype=np.bool_)
+    nbr = np.empty(27 * max_cell + 1, dtype=np.int64)
+    next_label = 0
+    for t in range(n):
+        i = trial_order[t]
+        if labels[i] != -1:
+            continue
+        m = 0
+        for a in range(knn_k):
+            j = knn[i, a]
+            if labels[j] == -1:
+                cand[m] = j
+                m += 1
+        if m < 3 or m < min_seed_points:
+            continue
+        ok, pnx, pny, pnz, pmx, pmy, pmz = _seed_plane(pts, i, cand, m, method, seed_dist, dirs,
+                                                      rng_seed, flag, tmp)
+        if not ok:
+            continue
+        cnt = 0
+        for a in range(m):
+            if flag[a]:
+                cnt += 1
+        if cnt < min_seed_points:
+            continue
+        lab = next_label
+        # origin of the moment sums: the trial point (limits round-off)
+        ox = pts[i, 0]
+        oy = pts[i, 1]
+        oz = pts[i, 2]
+        sx = sy = sz = sxx = sxy = sxz = syy = syz = szz = 0.0
+        tail = 0
+        for a in range(m):
+            if flag[a]:
+                j = cand[a]
+                labels[j] = lab
+                queue[tail] = j
+                tail += 1
+                x = pts[j, 0] - ox
+                y = pts[j, 1] - oy
+                z = pts[j, 2] - oz
+                sx += x
+                sy += y
+                sz += z
+                sxx += x * x
+                sxy += x * y
+                sxz += x * z
+                syy += y * y
+                syz += y * z
+                szz += z * z
+        last_fit = tail
+        head = 0
+        while head < tail:
+            q = queue[head]
+            head += 1
+            k = grid_neighbours(pts, q, grow_r2, cx, cy, cz, nyz, nz_cells, cell_keys, cell_start,
+                                order, nbr)
+            for a in range(k):
+                j = nbr[a]
+                if labels[j] != -1:
+                    continue
+                x = pts[j, 0] - ox
+                y = pts[j, 1] - oy
+                z = pts[j, 2] - oz
+                d = pnx * (x - pmx) + pny * (y - pmy) + pnz * (z - pmz)
+                if abs(d) > grow_dist:
+                    continue
+                labels[j] = lab
+                queue[tail] = j
+                tail += 1
+                sx += x
+                sy += y
+                sz += z
+                sxx += x * x
+                sxy += x * y
+                sxz += x * z
+                syy += y * y
+                syz += y * z
+                szz += z * z
+                if tail >= last_fit * (1.0 + refit_growth):
+                    pnx, pny, pnz, pmx, pmy, pmz = normal_from_moments(
+                        float(tail), sx, sy, sz, sxx, sxy, sxz, syy, syz, szz)
+                    last_fit = tail
+        if tail < min_segment_size:
+            for a in range(tail):
+                labels[queue[a]] = -1
+        else:
+            next_label += 1
+    return labels
