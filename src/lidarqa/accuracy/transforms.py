@@ -92,6 +92,9 @@ class TransformFit:
         Translation part (m).
     scale : float
         Scale factor (1 for ``none`` and ``helmert-fixed-scale``).
+    linear : ndarray of shape (3, 3)
+        Linear part: target = linear @ source + translation (for
+        ``similarity2d`` z is shifted, not scaled).
     sigma0_h, sigma0_v : float
         ``similarity2d`` only: separate σ0 of the horizontal (dof 2n-4) and
         vertical (dof n-1) adjustments, which are independent; the parameter
@@ -112,6 +115,7 @@ class TransformFit:
     rotation: np.ndarray
     translation: np.ndarray
     scale: float
+    linear: np.ndarray
     sigma0_h: float = math.nan
     sigma0_v: float = math.nan
     notes: tuple[str, ...] = field(default_factory=tuple)
@@ -128,7 +132,7 @@ class TransformFit:
         ndarray of shape (N, 3)
         """
         pts = as_points(points, "points")
-        return _apply(pts, self.rotation, self.translation, self.scale)
+        return self.translation + pts @ self.linear.T
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary: ``name``, ``params``, ``sigmas``, ``sigma0``, ``dof``, ..."""
@@ -197,10 +201,6 @@ def _expm_so3(w: np.ndarray) -> np.ndarray:
     if theta < 1e-12:
         return np.eye(3) + k
     return np.eye(3) + math.sin(theta) / theta * k + (1 - math.cos(theta)) / theta**2 * (k @ k)
-
-
-def _apply(pts: np.ndarray, rotation: np.ndarray, translation: np.ndarray, scale: float) -> np.ndarray:
-    return translation + scale * (pts @ rotation.T)
 
 
 # ------------------------------------------------------------------ helpers
@@ -333,8 +333,6 @@ def fit_similarity2d(source: Any, target: Any) -> TransformFit:
     sigmas = {k: float(v) for k, v in zip(names, sig, strict=True)}
     sigmas |= {"scale": float(sig_d[0]), "rotation_deg": float(sig_d[1])}
     rotation = np.array([[a / scale, -b / scale, 0.0], [b / scale, a / scale, 0.0], [0.0, 0.0, 1.0]])
-    # z is not scaled: keep a general affine form through a 3x3 matrix
-    linear = np.array([[a, -b, 0.0], [b, a, 0.0], [0.0, 0.0, 1.0]])
     return TransformFit(
         name="similarity2d",
         params=params,
@@ -348,10 +346,11 @@ def fit_similarity2d(source: Any, target: Any) -> TransformFit:
         rotation=rotation,
         translation=np.array([c, d, e]),
         scale=scale,
+        linear=np.array([[a, -b, 0.0], [b, a, 0.0], [0.0, 0.0, 1.0]]),
         sigma0_h=s0_h,
         sigma0_v=s0_v,
         notes=tuple(notes),
-    )._with_linear(linear)
+    )
 
 
 # ------------------------------------------------------------------- helmert
@@ -503,6 +502,7 @@ def fit_helmert(source: Any, target: Any, *, fix_scale: bool = False, max_iter: 
         rotation=r,
         translation=translation,
         scale=float(s),
+        linear=s * r,
         notes=tuple(notes),
     )
 
@@ -582,4 +582,5 @@ def estimate_transform(source: Any, target: Any, *, method: str = "similarity2d"
         rotation=np.eye(3),
         translation=np.zeros(3),
         scale=1.0,
+        linear=np.eye(3),
     )

@@ -478,3 +478,70 @@ def surface_growing_kernel(pts, trial_order, knn, knn_k, method, seed_dist, min_
         else:
             next_label += 1
     return labels
+
+
+# ------------------------------------------------------------------ kNN on the grid
+
+
+@njit(cache=True)
+def _knn_one(pts, i, k, rmax, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, order, cand, dist, out):
+    """Exact k nearest neighbours of pts[i] (including i) by expanding cube rings.
+
+    Returns True on success; False if more than `rmax` rings would be needed.
+    """
+    ncell = cell_keys.shape[0]
+    px = pts[i, 0]
+    py = pts[i, 1]
+    pz = pts[i, 2]
+    for r in range(1, rmax + 1):
+        m = 0
+        for dx in range(-r, r + 1):
+            for dy in range(-r, r + 1):
+                jx = cx[i] + dx
+                jy = cy[i] + dy
+                if jx < 0 or jy < 0:
+                    continue
+                base = jx * nyz + jy * nz
+                z0 = cz[i] - r
+                if z0 < 0:
+                    z0 = 0
+                z1 = cz[i] + r
+                if z1 > nz - 1:
+                    z1 = nz - 1
+                if z1 < z0:
+                    continue
+                # cells of one (x, y) column are contiguous in key order
+                c = np.searchsorted(cell_keys, base + z0)
+                while c < ncell and cell_keys[c] <= base + z1:
+                    for a in range(cell_start[c], cell_start[c + 1]):
+                        j = order[a]
+                        if m >= cand.shape[0]:
+                            return False
+                        cand[m] = j
+                        dist[m] = ((pts[j, 0] - px) ** 2 + (pts[j, 1] - py) ** 2
+                                   + (pts[j, 2] - pz) ** 2)
+                        m += 1
+                    c += 1
+        if m >= k:
+            srt = np.argsort(dist[:m], kind="mergesort")
+            if dist[srt[k - 1]] <= (r * cell) ** 2:
+                for a in range(k):
+                    out[a] = cand[srt[a]]
+                return True
+    return False
+
+
+@njit(cache=True)
+def knn_grid(pts, k, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, order, rmax, max_cand):
+    """k nearest neighbours of every point (N, k); rows that failed are all -1."""
+    n = pts.shape[0]
+    out = np.full((n, k), -1, dtype=np.int64)
+    cand = np.empty(max_cand, dtype=np.int64)
+    dist = np.empty(max_cand)
+    row = np.empty(k, dtype=np.int64)
+    for i in range(n):
+        if _knn_one(pts, i, k, rmax, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, order,
+                    cand, dist, row):
+            for a in range(k):
+                out[i, a] = row[a]
+    return out
