@@ -523,10 +523,19 @@ def _knn_one(pts, i, k, rmax, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, 
                         m += 1
                     c += 1
         if m >= k:
-            srt = np.argsort(dist[:m], kind="mergesort")
-            if dist[srt[k - 1]] <= (r * cell) ** 2:
-                for a in range(k):
-                    out[a] = cand[srt[a]]
+            kth = np.partition(dist[:m], k - 1)[k - 1]
+            if kth <= (r * cell) ** 2:
+                c = 0
+                for a in range(m):  # strictly closer first, then ties in gather order
+                    if dist[a] < kth:
+                        out[c] = cand[a]
+                        c += 1
+                for a in range(m):
+                    if c >= k:
+                        break
+                    if dist[a] == kth:
+                        out[c] = cand[a]
+                        c += 1
                 return True
     return False
 

@@ -222,14 +222,8 @@ def in_rectangle(xy: np.ndarray, center: np.ndarray, length: float, width: float
     return (np.abs(lx) <= 0.5 * length + margin) & (np.abs(ly) <= 0.5 * width + margin)
 
 
-class SortedXY:
-    """xy points sorted by x, to test many small regions quickly."""
-
-    def __init__(self, xy: np.ndarray) -> None:
-        self.order = np.argsort(xy[:, 0], kind="stable")
-        self.xs = xy[self.order, 0]
-        self.xy = xy
-
-    def candidates(self, xmin: float, xmax: float) -> np.ndarray:
-        i0, i1 = np.searchsorted(self.xs, [xmin, xmax])
-        return self.order[i0:i1]
+def x_window(xs: np.ndarray, xmin: float, xmax: float) -> slice:
+    """Slice of an x-sorted array with ``xmin <= x <= xmax``."""
+    i0, i1 = np.searchsorted(xs, [xmin, xmax], side="left"), None
+    i0, i1 = int(np.searchsorted(xs, xmin, side="left")), int(np.searchsorted(xs, xmax, side="right"))
+    return slice(i0, i1)

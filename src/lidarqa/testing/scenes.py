@@ -44,7 +44,6 @@ from ._shapes import (
     CLASS_NOISE,
     CLASS_OTHER,
     Face,
-    SortedXY,
     TerrainModel,
     _clip_line,
     canonical_plane,
@@ -52,6 +51,7 @@ from ._shapes import (
     polygon_area,
     rect_corners,
     sample_polygon,
+    x_window,
 )
 
 __all__ = [
@@ -533,25 +533,19 @@ def _sample_strip(world: _World, rng: np.random.Generator, *, density: float, no
     if world.ground and density > 0:
         n = int(rng.poisson(density * w * h))
         xy = rng.random((n, 2)) * np.array([w, h])
+        xy = xy[np.argsort(xy[:, 0], kind="stable")]  # x-sorted: objects test a slice (a view)
+        xs = xy[:, 0]
         keep = np.ones(n, dtype=bool)
-        sxy = SortedXY(xy)
         for center, length, width, az in world.footprints:
             r = 0.5 * float(np.hypot(length, width))
-            cand = sxy.candidates(center[0] - r, center[0] + r)
-            inside = in_rectangle(xy[cand], center, length, width, az)
-            keep[cand[inside]] = False
-        for t in world.trees:
-            r = t["crown_radius"]
-            cand = sxy.candidates(t["center"][0] - r, t["center"][0] + r)
-            under = np.hypot(*(xy[cand] - t["center"]).T) < r
-            drop = under & (rng.random(len(cand)) < 0.4)
-            keep[cand[drop]] = False
-        for s in world.shrubs:
-            r = s["radius"]
-            cand = sxy.candidates(s["center"][0] - r, s["center"][0] + r)
-            under = np.hypot(*(xy[cand] - s["center"]).T) < r
-            drop = under & (rng.random(len(cand)) < 0.5)
-            keep[cand[drop]] = False
+            sl = x_window(xs, center[0] - r, center[0] + r)
+            keep[sl][in_rectangle(xy[sl], center, length, width, az)] = False
+        for obj, p_drop in [(t, 0.4) for t in world.trees] + [(s, 0.5) for s in world.shrubs]:
+            r = obj.get("crown_radius", obj.get("radius"))
+            c = obj["center"]
+            sl = x_window(xs, c[0] - r, c[0] + r)
+            under = np.hypot(xy[sl, 0] - c[0], xy[sl, 1] - c[1]) < r
+            keep[sl][under & (rng.random(under.shape[0]) < p_drop)] = False
         xy = xy[keep]
         z = terrain.local_height(xy)
         xyz = np.column_stack([xy, z])

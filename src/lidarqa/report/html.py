@@ -1,0 +1,290 @@
+"""Self-contained HTML report: inline CSS, plots as base64 PNG, no network, phone-friendly.
+
+The page is built with plain string formatting (no template engine); every
+text value goes through :func:`html.escape`. Tables sit in horizontally
+scrolling wrappers so they stay readable on a narrow screen, and images scale
+to the page width.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+__all__ = ["Figure", "Table", "Section", "SummaryRow", "Report", "render_html", "fmt"]
+
+
+@dataclass(frozen=True)
+class Figure:
+    """A plot: PNG bytes, a title and a caption."""
+
+    title: str
+    png: bytes
+    caption: str = ""
+
+
+@dataclass(frozen=True)
+class Table:
+    """A small table: column headers and rows of values (formatted by :func:`fmt`)."""
+
+    title: str
+    columns: Sequence[str]
+    rows: Sequence[Sequence[Any]]
+    note: str = ""
+
+
+@dataclass(frozen=True)
+class SummaryRow:
+    """One row of the verdict table."""
+
+    analysis: str
+    anchor: str
+    headline: str
+    verdict: str  # "pass", "fail", "n/a", "error"
+    detail: str = ""
+
+
+@dataclass
+class Section:
+    """One analysis in the report."""
+
+    id: str
+    title: str
+    kind: str
+    headline: str = ""
+    paragraphs: list[str] = field(default_factory=list)
+    tables: list[Table] = field(default_factory=list)
+    figures: list[Figure] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+    outputs: list[str] = field(default_factory=list)
+    error: str | None = None
+
+
+@dataclass
+class Report:
+    """Everything the HTML page shows."""
+
+    title: str
+    subtitle: str
+    summary: list[SummaryRow]
+    sections: list[Section]
+    parameters: dict[str, Any]
+    provenance: list[tuple[str, str]]
+    inputs: list[dict[str, Any]]
+    versions: dict[str, Any]
+    attribution: str | None = None
+
+
+def fmt(value: Any, digits: int = 4) -> str:
+    """A compact, human-readable rendering of a table value."""
+    if value is None:
+        return "–"
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    if isinstance(value, int):
+        return f"{value:,}"
+    if isinstance(value, float):
+        if not math.isfinite(value):
+            return "–"
+        if value == 0:
+            return "0"
+        a = abs(value)
+        if a >= 1e5 or a < 1e-4:
+            return f"{value:.3e}"
+        if a >= 1000:
+            return f"{value:,.1f}"
+        return f"{value:.{digits}g}" if a < 1 else f"{value:.{max(digits - 1, 1)}f}".rstrip("0").rstrip(".")
+    try:
+        import numpy as np
+
+        if isinstance(value, np.integer):
+            return fmt(int(value), digits)
+        if isinstance(value, np.floating):
+            return fmt(float(value), digits)
+        if isinstance(value, np.bool_):
+            return fmt(bool(value), digits)
+    except ImportError:  # pragma: no cover
+        pass
+    if isinstance(value, list | tuple):
+        return ", ".join(fmt(v, digits) for v in value)
+    if isinstance(value, dict):
+        return "; ".join(f"{k}: {fmt(v, digits)}" for k, v in value.items())
+    return str(value)
+
+
+_CSS = """
+:root { --fg:#1f2933; --muted:#616e7c; --line:#d9e2ec; --bg:#ffffff; --head:#f0f4f8;
+        --pass:#1b7f3b; --fail:#c62828; --na:#7b8794; }
+* { box-sizing: border-box; }
+html { -webkit-text-size-adjust: 100%; }
+body { margin: 0; padding: 0 1rem 3rem; font: 15px/1.5 -apple-system, "Segoe UI", Roboto, Helvetica,
+       Arial, sans-serif; color: var(--fg); background: var(--bg); }
+main { max-width: 60rem; margin: 0 auto; }
+header { padding: 1.2rem 0 0.6rem; border-bottom: 2px solid var(--line); margin-bottom: 1rem; }
+h1 { font-size: 1.5rem; margin: 0 0 .3rem; }
+h2 { font-size: 1.25rem; margin: 2rem 0 .5rem; padding-top: .5rem; border-top: 1px solid var(--line); }
+h3 { font-size: 1.05rem; margin: 1.2rem 0 .4rem; }
+p, li { overflow-wrap: anywhere; }
+.sub, .muted, figcaption, .note { color: var(--muted); font-size: .9rem; }
+.attribution { font-size: .9rem; margin-top: .4rem; }
+nav ul { padding-left: 1.2rem; margin: .3rem 0; }
+.table-wrap { width: 100%; overflow-x: auto; -webkit-overflow-scrolling: touch; margin: .4rem 0 .8rem;
+              border: 1px solid var(--line); border-radius: 4px; }
+table { border-collapse: collapse; width: 100%; font-size: .9rem; font-variant-numeric: tabular-nums; }
+th, td { padding: .35rem .6rem; border-bottom: 1px solid var(--line); text-align: left;
+         vertical-align: top; white-space: nowrap; }
+td.wrap { white-space: normal; min-width: 12rem; }
+th { background: var(--head); font-weight: 600; position: sticky; top: 0; }
+tr:last-child td { border-bottom: 0; }
+td.num { text-align: right; }
+.verdict { font-weight: 700; padding: .1rem .45rem; border-radius: 3px; color: #fff; font-size: .8rem;
+           text-transform: uppercase; letter-spacing: .03em; }
+.verdict.pass { background: var(--pass); } .verdict.fail { background: var(--fail); }
+.verdict.na { background: var(--na); } .verdict.error { background: #6d1b1b; }
+.headline { font-size: 1rem; margin: .2rem 0 .6rem; }
+figure { margin: .8rem 0 1.2rem; }
+figure img { display: block; max-width: 100%; height: auto; border: 1px solid var(--line); }
+.figs { display: grid; grid-template-columns: repeat(auto-fit, minmax(18rem, 1fr)); gap: .8rem; }
+.error-box { border-left: 4px solid var(--fail); background: #fdecea; padding: .5rem .8rem; }
+.notes li { color: #8a5a00; }
+code, pre { font-family: ui-monospace, SFMono-Regular, Menlo, Consolas, monospace; font-size: .85rem; }
+pre { background: var(--head); padding: .6rem; overflow-x: auto; white-space: pre; }
+footer { margin-top: 2.5rem; color: var(--muted); font-size: .85rem; }
+@media (max-width: 40rem) { body { font-size: 14px; padding: 0 .6rem 2rem; } h1 { font-size: 1.25rem; }
+  th, td { padding: .3rem .45rem; } }
+@media print { .table-wrap { overflow: visible; } }
+"""
+
+
+def _e(text: Any) -> str:
+    return html.escape(str(text), quote=True)
+
+
+def _table(t: Table, *, numeric_right: bool = True) -> str:
+    out = []
+    if t.title:
+        out.append(f"<h3>{_e(t.title)}</h3>")
+    out.append('<div class="table-wrap"><table>')
+    out.append("<thead><tr>" + "".join(f'<th scope="col">{_e(c)}</th>' for c in t.columns)
+               + "</tr></thead><tbody>")
+    for row in t.rows:
+        cells = []
+        for v in row:
+            num = numeric_right and isinstance(v, int | float) and not isinstance(v, bool)
+            text = fmt(v)
+            cls = ' class="num"' if num else (' class="wrap"' if len(text) > 60 else "")
+            cells.append(f"<td{cls}>{_e(text)}</td>")
+        out.append("<tr>" + "".join(cells) + "</tr>")
+    out.append("</tbody></table></div>")
+    if t.note:
+        out.append(f'<p class="note">{_e(t.note)}</p>')
+    return "\n".join(out)
+
+
+def _figure(f: Figure) -> str:
+    data = base64.b64encode(f.png).decode("ascii")
+    cap = _e(f.title) + (f" — {_e(f.caption)}" if f.caption else "")
+    return (f'<figure><img src="data:image/png;base64,{data}" alt="{_e(f.title)}" loading="eager">'
+            f"<figcaption>{cap}</figcaption></figure>")
+
+
+def _verdict(v: str) -> str:
+    cls = {"pass": "pass", "fail": "fail", "error": "error"}.get(v, "na")
+    label = {"pass": "pass", "fail": "fail", "error": "error"}.get(v, "no target")
+    return f'<span class="verdict {cls}">{_e(label)}</span>'
+
+
+def _flatten(prefix: str, value: Any, rows: list[tuple[str, Any]]) -> None:
+    if isinstance(value, dict) and value:
+        for k, v in value.items():
+            _flatten(f"{prefix}.{k}" if prefix else str(k), v, rows)
+    else:
+        rows.append((prefix, value))
+
+
+def render_html(report: Report) -> str:
+    """The complete, self-contained HTML page of a report."""
+    parts: list[str] = [
+        "<!DOCTYPE html>",
+        '<html lang="en">',
+        "<head>",
+        '<meta charset="utf-8">',
+        '<meta name="viewport" content="width=device-width, initial-scale=1">',
+        '<meta name="generator" content="lidarqa">',
+        f"<title>{_e(report.title)}</title>",
+        f"<style>{_CSS}</style>",
+        "</head>",
+        "<body><main>",
+        "<header>",
+        f"<h1>{_e(report.title)}</h1>",
+        f'<div class="sub">{_e(report.subtitle)}</div>',
+    ]
+    if report.attribution:
+        parts.append(f'<div class="attribution">Data: {_e(report.attribution)}</div>')
+    parts.append("</header>")
+
+    # Summary verdict table first.
+    parts.append('<section id="summary"><h2 style="border-top:0;margin-top:.5rem">Summary</h2>')
+    parts.append('<div class="table-wrap"><table><thead><tr><th scope="col">Analysis</th>'
+                 '<th scope="col">Result</th><th scope="col">Verdict</th><th scope="col">Target</th>'
+                 "</tr></thead><tbody>")
+    for row in report.summary:
+        parts.append(
+            f'<tr><td><a href="#{_e(row.anchor)}">{_e(row.analysis)}</a></td>'
+            f'<td class="wrap">{_e(row.headline)}</td><td>{_verdict(row.verdict)}</td>'
+            f'<td class="wrap">{_e(row.detail)}</td></tr>')
+    parts.append("</tbody></table></div>")
+    parts.append("<nav><ul>" + "".join(f'<li><a href="#{_e(s.id)}">{_e(s.title)}</a></li>'
+                                       for s in report.sections)
+                 + '<li><a href="#parameters">Parameters</a></li>'
+                 + '<li><a href="#provenance">Provenance</a></li></ul></nav></section>')
+
+    for s in report.sections:
+        parts.append(f'<section id="{_e(s.id)}"><h2>{_e(s.title)}</h2>')
+        if s.headline:
+            parts.append(f'<p class="headline"><strong>{_e(s.headline)}</strong></p>')
+        if s.error:
+            parts.append(f'<p class="error-box">This analysis failed: {_e(s.error)}</p>')
+        for p in s.paragraphs:
+            parts.append(f"<p>{_e(p)}</p>")
+        if s.notes:
+            parts.append('<ul class="notes">' + "".join(f"<li>{_e(n)}</li>" for n in s.notes) + "</ul>")
+        for t in s.tables:
+            parts.append(_table(t))
+        if s.figures:
+            parts.append('<div class="figs">' + "".join(_figure(f) for f in s.figures) + "</div>")
+        if s.outputs:
+            parts.append('<p class="muted">Output files: '
+                         + ", ".join(f"<code>{_e(o)}</code>" for o in s.outputs) + "</p>")
+        parts.append("</section>")
+
+    # Parameters and provenance at the end.
+    parts.append('<section id="parameters"><h2>Parameters</h2>')
+    for sid, params in report.parameters.items():
+        rows: list[tuple[str, Any]] = []
+        _flatten("", params, rows)
+        parts.append(_table(Table(sid, ["parameter", "value"], [list(r) for r in rows]),
+                            numeric_right=False))
+    parts.append("</section>")
+    parts.append('<section id="provenance"><h2>Provenance</h2>')
+    parts.append(_table(Table("", ["item", "value"], [list(r) for r in report.provenance]),
+                        numeric_right=False))
+    if report.inputs:
+        parts.append(_table(Table("Input files", ["name", "kind", "path", "size (bytes)", "sha256", "CRS"],
+                                  [[i.get("name"), i.get("kind"), i.get("path"), i.get("size"),
+                                    i.get("sha256"), i.get("crs")] for i in report.inputs]),
+                            numeric_right=False))
+    parts.append(_table(Table("Software versions", ["package", "version"],
+                              [[k, v if v is not None else "not installed"]
+                               for k, v in report.versions.items()]), numeric_right=False))
+    parts.append("</section>")
+    foot = "Generated by lidarqa. This page is self-contained: it needs no network access."
+    if report.attribution:
+        foot += f" Data: {report.attribution}."
+    parts.append(f"<footer>{_e(foot)}</footer>")
+    parts.append("</main></body></html>")
+    return "\n".join(parts) + "\n"
