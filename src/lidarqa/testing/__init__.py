@@ -1,11 +1,28 @@
-"""Seeded synthetic scenes with known truth, edge-case inputs and hypothesis strategies.
+"""Seeded synthetic scenes with exactly known truth, edge-case inputs, scoring helpers.
+
+Scenes (every maker takes ``seed=`` and returns a :class:`Scene`):
+
+- :func:`make_scene`: terrain (slope, undulation, curbs, optional embankment),
+  flat and gable buildings with observed walls, cars, trees, shrubs, outliers.
+- :func:`make_building_scene`: buildings on a planar ground (edge/corner tests).
+- :func:`make_terrain_scene`: bare terrain with break lines (ground tests).
+- :func:`make_plane_pair`, :func:`make_corner`: two planes at a given angle,
+  three planes at a corner.
+
+A :class:`Scene` holds ``points``, ``classification`` (ASPRS), ``is_ground``,
+``object_id``, ``plane_id``, ``planes`` (:class:`TruePlane`), ``edges``
+(:class:`~lidarqa.io.vector.Segments`), ``corners``
+(:class:`~lidarqa.io.vector.PointSet`), ``params``, ``fields`` and the terrain
+model (``scene.ground_z(xy)``). :func:`rigid_motion` moves points and truth
+together; :func:`score_edges` / :func:`score_corners` score detections against
+the truth; :func:`sample_checkpoints` gives true ground check points;
+:mod:`lidarqa.testing.cases` has edge-case arrays. Hypothesis strategies live in
+``lidarqa.testing.strategies`` (needs the ``test`` extra; not imported here).
 
 >>> from lidarqa.testing import make_building_scene
 >>> scene = make_building_scene(seed=1)
 >>> scene.points.shape[1], len(scene.planes) > 0
 (3, True)
-
-``lidarqa.testing.strategies`` (hypothesis, a test extra) is not imported here.
 """
 
 from __future__ import annotations
@@ -17,12 +34,16 @@ from .scenes import (
     Scene,
     TruePlane,
     make_building_scene,
+    make_corner,
+    make_plane_pair,
     make_scene,
     make_terrain_scene,
     plane_area,
     rigid_motion,
     rotation_matrix,
+    sample_checkpoints,
 )
+from .scoring import CornerScore, EdgeScore, score_corners, score_edges
 
 __all__ = [
     "Scene",
@@ -32,8 +53,15 @@ __all__ = [
     "make_scene",
     "make_building_scene",
     "make_terrain_scene",
+    "make_plane_pair",
+    "make_corner",
     "rigid_motion",
     "rotation_matrix",
     "plane_area",
+    "sample_checkpoints",
+    "score_edges",
+    "score_corners",
+    "EdgeScore",
+    "CornerScore",
     "cases",
 ]

@@ -33,7 +33,7 @@ def canonical_plane(normal: np.ndarray, rho: float) -> tuple[np.ndarray, float]:
     if flip:
         n = -n
         rho = -rho
-    return n, rho
+    return n + 0.0, rho + 0.0  # no negative zeros
 
 
 # --------------------------------------------------------------------- terrain
@@ -169,6 +169,7 @@ class Face:
     object_id: int
     density: float  # points per m^2 of *surface*
     clip_below_terrain: bool = False
+    airborne: bool = False  # seen from above: a jittered grid is laid out in xy
 
 
 def polygon_area(vertices: np.ndarray) -> float:
@@ -193,6 +194,56 @@ def sample_polygon(rng: np.random.Generator, vertices: np.ndarray, density: floa
     flip = r.sum(axis=1) > 1.0
     r[flip] = 1.0 - r[flip]
     return v0 + r[:, :1] * e1[tri] + r[:, 1:] * e2[tri]
+
+
+def _jittered_grid(rng: np.random.Generator, lo: np.ndarray, hi: np.ndarray,
+                   spacing: float) -> np.ndarray:
+    """One uniform point per `spacing` cell of a randomly shifted grid covering [lo, hi]."""
+    shift = rng.random(2) * spacing
+    start = lo - shift
+    n = np.maximum(np.ceil((hi - start) / spacing).astype(int), 1)
+    i, j = np.meshgrid(np.arange(n[0]), np.arange(n[1]), indexing="ij")
+    cells = np.column_stack([i.ravel(), j.ravel()]).astype(np.float64)
+    p = start + (cells + rng.random(cells.shape)) * spacing
+    return p[np.all((p >= lo) & (p <= hi), axis=1)]
+
+
+def _inside_convex(p: np.ndarray, poly: np.ndarray) -> np.ndarray:
+    """Mask of 2D points inside a convex polygon (either orientation)."""
+    q = np.roll(poly, -1, axis=0)
+    cross = ((q[:, 0] - poly[:, 0])[None] * (p[:, 1:2] - poly[:, 1][None])
+             - (q[:, 1] - poly[:, 1])[None] * (p[:, 0:1] - poly[:, 0][None]))
+    area2 = np.sum(poly[:, 0] * q[:, 1] - q[:, 0] * poly[:, 1])
+    return np.all(cross * np.sign(area2) >= 0, axis=1)
+
+
+def sample_polygon_jittered(rng: np.random.Generator, vertices: np.ndarray, density: float,
+                            normal: np.ndarray, airborne: bool) -> np.ndarray:
+    """Points of a jittered grid (one per cell of area 1/density) on a convex planar polygon.
+
+    Airborne faces get the grid in horizontal xy at the horizontal density
+    ``density / |n_z|`` (so ``density`` stays per m^2 of surface); other faces
+    get it in the face's own (horizontal, up-slope) frame.
+    """
+    if density <= 0:
+        return np.zeros((0, 3))
+    v0 = vertices[0]
+    if airborne and abs(normal[2]) > 1e-6:
+        spacing = 1.0 / np.sqrt(density / abs(normal[2]))
+        poly = vertices[:, :2]
+        xy = _jittered_grid(rng, poly.min(axis=0), poly.max(axis=0), spacing)
+        xy = xy[_inside_convex(xy, poly)]
+        z = (normal @ v0 - xy @ normal[:2]) / normal[2]
+        return np.column_stack([xy, z])
+    u = np.cross([0.0, 0.0, 1.0], normal)
+    if np.linalg.norm(u) < 1e-9:
+        u = np.array([1.0, 0.0, 0.0])
+    u /= np.linalg.norm(u)
+    w = np.cross(normal, u)
+    poly = np.column_stack([(vertices - v0) @ u, (vertices - v0) @ w])
+    ab = _jittered_grid(rng, poly.min(axis=0), poly.max(axis=0), 1.0 / np.sqrt(density))
+    ab = ab[_inside_convex(ab, poly)]
+    return v0 + ab[:, :1] * u + ab[:, 1:] * w
 
 
 # --------------------------------------------------------------------- placement
@@ -222,8 +273,41 @@ def in_rectangle(xy: np.ndarray, center: np.ndarray, length: float, width: float
     return (np.abs(lx) <= 0.5 * length + margin) & (np.abs(ly) <= 0.5 * width + margin)
 
 
-def x_window(xs: np.ndarray, xmin: float, xmax: float) -> slice:
-    """Slice of an x-sorted array with ``xmin <= x <= xmax``."""
-    i0, i1 = np.searchsorted(xs, [xmin, xmax], side="left"), None
-    i0, i1 = int(np.searchsorted(xs, xmin, side="left")), int(np.searchsorted(xs, xmax, side="right"))
-    return slice(i0, i1)
+class ColumnSampler:
+    """Uniform random xy in [0, W] x [0, H], generated column by column (1 m wide).
+
+    Points come out grouped by x column, so the points near an object are a
+    contiguous slice (a view) without sorting millions of points.
+    """
+
+    def __init__(self, rng: np.random.Generator, n: int, size: tuple[float, float],
+                 column: float = 1.0, *, jittered: bool = False) -> None:
+        w, h = size
+        if jittered:  # one point per cell of area w * h / n, grid columns of width `column`
+            spacing = float(np.sqrt(w * h / max(n, 1)))
+            xy = _jittered_grid(rng, np.zeros(2), np.array([w, h]), spacing)
+            col = np.minimum((xy[:, 0] // spacing).astype(np.int64), int(np.ceil(w / spacing)) - 1)
+            order = np.argsort(col, kind="stable")
+            self.xy = np.take(xy, order, axis=0)
+            self.ncol = int(np.ceil(w / spacing))
+            counts = np.bincount(col, minlength=self.ncol)
+            self.offsets = np.concatenate([[0], np.cumsum(counts)])
+            self.column = spacing
+            return
+        ncol = max(1, int(np.ceil(w / column)))
+        edges = np.minimum(np.arange(ncol + 1) * column, w)
+        widths = np.diff(edges)
+        counts = rng.multinomial(n, widths / widths.sum())
+        self.offsets = np.concatenate([[0], np.cumsum(counts)])
+        col = np.repeat(np.arange(ncol), counts)
+        x = edges[col] + rng.random(n) * widths[col]
+        y = rng.random(n) * h
+        self.xy = np.column_stack([x, y])
+        self.column = column
+        self.ncol = ncol
+
+    def window(self, xmin: float, xmax: float) -> slice:
+        """Slice of the points whose column overlaps ``[xmin, xmax]``."""
+        c0 = int(np.clip(np.floor(xmin / self.column), 0, self.ncol - 1))
+        c1 = int(np.clip(np.floor(xmax / self.column), 0, self.ncol - 1))
+        return slice(int(self.offsets[c0]), int(self.offsets[c1 + 1]))

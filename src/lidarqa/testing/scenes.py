@@ -35,24 +35,23 @@ from .._validate import as_points, check_choice, check_positive
 from ..errors import OptionError
 from ..io.pointcloud import PointCloud
 from ..io.vector import PointSet, Segments
-from ._shapes import (
-    CLASS_BUILDING,
-    CLASS_GROUND,
-    CLASS_HIGH_VEG,
-    CLASS_LOW_VEG,
-    CLASS_MEDIUM_VEG,
-    CLASS_NOISE,
-    CLASS_OTHER,
-    Face,
-    TerrainModel,
-    _clip_line,
-    canonical_plane,
-    in_rectangle,
-    polygon_area,
-    rect_corners,
-    sample_polygon,
-    x_window,
+from ._shapes import CLASS_OTHER, Face, TerrainModel, canonical_plane, polygon_area
+from ._world import (
+    ROOF_TYPES,
+    BuildingSpec,
+    _add_shrub,
+    _add_structure,
+    _add_tree,
+    _breaklines,
+    _place,
+    _plane_normal,
+    _random_building,
+    _random_terrain,
+    _sample_strip,
+    _World,
 )
+
+PATTERNS = ("random", "jittered")
 
 __all__ = [
     "Scene",
@@ -64,10 +63,11 @@ __all__ = [
     "make_terrain_scene",
     "rigid_motion",
     "rotation_matrix",
+    "sample_checkpoints",
+    "plane_area",
+    "make_plane_pair",
+    "make_corner",
 ]
-
-ROOF_TYPES = ("flat", "gable")
-
 
 # --------------------------------------------------------------------- results
 
@@ -108,47 +108,7 @@ class TruePlane:
                 "kind": self.kind, "object_id": int(self.object_id), "n_points": int(self.n_points)}
 
 
-@dataclass(frozen=True)
-class BuildingSpec:
-    """One building of a scene.
-
-    Parameters
-    ----------
-    roof : {"flat", "gable"}
-    center : (float, float)
-        Footprint centre in the scene's local frame (m; the extent starts at 0, 0).
-    length, width : float
-        Footprint size (m); a gable ridge runs along `length`.
-    azimuth_deg : float
-        Direction of the `length` axis, counter-clockwise from +x (degrees).
-    height : float
-        Eave height (flat roof: roof height) above the highest footprint corner's ground (m).
-    pitch_deg : float
-        Gable roof pitch (degrees, 0 < pitch < 90); ignored for flat roofs.
-    """
-
-    roof: str = "flat"
-    center: tuple[float, float] = (20.0, 20.0)
-    length: float = 15.0
-    width: float = 10.0
-    azimuth_deg: float = 0.0
-    height: float = 6.0
-    pitch_deg: float = 35.0
-
-    def __post_init__(self) -> None:
-        check_choice(self.roof, ROOF_TYPES, "roof")
-        check_positive(self.length, "length")
-        check_positive(self.width, "width")
-        check_positive(self.height, "height")
-        if self.roof == "gable" and not 0.0 < float(self.pitch_deg) < 90.0:
-            raise OptionError(f"pitch_deg must be in (0, 90) degrees, got {self.pitch_deg!r}")
-
-    @property
-    def radius(self) -> float:
-        return 0.5 * float(np.hypot(self.length, self.width))
-
-
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, repr=False)
 class Scene:
     """A synthetic point cloud with its exact truth.
 
@@ -199,6 +159,11 @@ class Scene:
     def __len__(self) -> int:
         return int(self.points.shape[0])
 
+    def __repr__(self) -> str:
+        return (f"Scene(n_points={len(self)}, planes={len(self.planes)}, edges={len(self.edges)}, "
+                f"corners={len(self.corners)}, maker={self.params.get('maker')!r}, "
+                f"seed={self.params.get('seed')!r})")
+
     @property
     def n_points(self) -> int:
         """Number of points."""
@@ -210,6 +175,40 @@ class Scene:
         if self.terrain is None:
             return np.full(len(xy), np.nan)
         return self.terrain.height(xy)
+
+    def breaklines(self) -> Segments:
+        """Terrain break lines (curbs, embankment foot and top) clipped to the extent.
+
+        xy are exact; z is the true terrain height at each endpoint (on a curb
+        line itself that may be either side of the step). Attribute ``kind``:
+        ``"curb"``, ``"embankment_foot"``, ``"embankment_top"``. Empty without a terrain model.
+        """
+        if self.terrain is None:
+            return Segments(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3)),
+                            {"kind": np.zeros(0, dtype=str)})
+        t = self.terrain
+        lines = t.breaklines(tuple(self.params["size"]))
+        start = np.array([t.rotation @ a for a, _b, _k in lines]).reshape(-1, 2) + t.offset[:2]
+        end = np.array([t.rotation @ b for _a, b, _k in lines]).reshape(-1, 2) + t.offset[:2]
+        return Segments(
+            np.arange(len(lines), dtype=np.int64),
+            np.column_stack([start, self.ground_z(start)]),
+            np.column_stack([end, self.ground_z(end)]),
+            {"kind": np.array([k for *_ab, k in lines], dtype=str).reshape(-1)},
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        """Counts and parameters (JSON-able; no per-point arrays)."""
+        cls, cnt = np.unique(self.classification, return_counts=True)
+        return {
+            "n_points": len(self),
+            "classes": {str(int(c)): int(n) for c, n in zip(cls, cnt, strict=True)},
+            "n_ground": int(self.is_ground.sum()),
+            "n_planes": len(self.planes),
+            "n_edges": len(self.edges),
+            "n_corners": len(self.corners),
+            "params": self.params,
+        }
 
     def subset(self, index: Any) -> Scene:
         """The scene restricted to some points (mask or indices); the truth is kept whole."""
@@ -224,12 +223,14 @@ class Scene:
             fields={k: v[idx] for k, v in self.fields.items()},
         )
 
-    def to_cloud(self, *, include_truth: bool = False) -> PointCloud:
+    def to_cloud(self, *, include_truth: bool = False, crs: Any = None) -> PointCloud:
         """The points as a :class:`~lidarqa.io.PointCloud` (writable with :func:`lidarqa.write`).
 
         Fields: ``classification`` and every entry of :attr:`fields`; with
         `include_truth`, also ``is_ground`` (uint8), ``object_id`` and
-        ``plane_id`` (int32), which become LAS extra bytes.
+        ``plane_id`` (int32), which become LAS extra bytes. `crs` (anything
+        :func:`lidarqa.io.crs.parse_crs` accepts, e.g. ``"EPSG:2154"``) is
+        attached to the cloud.
         """
         fields: dict[str, np.ndarray] = {"classification": self.classification.astype(np.uint8)}
         fields.update({k: v.copy() for k, v in self.fields.items()})
@@ -237,7 +238,11 @@ class Scene:
             fields["is_ground"] = self.is_ground.astype(np.uint8)
             fields["object_id"] = self.object_id.astype(np.int32)
             fields["plane_id"] = self.plane_id.astype(np.int32)
-        return PointCloud(xyz=self.points.copy(), fields=fields)
+        if crs is not None:
+            from ..io.crs import parse_crs
+
+            crs = parse_crs(crs)
+        return PointCloud(xyz=self.points.copy(), fields=fields, crs=crs)
 
 
 # --------------------------------------------------------------------- rigid motions
@@ -326,342 +331,21 @@ def rigid_motion(
     return _move_points(pts, rot, t)
 
 
-# --------------------------------------------------------------------- world construction
-
-
-@dataclass
-class _World:
-    """Noise-free geometry in the local frame, before sampling."""
-
-    size: tuple[float, float]
-    terrain: TerrainModel
-    ground: bool = True
-    planes: list[dict] = field(default_factory=list)
-    faces: list[Face] = field(default_factory=list)
-    edges: list[tuple] = field(default_factory=list)
-    corners: list[tuple] = field(default_factory=list)
-    footprints: list[tuple] = field(default_factory=list)  # (center, L, W, az)
-    trees: list[dict] = field(default_factory=list)
-    shrubs: list[dict] = field(default_factory=list)
-    ground_plane: int = -1
-    next_object: int = 0
-
-    def add_plane(self, normal: np.ndarray, point: np.ndarray, kind: str, object_id: int,
-                  polygon: np.ndarray | None) -> int:
-        n, rho = canonical_plane(normal, float(np.dot(normal, point)))
-        self.planes.append({"normal": n, "rho": rho, "kind": kind, "object_id": object_id,
-                            "polygon": polygon})
-        return len(self.planes) - 1
-
-    def new_object(self) -> int:
-        self.next_object += 1
-        return self.next_object - 1
-
-
-def _plane_normal(vertices: np.ndarray) -> np.ndarray:
-    """Newell normal of a planar polygon (exact up to rounding)."""
-    v = vertices
-    w = np.roll(v, -1, axis=0)
-    n = np.array([
-        np.sum((v[:, 1] - w[:, 1]) * (v[:, 2] + w[:, 2])),
-        np.sum((v[:, 2] - w[:, 2]) * (v[:, 0] + w[:, 0])),
-        np.sum((v[:, 0] - w[:, 0]) * (v[:, 1] + w[:, 1])),
-    ])
-    return n / np.linalg.norm(n)
-
-
-def _add_structure(world: _World, spec: BuildingSpec, *, object_kind: str, density: float,
-                   wall_density: float, foot_edges: bool) -> int:
-    """Add a building ("building") or a car ("car") with its planes, faces, edges, corners."""
-    oid = world.new_object()
-    is_car = object_kind == "car"
-    cls = CLASS_OTHER if is_car else CLASS_BUILDING
-    roof_kind, wall_kind = ("car_top", "car_side") if is_car else ("roof", "wall")
-    planar = world.terrain.is_planar
-    c2 = rect_corners(np.asarray(spec.center, dtype=np.float64), spec.length, spec.width,
-                      spec.azimuth_deg)
-    g = world.terrain.local_height(c2)
-    top = (g.min() if is_car else g.max()) + spec.height
-    bottom = g if planar else np.full(4, g.min() - 1.0)
-    world.footprints.append((np.asarray(spec.center, float), spec.length, spec.width,
-                             spec.azimuth_deg))
-
-    def p3(xy: np.ndarray, z: float) -> np.ndarray:
-        return np.array([xy[0], xy[1], z])
-
-    roof_ids: list[int] = []
-    if spec.roof == "flat" or is_car:
-        poly = np.array([p3(c2[i], top) for i in range(4)])
-        rid = world.add_plane(np.array([0.0, 0.0, 1.0]), poly[0], roof_kind, oid, poly)
-        world.faces.append(Face(poly, rid, cls, oid, density))
-        roof_ids = [rid]
-        wall_tops = {i: [p3(c2[i], top), p3(c2[(i + 1) % 4], top)] for i in range(4)}
-        ridge = None
-    else:
-        rise = 0.5 * spec.width * np.tan(np.deg2rad(spec.pitch_deg))
-        zr = top + rise
-        r0 = 0.5 * (c2[3] + c2[0])
-        r1 = 0.5 * (c2[1] + c2[2])
-        ridge = (p3(r0, zr), p3(r1, zr))
-        face_a = np.array([p3(c2[0], top), p3(c2[1], top), ridge[1], ridge[0]])
-        face_b = np.array([p3(c2[2], top), p3(c2[3], top), ridge[0], ridge[1]])
-        for poly in (face_a, face_b):
-            n = _plane_normal(poly)
-            rid = world.add_plane(n, poly[0], roof_kind, oid, poly)
-            # airborne density per horizontal m^2 -> per surface m^2
-            world.faces.append(Face(poly, rid, cls, oid, density * abs(world.planes[rid]["normal"][2])))
-            roof_ids.append(rid)
-        wall_tops = {
-            0: [p3(c2[0], top), p3(c2[1], top)],
-            1: [p3(c2[1], top), ridge[1], p3(c2[2], top)],
-            2: [p3(c2[2], top), p3(c2[3], top)],
-            3: [p3(c2[3], top), ridge[0], p3(c2[0], top)],
-        }
-
-    wall_ids = []
-    for i in range(4):
-        j = (i + 1) % 4
-        e = c2[j] - c2[i]
-        n = np.array([e[1], -e[0], 0.0]) / np.hypot(e[0], e[1])  # outward for CCW corners
-        tops = wall_tops[i]
-        # order: bottom_i, bottom_j, top_j ... top_i (convex)
-        poly = np.array([p3(c2[i], bottom[i]), p3(c2[j], bottom[j]), *tops[::-1]])
-        wid = world.add_plane(n, poly[0], wall_kind, oid, poly)
-        world.faces.append(Face(poly, wid, cls, oid, wall_density, clip_below_terrain=not planar))
-        wall_ids.append(wid)
-
-    ek = (lambda k: "car") if is_car else (lambda k: k)
-    # eaves (roof - wall), verges, ridge
-    if ridge is None:
-        r = roof_ids[0]
-        for i in range(4):
-            a, b = wall_tops[i]
-            world.edges.append((a, b, r, wall_ids[i], ek("eave"), oid))
-            world.corners.append((a, (r, wall_ids[i - 1], wall_ids[i]), ek("eave"), oid))
-    else:
-        ra, rb = roof_ids
-        world.edges.append((ridge[0], ridge[1], ra, rb, "ridge", oid))
-        world.edges.append((*wall_tops[0], ra, wall_ids[0], "eave", oid))
-        world.edges.append((*wall_tops[2], rb, wall_ids[2], "eave", oid))
-        world.edges.append((p3(c2[1], top), ridge[1], ra, wall_ids[1], "verge", oid))
-        world.edges.append((p3(c2[2], top), ridge[1], rb, wall_ids[1], "verge", oid))
-        world.edges.append((p3(c2[0], top), ridge[0], ra, wall_ids[3], "verge", oid))
-        world.edges.append((p3(c2[3], top), ridge[0], rb, wall_ids[3], "verge", oid))
-        world.corners.append((ridge[0], (ra, rb, wall_ids[3]), "ridge", oid))
-        world.corners.append((ridge[1], (ra, rb, wall_ids[1]), "ridge", oid))
-        world.corners.append((p3(c2[0], top), (ra, wall_ids[0], wall_ids[3]), "eave", oid))
-        world.corners.append((p3(c2[1], top), (ra, wall_ids[0], wall_ids[1]), "eave", oid))
-        world.corners.append((p3(c2[2], top), (rb, wall_ids[1], wall_ids[2]), "eave", oid))
-        world.corners.append((p3(c2[3], top), (rb, wall_ids[2], wall_ids[3]), "eave", oid))
-    # vertical wall-wall edges from the ground at the corner up to the eave
-    for i in range(4):
-        world.edges.append((p3(c2[i], g[i]), p3(c2[i], top), wall_ids[i - 1], wall_ids[i],
-                            ek("wall"), oid))
-    # foot lines and corners on a planar ground
-    if planar and world.ground and world.ground_plane >= 0 and foot_edges:
-        gp = world.ground_plane
-        for i in range(4):
-            j = (i + 1) % 4
-            world.edges.append((p3(c2[i], g[i]), p3(c2[j], g[j]), gp, wall_ids[i], ek("foot"), oid))
-            world.corners.append((p3(c2[i], g[i]), (gp, wall_ids[i - 1], wall_ids[i]), ek("foot"),
-                                  oid))
-    return oid
-
-
-def _add_tree(world: _World, rng: np.random.Generator, center: np.ndarray) -> None:
-    oid = world.new_object()
-    gz = float(world.terrain.local_height(center[None, :])[0])
-    trunk_h = float(rng.uniform(1.5, 4.0))
-    crown_rz = float(rng.uniform(1.5, 4.0))
-    world.trees.append({
-        "object_id": oid, "center": center, "ground_z": gz, "trunk_height": trunk_h,
-        "trunk_radius": float(rng.uniform(0.12, 0.3)), "crown_radius": float(rng.uniform(1.5, 4.0)),
-        "crown_rz": crown_rz, "crown_z": gz + trunk_h + crown_rz,
-    })
-
-
-def _add_shrub(world: _World, rng: np.random.Generator, center: np.ndarray) -> None:
-    oid = world.new_object()
-    world.shrubs.append({"object_id": oid, "center": center, "radius": float(rng.uniform(0.5, 2.0)),
-                         "height": float(rng.uniform(0.3, 1.5))})
-
-
-# --------------------------------------------------------------------- sampling
-
-
-class _Chunks:
-    def __init__(self) -> None:
-        self.parts: list[dict[str, np.ndarray]] = []
-
-    def add(self, xyz: np.ndarray, cls: Any, ground: Any, oid: Any, pid: Any,
-            ret: Any = 1, nret: Any = 1) -> None:
-        n = len(xyz)
-        if n == 0:
-            return
-        self.parts.append({
-            "xyz": xyz,
-            "cls": np.broadcast_to(np.asarray(cls, np.uint8), (n,)),
-            "ground": np.broadcast_to(np.asarray(ground, bool), (n,)),
-            "oid": np.broadcast_to(np.asarray(oid, np.int64), (n,)),
-            "pid": np.broadcast_to(np.asarray(pid, np.int64), (n,)),
-            "ret": np.broadcast_to(np.asarray(ret, np.uint8), (n,)),
-            "nret": np.broadcast_to(np.asarray(nret, np.uint8), (n,)),
-        })
-
-    def concat(self) -> dict[str, np.ndarray]:
-        keys = ("xyz", "cls", "ground", "oid", "pid", "ret", "nret")
-        if not self.parts:
-            empty = {"xyz": np.zeros((0, 3)), "cls": np.zeros(0, np.uint8),
-                     "ground": np.zeros(0, bool), "oid": np.zeros(0, np.int64),
-                     "pid": np.zeros(0, np.int64), "ret": np.zeros(0, np.uint8),
-                     "nret": np.zeros(0, np.uint8)}
-            return empty
-        return {k: np.concatenate([p[k] for p in self.parts]) for k in keys}
-
-
-def _veg_class(hag: np.ndarray) -> np.ndarray:
-    return np.where(hag > 2.0, CLASS_HIGH_VEG,
-                    np.where(hag > 0.5, CLASS_MEDIUM_VEG, CLASS_LOW_VEG)).astype(np.uint8)
-
-
-def _sample_strip(world: _World, rng: np.random.Generator, *, density: float, noise: float,
-                  wall_density: float, outliers: int, returns: bool) -> dict[str, np.ndarray]:
-    out = _Chunks()
-    terrain = world.terrain
-    w, h = world.size
-    # ---- terrain
-    if world.ground and density > 0:
-        n = int(rng.poisson(density * w * h))
-        xy = rng.random((n, 2)) * np.array([w, h])
-        xy = xy[np.argsort(xy[:, 0], kind="stable")]  # x-sorted: objects test a slice (a view)
-        xs = xy[:, 0]
-        keep = np.ones(n, dtype=bool)
-        for center, length, width, az in world.footprints:
-            r = 0.5 * float(np.hypot(length, width))
-            sl = x_window(xs, center[0] - r, center[0] + r)
-            keep[sl][in_rectangle(xy[sl], center, length, width, az)] = False
-        for obj, p_drop in [(t, 0.4) for t in world.trees] + [(s, 0.5) for s in world.shrubs]:
-            r = obj.get("crown_radius", obj.get("radius"))
-            c = obj["center"]
-            sl = x_window(xs, c[0] - r, c[0] + r)
-            under = np.hypot(xy[sl, 0] - c[0], xy[sl, 1] - c[1]) < r
-            keep[sl][under & (rng.random(under.shape[0]) < p_drop)] = False
-        xy = xy[keep]
-        z = terrain.local_height(xy)
-        xyz = np.column_stack([xy, z])
-        eps = rng.normal(0.0, noise, len(xyz)) if noise > 0 else np.zeros(len(xyz))
-        if world.ground_plane >= 0:
-            xyz += eps[:, None] * world.planes[world.ground_plane]["normal"]
-        else:
-            xyz[:, 2] += eps
-        out.add(xyz, CLASS_GROUND, True, -1, world.ground_plane)
-        # ---- curb faces (vertical steps of the ground)
-        for k, (px, py, ux, uy, half, step) in enumerate(terrain.roads):
-            for side in (-1.0, 1.0):
-                seg = _clip_line(np.array([px, py]), np.array([ux, uy]), side * half, (w, h))
-                if seg is None:
-                    continue
-                a, b = seg
-                length = float(np.linalg.norm(b - a))
-                m = int(rng.poisson(wall_density * length * step))
-                if m == 0:
-                    continue
-                t = rng.random(m)
-                cxy = a + t[:, None] * (b - a)
-                base = terrain.local_height(cxy, skip_road=k)
-                cz = base + rng.random(m) * step
-                nrm = np.array([-uy, ux]) * side
-                if noise > 0:
-                    cxy = cxy + rng.normal(0.0, noise, m)[:, None] * nrm
-                # keep curb points outside object footprints
-                ok = np.ones(m, dtype=bool)
-                for center, length_, width_, az in world.footprints:
-                    ok &= ~in_rectangle(cxy, center, length_, width_, az)
-                out.add(np.column_stack([cxy[ok], cz[ok]]), CLASS_GROUND, True, -1, -1)
-    # ---- planar faces (roofs, walls, cars)
-    for f in world.faces:
-        p = sample_polygon(rng, f.vertices, f.density)
-        if len(p) == 0:
-            continue
-        if f.clip_below_terrain:
-            p = p[p[:, 2] >= terrain.local_height(p[:, :2])]
-        if noise > 0:
-            p = p + rng.normal(0.0, noise, len(p))[:, None] * world.planes[f.plane]["normal"]
-        out.add(p, f.classification, False, f.object_id, f.plane)
-    # ---- trees
-    for t in world.trees:
-        r, rz = t["crown_radius"], t["crown_rz"]
-        m = int(rng.poisson(density * np.pi * r * r * 1.2))
-        d = rng.normal(size=(m, 3))
-        d /= np.linalg.norm(d, axis=1, keepdims=True)
-        flip = rng.random(m) < 0.6
-        d[flip, 2] = np.abs(d[flip, 2])
-        s = 1.0 - 0.4 * rng.random(m) ** 2
-        p = np.column_stack([t["center"][0] + r * s * d[:, 0], t["center"][1] + r * s * d[:, 1],
-                             t["crown_z"] + rz * s * d[:, 2]])
-        gz = terrain.local_height(p[:, :2])
-        p = p[p[:, 2] > gz + 0.05]
-        gz = terrain.local_height(p[:, :2])
-        nret = 1
-        if returns and len(p):
-            nret = np.where(rng.random(len(p)) < 0.6, 2, 1).astype(np.uint8)
-        out.add(p, _veg_class(p[:, 2] - gz), False, t["object_id"], -1, 1, nret)
-        if returns and len(p):
-            two = nret == 2
-            gxy = p[two, :2] + rng.normal(0.0, 0.05, (int(two.sum()), 2))
-            gp = np.column_stack([gxy, terrain.local_height(gxy) + rng.normal(0.0, noise, len(gxy))
-                                  if noise > 0 else terrain.local_height(gxy)])
-            out.add(gp, CLASS_GROUND, True, -1, world.ground_plane if world.ground_plane >= 0 else -1,
-                    2, 2)
-        # trunk
-        tr, th = t["trunk_radius"], t["trunk_height"]
-        m = int(rng.poisson(wall_density * 2 * np.pi * tr * th * 0.3))
-        if m:
-            ang = rng.random(m) * 2 * np.pi
-            hz = rng.random(m) * (th + rz * 0.5)
-            p = np.column_stack([t["center"][0] + tr * np.cos(ang), t["center"][1] + tr * np.sin(ang),
-                                 t["ground_z"] + hz])
-            out.add(p, _veg_class(hz), False, t["object_id"], -1)
-    # ---- shrubs (low vegetation)
-    for s in world.shrubs:
-        r, sh = s["radius"], s["height"]
-        m = int(rng.poisson(density * np.pi * r * r * 0.8))
-        if m == 0:
-            continue
-        rr = r * np.sqrt(rng.random(m))
-        ang = rng.random(m) * 2 * np.pi
-        xy = s["center"] + np.column_stack([rr * np.cos(ang), rr * np.sin(ang)])
-        top = sh * np.sqrt(np.clip(1.0 - (rr / r) ** 2, 0.0, 1.0))
-        hag = top * rng.random(m) ** 0.3
-        keep = hag > 0.08
-        xy, hag = xy[keep], hag[keep]
-        p = np.column_stack([xy, terrain.local_height(xy) + hag])
-        out.add(p, _veg_class(hag), False, s["object_id"], -1)
-    # ---- outliers
-    if outliers > 0:
-        xy = rng.random((outliers, 2)) * np.array([w, h])
-        gz = terrain.local_height(xy)
-        low = np.arange(outliers) % 2 == 0
-        dz = np.where(low, -rng.uniform(1.0, 15.0, outliers), rng.uniform(20.0, 80.0, outliers))
-        out.add(np.column_stack([xy, gz + dz]), CLASS_NOISE, False, -1, -1)
-    return out.concat()
-
-
 def _finish(world: _World, rng: np.random.Generator, *, density: float, noise: float,
-            wall_density: float, outliers: int, returns: bool, strips: int,
+            wall_density: float, outliers: int, returns: bool, strips: int, pattern: str,
             strip_offset: Sequence[float], origin: Sequence[float], min_plane_points: int,
             params: dict[str, Any]) -> Scene:
     parts = []
     for k in range(strips):
         d = _sample_strip(world, rng, density=density, noise=noise, wall_density=wall_density,
-                          outliers=outliers, returns=returns)
+                          outliers=outliers, returns=returns, pattern=pattern)
         if k >= 1:
             d["xyz"] = d["xyz"] + np.asarray(strip_offset, dtype=np.float64) * k
         d["psid"] = np.full(len(d["xyz"]), k + 1, dtype=np.uint16)
         parts.append(d)
     data = {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
     order = rng.permutation(len(data["xyz"]))
-    data = {key: v[order] for key, v in data.items()}
+    data = {key: np.take(v, order, axis=0) for key, v in data.items()}  # take: fast for 2D
 
     counts = np.bincount(data["pid"][data["pid"] >= 0], minlength=len(world.planes))
     observed = counts >= min_plane_points
@@ -713,78 +397,6 @@ def _finish(world: _World, rng: np.random.Generator, *, density: float, noise: f
     return scene
 
 
-# --------------------------------------------------------------------- placement helpers
-
-
-def _breaklines(terrain: TerrainModel) -> list[tuple[np.ndarray, np.ndarray, float]]:
-    """(point, unit normal, signed offset) of every break line, for keep-out tests."""
-    out = []
-    for px, py, ux, uy, half, _h in terrain.roads:
-        for s in (-half, half):
-            out.append((np.array([px, py]), np.array([-uy, ux]), s))
-    for px, py, ux, uy, start, width, _h in terrain.embankments:
-        # keep objects off the whole ramp
-        out.append((np.array([px, py]), np.array([-uy, ux]), start + 0.5 * width, 0.5 * width))
-    return out
-
-
-def _place(rng: np.random.Generator, n: int, radii: Any, size: tuple[float, float],
-           occupied: list[tuple[np.ndarray, float]], keepout: list, max_tries: int = 200) -> list:
-    """Rejection-sample up to `n` non-overlapping discs; returns [(center, radius)]."""
-    placed = []
-    for _ in range(n):
-        for _try in range(max_tries):
-            r = float(radii())
-            if 2 * r + 2 > min(size):
-                break
-            c = np.array([rng.uniform(r + 1, size[0] - r - 1), rng.uniform(r + 1, size[1] - r - 1)])
-            ok = all(np.hypot(*(c - oc)) > r + orad + 1.0 for oc, orad in occupied)
-            if ok:
-                for item in keepout:
-                    p, nrm, off = item[0], item[1], item[2]
-                    extra = item[3] if len(item) > 3 else 0.0
-                    if abs(float((c - p) @ nrm) - off) < r + extra + 0.5:
-                        ok = False
-                        break
-            if ok:
-                occupied.append((c, r))
-                placed.append((c, r))
-                break
-    return placed
-
-
-def _random_terrain(rng: np.random.Generator, size: tuple[float, float], *, slope_deg: float,
-                    undulation: float, curbs: int, curb_height: float | None,
-                    embankment: bool | float) -> TerrainModel:
-    w, h = size
-    az = rng.uniform(0, 2 * np.pi)
-    g = np.tan(np.deg2rad(slope_deg))
-    gx, gy = g * np.cos(az), g * np.sin(az)
-    waves = np.zeros((0, 4))
-    if undulation > 0:
-        k = 3
-        lam = rng.uniform(30.0, 120.0, k)
-        ang = rng.uniform(0, 2 * np.pi, k)
-        kk = 2 * np.pi / lam
-        amp = undulation * rng.dirichlet(np.ones(k))
-        waves = np.column_stack([amp, kk * np.cos(ang), kk * np.sin(ang), rng.uniform(0, 2 * np.pi, k)])
-    roads = []
-    for _ in range(int(curbs)):
-        ang = rng.uniform(0, np.pi)
-        p = np.array([rng.uniform(0.3, 0.7) * w, rng.uniform(0.3, 0.7) * h])
-        step = float(curb_height) if curb_height is not None else float(rng.uniform(0.15, 0.3))
-        roads.append([p[0], p[1], np.cos(ang), np.sin(ang), rng.uniform(3.0, 5.0), step])
-    embs = []
-    if embankment:
-        ang = rng.uniform(0, np.pi)
-        p = np.array([rng.uniform(0.2, 0.8) * w, rng.uniform(0.2, 0.8) * h])
-        height = float(embankment) if not isinstance(embankment, bool) else float(rng.uniform(2, 4))
-        embs.append([p[0], p[1], np.cos(ang), np.sin(ang), 0.0, rng.uniform(1.5, 3.0), height])
-    return TerrainModel(z0=0.0, gx=float(gx), gy=float(gy), waves=waves,
-                        roads=np.asarray(roads, float).reshape(-1, 6),
-                        embankments=np.asarray(embs, float).reshape(-1, 7))
-
-
 def _check_common(density: float, noise: float, wall_density: float | None, strips: int,
                   min_plane_points: int) -> float:
     check_positive(density, "density")
@@ -806,17 +418,6 @@ def _check_size(size: Any) -> tuple[float, float]:
     check_positive(w, "size[0]")
     check_positive(h, "size[1]")
     return w, h
-
-
-def _random_building(rng: np.random.Generator, roof: str, center: np.ndarray) -> BuildingSpec:
-    if roof == "flat":
-        return BuildingSpec("flat", (float(center[0]), float(center[1])),
-                            float(rng.uniform(10, 20)), float(rng.uniform(7, 14)),
-                            float(rng.uniform(0, 180)), float(rng.uniform(4, 12)), 0.0)
-    return BuildingSpec("gable", (float(center[0]), float(center[1])),
-                        float(rng.uniform(10, 18)), float(rng.uniform(7, 11)),
-                        float(rng.uniform(0, 180)), float(rng.uniform(3, 7)),
-                        float(rng.uniform(25, 45)))
 
 
 # --------------------------------------------------------------------- public makers
@@ -846,6 +447,8 @@ def make_scene(
     origin: Sequence[float] = (0.0, 0.0, 0.0),
     foot_edges: bool = True,
     min_plane_points: int = 10,
+    overhang: float = 0.0,
+    pattern: str = "random",
 ) -> Scene:
     """A full synthetic scene: terrain, buildings, cars, trees, shrubs, outliers.
 
@@ -896,6 +499,13 @@ def make_scene(
         Include wall-ground edges and corners when the ground is a plane.
     min_plane_points : int, default 10
         A plane with fewer points is unobserved: no edge or corner uses it.
+    overhang : float, default 0
+        Roof overhang (m) of every building (see :class:`BuildingSpec`).
+    pattern : {"random", "jittered"}, default "random"
+        Point layout on terrain, roofs and walls: independent uniform points
+        (Poisson counts), or one uniform point per cell of a randomly shifted
+        grid with cell area 1/density (even spacing, like a scanner; counts
+        fixed by the area). Trees, shrubs and curb faces are always random.
 
     Returns
     -------
@@ -903,6 +513,7 @@ def make_scene(
     """
     size = _check_size(size)
     wd = _check_common(density, noise, wall_density, strips, min_plane_points)
+    check_choice(pattern, PATTERNS, "pattern")
     for r in roofs:
         check_choice(r, ROOF_TYPES, "roofs")
     rng = np.random.default_rng(seed)
@@ -923,7 +534,8 @@ def make_scene(
     occupied: list = []
     keepout = _breaklines(terrain)
     buildings: list[BuildingSpec] = []
-    drafts = [_random_building(rng, roofs[i % len(roofs)], np.zeros(2)) for i in range(n_buildings)]
+    drafts = [replace(_random_building(rng, roofs[i % len(roofs)], np.zeros(2)), overhang=overhang)
+              for i in range(n_buildings)]
     for spec in drafts:
         got = _place(rng, 1, lambda s=spec: s.radius, size, occupied, keepout)
         if got:
@@ -942,8 +554,8 @@ def make_scene(
             cars.append(spec)
             _add_structure(world, spec, object_kind="car", density=density, wall_density=wd,
                            foot_edges=foot_edges)
-    for c, _r in _place(rng, n_trees, lambda: 2.5, size, occupied, []):
-        _add_tree(world, rng, c)
+    for c, r in _place(rng, n_trees, lambda: rng.uniform(1.5, 4.0), size, occupied, []):
+        _add_tree(world, rng, c, r)
     for c, _r in _place(rng, n_shrubs, lambda: 1.5, size, occupied, []):
         _add_shrub(world, rng, c)
     params = {
@@ -952,14 +564,16 @@ def make_scene(
         "undulation": undulation, "curbs": curbs, "curb_height": curb_height,
         "embankment": embankment, "outliers": outliers, "returns": returns, "strips": strips,
         "strip_offset": [float(v) for v in strip_offset], "origin": [float(v) for v in origin],
-        "foot_edges": foot_edges, "min_plane_points": min_plane_points,
+        "foot_edges": foot_edges, "min_plane_points": min_plane_points, "overhang": overhang,
+        "pattern": pattern,
         "counts": {"buildings": len(buildings), "cars": len(cars), "trees": len(world.trees),
                    "shrubs": len(world.shrubs)},
         "buildings": [asdict(b) for b in buildings],
         "cars": [asdict(c) for c in cars],
     }
     return _finish(world, rng, density=density, noise=noise, wall_density=wd, outliers=outliers,
-                   returns=returns, strips=strips, strip_offset=strip_offset, origin=origin,
+                   returns=returns, strips=strips, pattern=pattern,
+                   strip_offset=strip_offset, origin=origin,
                    min_plane_points=min_plane_points, params=params)
 
 
@@ -1012,6 +626,8 @@ def make_building_scene(
     strip_offset: Sequence[float] = (0.0, 0.0, 0.0),
     origin: Sequence[float] = (0.0, 0.0, 0.0),
     min_plane_points: int = 10,
+    overhang: float = 0.0,
+    pattern: str = "random",
 ) -> Scene:
     """Buildings with observed walls on a planar ground: one building per roof type in `roofs`.
 
@@ -1038,6 +654,10 @@ def make_building_scene(
         Include wall-ground edges (kind ``"foot"``) and their corners.
     strips, strip_offset, origin, min_plane_points
         As in :func:`make_scene`.
+    overhang : float, default 0
+        Roof overhang (m) of the random buildings (see :class:`BuildingSpec`).
+    pattern : {"random", "jittered"}, default "random"
+        As in :func:`make_scene`.
 
     Returns
     -------
@@ -1046,6 +666,7 @@ def make_building_scene(
         ``ridge``, ``eave``, ``foot``.
     """
     wd = _check_common(density, noise, wall_density, strips, min_plane_points)
+    check_choice(pattern, PATTERNS, "pattern")
     rng = np.random.default_rng(seed)
     if buildings is None:
         for r in roofs:
@@ -1060,7 +681,7 @@ def make_building_scene(
         for i, roof in enumerate(roofs):
             cx = (i % cols + 0.5) * spacing
             cy = (i // cols + 0.5) * spacing
-            spec = _random_building(rng, roof, np.zeros(2))
+            spec = replace(_random_building(rng, roof, np.zeros(2)), overhang=overhang)
             room = 0.5 * spacing - spec.radius - 1.0
             jitter = rng.uniform(-1, 1, 2) * max(room, 0.0)
             specs.append(replace(spec, center=(float(cx + jitter[0]), float(cy + jitter[1]))))
@@ -1085,17 +706,192 @@ def make_building_scene(
     params = {
         "maker": "make_building_scene", "seed": seed, "size": list(size), "density": density,
         "noise": noise, "wall_density": wd, "roofs": [b.roof for b in specs],
-        "spacing": spacing, "slope_deg": slope_deg, "ground": ground, "foot_edges": foot_edges,
+        "spacing": spacing, "overhang": overhang, "slope_deg": slope_deg, "ground": ground,
+        "foot_edges": foot_edges, "pattern": pattern,
         "strips": strips, "strip_offset": [float(v) for v in strip_offset],
         "origin": [float(v) for v in origin], "min_plane_points": min_plane_points,
         "counts": {"buildings": len(specs)},
         "buildings": [asdict(b) for b in specs],
     }
     return _finish(world, rng, density=density, noise=noise, wall_density=wd, outliers=0,
-                   returns=False, strips=strips, strip_offset=strip_offset, origin=origin,
+                   returns=False, strips=strips, pattern=pattern,
+                   strip_offset=strip_offset, origin=origin,
                    min_plane_points=min_plane_points, params=params)
+
+
+def _small_scene(faces: list[np.ndarray], kinds: list[str], edges: list[tuple],
+                 corners: list[tuple], *, maker: str, seed: int, density: float, noise: float,
+                 rotation_deg: Sequence[float], translation: Sequence[float],
+                 params: dict[str, Any]) -> Scene:
+    check_positive(density, "density")
+    check_positive(noise, "noise", allow_zero=True)
+    rng = np.random.default_rng(seed)
+    world = _World(size=(1.0, 1.0), terrain=TerrainModel(), ground=False)
+    for poly, kind in zip(faces, kinds, strict=True):
+        pid = world.add_plane(_plane_normal(poly), poly[0], kind, 0, poly)
+        world.faces.append(Face(poly, pid, CLASS_OTHER, 0, density))
+    world.edges.extend(edges)
+    world.corners.extend(corners)
+    params = {"maker": maker, "seed": seed, "density": density, "noise": noise,
+              "rotation_deg": [float(v) for v in rotation_deg],
+              "translation": [float(v) for v in translation], "size": [1.0, 1.0], **params}
+    scene = _finish(world, rng, density=density, noise=noise, wall_density=density, outliers=0,
+                    returns=False, strips=1, pattern="random", strip_offset=(0.0, 0.0, 0.0),
+                    origin=(0.0, 0.0, 0.0), min_plane_points=3, params=params)
+    scene = _move_scene(scene, rotation_matrix(rotation_deg),
+                        np.asarray(translation, dtype=np.float64).reshape(3), None)
+    return replace(scene, terrain=None)
+
+
+def make_plane_pair(
+    *,
+    angle_deg: float = 90.0,
+    length: float = 10.0,
+    width: float = 5.0,
+    density: float = 20.0,
+    noise: float = 0.02,
+    seed: int = 0,
+    rotation_deg: Sequence[float] = (0.0, 0.0, 0.0),
+    translation: Sequence[float] = (0.0, 0.0, 0.0),
+) -> Scene:
+    """Two planar strips meeting along one edge at a given dihedral angle.
+
+    Before the motion, strip A is ``z = 0, -width <= y <= 0`` and strip B leaves
+    the edge ``(0, 0, 0)-(length, 0, 0)`` in direction
+    ``(0, -cos(angle), sin(angle))``: 90 degrees is a floor and a wall, 180
+    coplanar, small angles a sharp wedge.
+
+    Parameters
+    ----------
+    angle_deg : float, default 90
+        Interior angle between the strips (degrees, 0 < angle < 180).
+    length, width : float
+        Edge length and strip width (m).
+    density : float
+        Points per m^2 of each strip.
+    noise : float
+        Gaussian noise (m) along each plane's normal.
+    seed : int
+    rotation_deg, translation
+        A rigid motion applied to points and truth (see :func:`rigid_motion`).
+
+    Returns
+    -------
+    Scene
+        planes 0 and 1 (kind ``"strip"``), one edge (kind ``"pair"``), no corners;
+        ``classification`` 1.
+    """
+    if not 0.0 < float(angle_deg) < 180.0:
+        raise OptionError(f"angle_deg must be in (0, 180) degrees, got {angle_deg!r}")
+    check_positive(length, "length")
+    check_positive(width, "width")
+    a = np.deg2rad(angle_deg)
+    d = np.array([0.0, -np.cos(a), np.sin(a)]) * width
+    o, e = np.zeros(3), np.array([length, 0.0, 0.0])
+    face_a = np.array([o, e, e + [0, -width, 0], o + [0, -width, 0]])
+    face_b = np.array([o, e, e + d, o + d])
+    return _small_scene([face_a, face_b], ["strip", "strip"], [(o, e, 0, 1, "pair", 0)], [],
+                        maker="make_plane_pair", seed=seed, density=density, noise=noise,
+                        rotation_deg=rotation_deg, translation=translation,
+                        params={"angle_deg": angle_deg, "length": length, "width": width})
+
+
+def make_corner(
+    *,
+    size: float = 5.0,
+    density: float = 20.0,
+    noise: float = 0.02,
+    seed: int = 0,
+    rotation_deg: Sequence[float] = (0.0, 0.0, 0.0),
+    translation: Sequence[float] = (0.0, 0.0, 0.0),
+) -> Scene:
+    """Three mutually orthogonal square faces meeting at one corner (a box corner).
+
+    Before the motion the faces are ``z = 0``, ``x = 0`` and ``y = 0`` (each
+    `size` x `size` m in the positive octant) and the corner is the origin.
+
+    Returns
+    -------
+    Scene
+        planes 0-2 (kind ``"face"``), three edges (kind ``"pair"``) and one corner
+        (kind ``"corner"``).
+    """
+    check_positive(size, "size")
+    s = float(size)
+    o = np.zeros(3)
+    ex, ey, ez = np.array([s, 0, 0.0]), np.array([0, s, 0.0]), np.array([0, 0, s])
+    floor = np.array([o, ex, ex + ey, ey])
+    wall_x0 = np.array([o, ey, ey + ez, ez])
+    wall_y0 = np.array([o, ez, ez + ex, ex])
+    edges = [(o, ey, 0, 1, "pair", 0), (o, ex, 0, 2, "pair", 0), (o, ez, 1, 2, "pair", 0)]
+    return _small_scene([floor, wall_x0, wall_y0], ["face"] * 3, edges,
+                        [(o, (0, 1, 2), "corner", 0)], maker="make_corner", seed=seed,
+                        density=density, noise=noise, rotation_deg=rotation_deg,
+                        translation=translation, params={"face_size": s})
 
 
 def plane_area(plane: TruePlane) -> float:
     """Area (m^2) of a plane's sampled face (NaN for the ground)."""
     return float("nan") if plane.polygon is None else polygon_area(plane.polygon)
+
+
+def sample_checkpoints(
+    scene: Scene,
+    n: int = 100,
+    *,
+    seed: int = 0,
+    clearance: float = 2.0,
+    max_curvature: float = 0.01,
+) -> PointSet:
+    """True bare-earth check points at random open places of a scene.
+
+    A place qualifies when no non-ground point of the scene lies within
+    `clearance` (m, horizontally) and the terrain is locally planar there (no
+    curb or embankment within `clearance`: second differences of the true
+    surface over +-`clearance` along x, y and both diagonals below
+    `max_curvature` m).
+
+    Parameters
+    ----------
+    scene : Scene
+        A scene with a terrain model (not tilted by :func:`rigid_motion`).
+    n : int, default 100
+        Number of check points wanted; fewer are returned if the open area is small.
+    seed : int, default 0
+    clearance : float, default 2.0
+    max_curvature : float, default 0.01
+
+    Returns
+    -------
+    PointSet
+        ids ``CP0001``... and exact xyz (z = ``scene.ground_z(xy)``, no noise).
+    """
+    from scipy.spatial import cKDTree
+
+    if scene.terrain is None:
+        raise OptionError("sample_checkpoints needs a scene with a terrain model (not tilted)")
+    check_positive(clearance, "clearance")
+    rng = np.random.default_rng(seed)
+    g = scene.is_ground
+    gxy = scene.points[g, :2]
+    if len(gxy) == 0 or n <= 0:
+        return PointSet(np.zeros(0, dtype=str), np.zeros((0, 3)))
+    lo, hi = gxy.min(axis=0) + clearance, gxy.max(axis=0) - clearance
+    cand = lo + rng.random((20 * n, 2)) * np.maximum(hi - lo, 0.0)
+    other = scene.points[~g, :2]
+    if len(other):
+        d, _ = cKDTree(other).query(cand, k=1, distance_upper_bound=clearance)
+        cand = cand[~np.isfinite(d)]
+    z0 = scene.ground_z(cand)
+    ok = np.ones(len(cand), dtype=bool)
+    for dx, dy in ((1, 0), (0, 1), (0.7071067811865476, 0.7071067811865476),
+                   (0.7071067811865476, -0.7071067811865476)):
+        step = clearance * np.array([dx, dy])
+        second = scene.ground_z(cand + step) + scene.ground_z(cand - step) - 2 * z0
+        ok &= np.abs(second) <= max_curvature
+    # ground points must surround the place (not a hole under an object)
+    d, _ = cKDTree(gxy).query(cand, k=1)
+    ok &= d < clearance
+    cand, z0 = cand[ok][:n], z0[ok][:n]
+    ids = np.array([f"CP{i + 1:04d}" for i in range(len(cand))])
+    return PointSet(ids, np.column_stack([cand, z0]))
