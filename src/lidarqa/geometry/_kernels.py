@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import get_num_threads, njit, prange
 
 # ----------------------------------------------------------------- eigen / fits
 
@@ -124,7 +124,7 @@ def normal_from_moments(n, sx, sy, sz, sxx, sxy, sxz, syy, syz, szz):
 
 @njit(cache=True)
 def fit_subset(pts, idx, m, ox, oy, oz):
-    """TLS plane of pts[idx[:m]] relative to origin o: (nx, ny, nz, mx, my, mz) with mean in the o-frame."""
+    """TLS plane of pts[idx[:m]] about origin o: (nx, ny, nz, mx, my, mz), mean in the o-frame."""
     sx = sy = sz = sxx = sxy = sxz = syy = syz = szz = 0.0
     for a in range(m):
         j = idx[a]
@@ -278,6 +278,13 @@ def _seed_plane(pts, i, cand, m, method, seed_dist, dirs, rng_seed, flag, tmp):
         half = int(math.ceil(rmax / seed_dist)) + 1
         nb = 2 * half + 1
         acc = np.zeros(nb, dtype=np.int64)
+        touched = np.empty(m, dtype=np.int64)
+        rel = np.empty((m, 3))
+        for a in range(m):
+            j = cand[a]
+            rel[a, 0] = pts[j, 0] - ox
+            rel[a, 1] = pts[j, 1] - oy
+            rel[a, 2] = pts[j, 2] - oz
         best = -1
         best_d = 0
         best_b = 0
@@ -285,18 +292,20 @@ def _seed_plane(pts, i, cand, m, method, seed_dist, dirs, rng_seed, flag, tmp):
             ux = dirs[d, 0]
             uy = dirs[d, 1]
             uz = dirs[d, 2]
-            for b in range(nb):
-                acc[b] = 0
             for a in range(m):
-                j = cand[a]
-                r = ux * (pts[j, 0] - ox) + uy * (pts[j, 1] - oy) + uz * (pts[j, 2] - oz)
+                r = ux * rel[a, 0] + uy * rel[a, 1] + uz * rel[a, 2]
                 b = int(math.floor(r / seed_dist + 0.5)) + half
+                touched[a] = b
                 acc[b] += 1
-            for b in range(nb):
-                if acc[b] > best:
+            # the fullest bin of this direction; ties: smaller bin index (then smaller direction)
+            for a in range(m):
+                b = touched[a]
+                if acc[b] > best or (acc[b] == best and d == best_d and b < best_b):
                     best = acc[b]
                     best_d = d
                     best_b = b
+            for a in range(m):
+                acc[touched[a]] = 0
         ux = dirs[best_d, 0]
         uy = dirs[best_d, 1]
         uz = dirs[best_d, 2]
@@ -484,7 +493,8 @@ def surface_growing_kernel(pts, trial_order, knn, knn_k, method, seed_dist, min_
 
 
 @njit(cache=True)
-def _knn_one(pts, i, k, rmax, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, order, cand, dist, out):
+def _knn_one(pts, i, k, rmax, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, order, cand, dist,
+             out):
     """Exact k nearest neighbours of pts[i] (including i) by expanding cube rings.
 
     Returns True on success; False if more than `rmax` rings would be needed.
@@ -540,17 +550,312 @@ def _knn_one(pts, i, k, rmax, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, 
     return False
 
 
-@njit(cache=True)
-def knn_grid(pts, k, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, order, rmax, max_cand):
-    """k nearest neighbours of every point (N, k); rows that failed are all -1."""
+@njit(cache=True, parallel=True)
+def knn_grid(pts, k, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, order, rmax, max_cand,
+             n_chunks):
+    """k nearest neighbours of every point (N, k); rows that failed are all -1.
+
+    Works cell by cell: the points of the 27 cells around a cell are gathered once
+    into a contiguous buffer, and each point of the cell keeps its k nearest among
+    them when the k-th distance is within one cell (exact); other points fall back
+    to expanding rings (:func:`_knn_one`).
+    """
     n = pts.shape[0]
     out = np.full((n, k), -1, dtype=np.int64)
-    cand = np.empty(max_cand, dtype=np.int64)
-    dist = np.empty(max_cand)
-    row = np.empty(k, dtype=np.int64)
-    for i in range(n):
-        if _knn_one(pts, i, k, rmax, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, order,
-                    cand, dist, row):
-            for a in range(k):
-                out[i, a] = row[a]
+    ncell = cell_keys.shape[0]
+    # a few chunks per thread: buffers are allocated once per chunk
+    nblocks = max(1, min(ncell, n_chunks))
+    block = (ncell + nblocks - 1) // max(nblocks, 1)
+    lim = cell * cell
+    for bb in prange(nblocks):
+        cand = np.empty(max_cand, dtype=np.int64)
+        cxyz = np.empty((max_cand, 3))
+        cand2 = np.empty(max_cand, dtype=np.int64)  # for the ring fallback (keeps cand intact)
+        dist = np.empty(max_cand)
+        bestd = np.empty(k)
+        besti = np.empty(k, dtype=np.int64)
+        row = np.empty(k, dtype=np.int64)
+        c1 = min(ncell, (bb + 1) * block)
+        for c in range(bb * block, c1):
+            rep = order[cell_start[c]]
+            m = 0
+            overflow = False
+            for dx in range(-1, 2):
+                for dy in range(-1, 2):
+                    jx = cx[rep] + dx
+                    jy = cy[rep] + dy
+                    base = jx * nyz + jy * nz
+                    z0 = max(cz[rep] - 1, 0)
+                    z1 = min(cz[rep] + 1, nz - 1)
+                    c2 = np.searchsorted(cell_keys, base + z0)
+                    while c2 < ncell and cell_keys[c2] <= base + z1:
+                        for a in range(cell_start[c2], cell_start[c2 + 1]):
+                            if m >= max_cand:
+                                overflow = True
+                                break
+                            j = order[a]
+                            cand[m] = j
+                            cxyz[m, 0] = pts[j, 0]
+                            cxyz[m, 1] = pts[j, 1]
+                            cxyz[m, 2] = pts[j, 2]
+                            m += 1
+                        c2 += 1
+            for a in range(cell_start[c], cell_start[c + 1]):
+                i = order[a]
+                ok = False
+                if not overflow and m >= k:
+                    px = pts[i, 0]
+                    py = pts[i, 1]
+                    pz = pts[i, 2]
+                    nb = 0
+                    for t in range(m):
+                        d = (cxyz[t, 0] - px) ** 2 + (cxyz[t, 1] - py) ** 2 + (cxyz[t, 2] - pz) ** 2
+                        if nb < k:
+                            q = nb
+                            nb += 1
+                        elif d < bestd[k - 1]:
+                            q = k - 1
+                        else:
+                            continue
+                        while q > 0 and bestd[q - 1] > d:
+                            bestd[q] = bestd[q - 1]
+                            besti[q] = besti[q - 1]
+                            q -= 1
+                        bestd[q] = d
+                        besti[q] = cand[t]
+                    if bestd[k - 1] <= lim:
+                        for t in range(k):
+                            out[i, t] = besti[t]
+                        ok = True
+                if not ok:
+                    if _knn_one(pts, i, k, rmax, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start,
+                                order, cand2, dist, row):
+                        for t in range(k):
+                            out[i, t] = row[t]
     return out
+
+
+def knn(pts: np.ndarray, k: int) -> np.ndarray:
+    """Exact k nearest neighbours (including the point itself) of every point, (N, k) int64.
+
+    A hashed grid sized from the occupied-cell density answers most queries in one
+    ring of cells (numba, parallel); the few points that need more rings are
+    answered by a cKDTree. Best with spatially sorted `pts` (memory locality).
+    """
+    n = len(pts)
+    k = min(k, n)
+    cell = knn_cell_size(pts, k)
+    # refine the density estimate from the occupancy of the cells actually used
+    for _ in range(6):
+        g = build_grid(pts, cell)
+        counts = np.diff(g[6])
+        occ = float((counts.astype(np.float64) ** 2).sum() / counts.sum())  # point-weighted
+        dens = occ / (cell * cell)
+        new = 1.6 * math.sqrt(k / (math.pi * dens))
+        if 0.8 * cell <= new <= 1.25 * cell:
+            break
+        cell = new
+    g = build_grid(pts, cell)
+    cx, cy, cz, nyz, nz, cell_keys, cell_start, order, max_cell = g
+    max_cand = int(min(max(343 * max_cell, k), 2_000_000))
+    out = knn_grid(pts, k, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, order, 3, max_cand,
+                   8 * get_num_threads())
+    bad = np.flatnonzero(out[:, 0] < 0)
+    if len(bad):
+        from scipy.spatial import cKDTree
+
+        _, idx = cKDTree(pts).query(pts[bad], k=k)
+        out[bad] = np.asarray(idx, dtype=np.int64).reshape(len(bad), k)
+    return out
+
+
+def knn_cell_size(pts: np.ndarray, k: int) -> float:
+    """Cell size (m) of the grid used by :func:`knn` for the canonical spatial sort."""
+    return cell_size(np.ptp(pts, axis=0), len(pts), k)
+
+
+def cell_size(extent: np.ndarray, n: int, k: int) -> float:
+    """Cell edge (m) expected to hold about k/2 points of a surface sampled with n points.
+
+    The surface area is taken as the largest of the three projected bounding-box
+    areas; the cell is never smaller than 1e-5 of the largest extent.
+    """
+    ex, ey, ez = (float(v) for v in extent)
+    area = max(ex * ey, ex * ez, ey * ez, 1e-12)
+    cell = 1.6 * math.sqrt(max(k, 1) / (math.pi * max(n, 1) / area))
+    cell = max(cell, max(ex, ey, ez) / 1e5)  # bounds the grid dimensions
+    return cell if math.isfinite(cell) and cell > 0 else 1.0
+
+
+# ------------------------------------------------------------------ per-segment planes
+
+
+def segment_planes_tls(pts: np.ndarray, labels: np.ndarray, n_labels: int):
+    """TLS plane of every label 0..n_labels-1 from moment sums (vectorised).
+
+    Returns (count (L,), mean (L,3), normal (L,3) canonical sign, eigvals (L,3) ascending,
+    eigvecs (L,3,3) as columns); the mean is in the frame of `pts`.
+    """
+    ok = labels >= 0
+    lab = labels[ok]
+    p = pts[ok]
+    cnt = np.bincount(lab, minlength=n_labels).astype(np.float64)
+    safe = np.maximum(cnt, 1.0)
+    mean = np.column_stack([np.bincount(lab, p[:, a], n_labels) for a in range(3)]) / safe[:, None]
+    d = p - mean[lab]
+    cov = np.empty((n_labels, 3, 3))
+    for a in range(3):
+        for b in range(a, 3):
+            v = np.bincount(lab, d[:, a] * d[:, b], n_labels) / safe
+            cov[:, a, b] = v
+            cov[:, b, a] = v
+    w, v = np.linalg.eigh(cov)
+    normal = v[:, :, 0].copy()
+    zero_x = (normal[:, 0] == 0) & (normal[:, 1] < 0)
+    flip = (normal[:, 2] < 0) | ((normal[:, 2] == 0) & ((normal[:, 0] < 0) | zero_x))
+    normal[flip] *= -1.0
+    return cnt, mean, normal, w, v
+
+
+@njit(cache=True)
+def reassign_kernel(pts, labels, normal, mean, check, r2, max_dist,
+                    cx, cy, cz, nyz, nz, cell_keys, cell_start, order, max_cell):
+    """Move a checked point to a touching segment whose plane is nearer (one Jacobi pass)."""
+    n = pts.shape[0]
+    out = labels.copy()
+    nbr = np.empty(27 * max_cell + 1, dtype=np.int64)
+    for i in range(n):
+        if not check[i]:
+            continue
+        a = labels[i]
+        best = abs(normal[a, 0] * (pts[i, 0] - mean[a, 0]) + normal[a, 1] * (pts[i, 1] - mean[a, 1])
+                   + normal[a, 2] * (pts[i, 2] - mean[a, 2]))
+        best_lab = a
+        k = grid_neighbours(pts, i, r2, cx, cy, cz, nyz, nz, cell_keys, cell_start, order, nbr)
+        for t in range(k):
+            b = labels[nbr[t]]
+            if b < 0 or b == best_lab:
+                continue
+            d = abs(normal[b, 0] * (pts[i, 0] - mean[b, 0])
+                    + normal[b, 1] * (pts[i, 1] - mean[b, 1])
+                    + normal[b, 2] * (pts[i, 2] - mean[b, 2]))
+            if d <= max_dist and (d < best or (d == best and b < best_lab)):
+                best = d
+                best_lab = b
+        out[i] = best_lab
+    return out
+
+
+# ------------------------------------------------------------------ adjacency
+
+
+@njit(cache=True)
+def contact_pairs(pts, labels, r2, cx, cy, cz, nyz, nz, cell_keys, cell_start, order):
+    """Point pairs (i, j) with labels[i] != labels[j], both >= 0, within sqrt(r2) (grid cell >= r).
+
+    Only cells whose 27-neighbourhood holds more than one label are examined
+    in detail, so the cost is proportional to the segment boundaries.
+    """
+    ncell = cell_keys.shape[0]
+    lo = np.full(ncell, np.iinfo(np.int64).max, dtype=np.int64)
+    hi = np.full(ncell, -1, dtype=np.int64)
+    for c in range(ncell):
+        for a in range(cell_start[c], cell_start[c + 1]):
+            lab = labels[order[a]]
+            if lab >= 0:
+                if lab < lo[c]:
+                    lo[c] = lab
+                if lab > hi[c]:
+                    hi[c] = lab
+    cap = 1024
+    out_i = np.empty(cap, dtype=np.int64)
+    out_j = np.empty(cap, dtype=np.int64)
+    m = 0
+    for c in range(ncell):
+        if hi[c] < 0:
+            continue
+        rep = order[cell_start[c]]
+        ix = cx[rep]
+        iy = cy[rep]
+        iz = cz[rep]
+        for dx in range(-1, 2):
+            for dy in range(-1, 2):
+                for dz in range(-1, 2):
+                    jz = iz + dz
+                    if jz < 0 or jz >= nz:
+                        continue
+                    key = (ix + dx) * nyz + (iy + dy) * nz + jz
+                    c2 = np.searchsorted(cell_keys, key)
+                    if c2 >= ncell or cell_keys[c2] != key or c2 < c or hi[c2] < 0:
+                        continue
+                    if lo[c] == hi[c] and lo[c2] == hi[c2] and lo[c] == lo[c2]:
+                        continue
+                    for a in range(cell_start[c], cell_start[c + 1]):
+                        i = order[a]
+                        li = labels[i]
+                        if li < 0:
+                            continue
+                        b0 = cell_start[c2]
+                        if c2 == c:
+                            b0 = a + 1
+                        for b in range(b0, cell_start[c2 + 1]):
+                            j = order[b]
+                            lj = labels[j]
+                            if lj < 0 or lj == li:
+                                continue
+                            d = ((pts[i, 0] - pts[j, 0]) ** 2 + (pts[i, 1] - pts[j, 1]) ** 2
+                                 + (pts[i, 2] - pts[j, 2]) ** 2)
+                            if d <= r2:
+                                if m >= cap:
+                                    cap *= 2
+                                    ni = np.empty(cap, dtype=np.int64)
+                                    nj = np.empty(cap, dtype=np.int64)
+                                    ni[:m] = out_i[:m]
+                                    nj[:m] = out_j[:m]
+                                    out_i = ni
+                                    out_j = nj
+                                out_i[m] = i
+                                out_j[m] = j
+                                m += 1
+    return out_i[:m], out_j[:m]
+
+
+# ------------------------------------------------------------------ canonical order
+
+
+@njit(cache=True)
+def _lex_less(pts, a, b):
+    if pts[a, 0] != pts[b, 0]:
+        return pts[a, 0] < pts[b, 0]
+    if pts[a, 1] != pts[b, 1]:
+        return pts[a, 1] < pts[b, 1]
+    return pts[a, 2] < pts[b, 2]
+
+
+@njit(cache=True)
+def sort_runs_lex(perm, key_sorted, pts):
+    """Sort each run of equal keys of `perm` by (x, y, z) in place (stable insertion sort)."""
+    n = perm.shape[0]
+    s = 0
+    while s < n:
+        e = s + 1
+        while e < n and key_sorted[e] == key_sorted[s]:
+            e += 1
+        if e - s > 16:
+            # sort the run by x first (O(g log g)); the insertion pass then only fixes x-ties
+            xs = np.empty(e - s)
+            for i in range(s, e):
+                xs[i - s] = pts[perm[i], 0]
+            o = np.argsort(xs, kind="mergesort")
+            tmp = perm[s:e].copy()
+            for i in range(e - s):
+                perm[s + i] = tmp[o[i]]
+        for i in range(s + 1, e):
+            v = perm[i]
+            j = i - 1
+            while j >= s and _lex_less(pts, v, perm[j]):
+                perm[j + 1] = perm[j]
+                j -= 1
+            perm[j + 1] = v
+        s = e
+    return perm

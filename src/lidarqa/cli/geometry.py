@@ -1,0 +1,242 @@
+"""``lidarqa planes``, ``lidarqa edges`` and ``lidarqa corners``: plane segmentation products."""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import click
+import numpy as np
+
+from ._common import INT_LIST, Steps, common_options, echo, finish, prepare_outputs, settings
+
+_OUT_SUFFIXES = (".csv", ".gpkg", ".geojson", ".json")
+
+
+def _selection_options(func: Callable[..., Any]) -> Callable[..., Any]:
+    opts = [
+        click.argument("path", type=click.Path(dir_okay=False)),
+        click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
+                     help="Output file: .csv, .gpkg or .geojson (by extension)."),
+        click.option("--classes", type=INT_LIST, default=None,
+                     help="Only these classification codes, e.g. 6 (buildings) or 6,2."),
+        click.option("--source-id", type=INT_LIST, default=None,
+                     help="Only these point_source_id values (flight strips), e.g. 706."),
+        click.option("--grow-radius", type=float, default=None,
+                     help="Surface growing: neighbourhood radius (m) [default: 2x the point "
+                          "spacing, 0.5-3 m]."),
+        click.option("--grow-dist", type=float, default=0.2, show_default=True,
+                     help="Surface growing: largest distance of a point to the segment plane (m)."),
+        click.option("--seed-method", type=click.Choice(["pca", "hough", "ransac"]), default="pca",
+                     show_default=True, help="How seed planes are found."),
+        click.option("--min-segment-size", type=int, default=30, show_default=True,
+                     help="Smallest planar segment kept (points)."),
+        click.option("--max-rmse", type=float, default=0.15, show_default=True,
+                     help="Drop segments whose plane RMS residual exceeds this (m)."),
+    ]
+    for opt in reversed(opts):
+        func = opt(func)
+    return func
+
+
+def _check_suffix(output: str) -> None:
+    from ..errors import OptionError
+
+    if Path(output).suffix.lower() not in _OUT_SUFFIXES:
+        raise OptionError(f"output {output}: use a .csv, .gpkg or .geojson file name")
+
+
+def _load(path: str, classes: list[int] | None, source_id: list[int] | None, steps: Steps):
+    """Read and select; return (cloud selection, xyz in metres, z factor)."""
+    from ..errors import InvalidPointsError
+    from ..io import read
+    from ..io.crs import z_to_metres_factor
+
+    with steps(f"Reading {path}"):
+        cloud = read(path)
+    sub = cloud.select(classes=classes, source_id=source_id) if (classes or source_id) else cloud
+    if len(sub) < 3:
+        what = []
+        if classes:
+            what.append(f"classes {','.join(map(str, classes))}")
+        if source_id:
+            what.append(f"source ids {','.join(map(str, source_id))}")
+        sel = (" with " + " and ".join(what)) if what else ""
+        raise InvalidPointsError(f"{path}: {len(sub)} point(s){sel}; at least 3 are needed")
+    f = z_to_metres_factor(sub.crs) if sub.crs is not None else 1.0
+    xyz = sub.xyz.copy()
+    if f != 1.0:
+        xyz[:, 2] *= f
+    return sub, xyz, f
+
+
+def _segment(xyz: np.ndarray, opts: dict, steps: Steps):
+    from ..geometry.segmentation import segment_planes
+
+    with steps(f"Segmenting {len(xyz):,} points into planes"):
+        return segment_planes(xyz, grow_radius=opts["grow_radius"], grow_dist=opts["grow_dist"],
+                              seed_method=opts["seed_method"],
+                              min_segment_size=opts["min_segment_size"], max_rmse=opts["max_rmse"])
+
+
+def _stats(values: np.ndarray) -> dict[str, Any]:
+    v = np.asarray(values, dtype=np.float64)
+    v = v[np.isfinite(v)]
+    if not len(v):
+        return {"min": None, "median": None, "max": None}
+    return {"min": float(v.min()), "median": float(np.median(v)), "max": float(v.max())}
+
+
+def _inputs(path: str, classes: Any, source_id: Any, n: int, crs: Any) -> dict[str, Any]:
+    from ..io.crs import crs_name
+
+    return {"path": path, "classes": classes, "source_id": source_id, "n_points_selected": n,
+            "crs": crs_name(crs) if crs is not None else None}
+
+
+@click.command()
+@_selection_options
+@common_options
+def planes(path: str, output: str, classes: list[int] | None, source_id: list[int] | None,
+           **opts: Any) -> None:
+    """Segment a point cloud into planes; write one point per plane (at its centroid).
+
+    Columns: id, x, y, z (centroid), nx, ny, nz, rho (n·p = rho), n_points,
+    n_inliers, rmse (m), sigma_rho (m), sigma_normal_deg, n_adjacent.
+    """
+    from ..io.vector import PointSet, write_points
+
+    _check_suffix(output)
+    prepare_outputs(output, inputs=(path,))
+    steps = Steps()
+    sub, xyz, f = _load(path, classes, source_id, steps)
+    seg = _segment(xyz, opts, steps)
+    cen = seg.centroid.copy()
+    cen[:, 2] /= f
+    deg = np.bincount(seg.adjacency.ravel(), minlength=seg.n_segments) if seg.n_segments else \
+        np.zeros(0, dtype=np.int64)
+    sn = np.sqrt(np.maximum(np.trace(seg.covariance[:, :3, :3], axis1=1, axis2=2), 0.0))
+    ps = PointSet(ids=np.arange(seg.n_segments, dtype=np.int64), xyz=cen, crs=sub.crs, attributes={
+        "nx": seg.normal[:, 0], "ny": seg.normal[:, 1], "nz": seg.normal[:, 2], "rho": seg.rho,
+        "n_points": seg.n_points, "n_inliers": seg.n_inliers, "rmse": seg.rmse,
+        "sigma_rho": seg.sigma_rho, "sigma_normal_deg": np.degrees(sn), "n_adjacent": deg})
+    with steps(f"Writing {output}"):
+        write_points(ps, output, overwrite=settings().overwrite, layer="planes")
+    d = seg.to_dict()
+    tilt = np.degrees(np.arccos(np.clip(seg.normal[:, 2], -1, 1)))
+    results = {**{k: v for k, v in d.items() if k != "parameters"},
+               "rmse_m": _stats(seg.rmse), "n_points_per_plane": _stats(seg.n_points),
+               "n_horizontal": int((tilt < 10).sum()), "n_vertical": int((tilt > 80).sum()),
+               "output": output}
+    echo(f"{seg.n_segments} planes from {len(xyz):,} points "
+         f"({d['segmented_fraction']:.1%} segmented), {len(seg.adjacency)} adjacent pairs "
+         f"-> {output}")
+    finish("planes", inputs=_inputs(path, classes, source_id, len(xyz), sub.crs),
+           parameters=d["parameters"], results=results)
+
+
+@click.command()
+@_selection_options
+@click.option("--near-dist", type=float, default=None,
+              help="Points within this distance (m) of the intersection line support it "
+                   "[default: 1.2x the point spacing, 0.15-1 m].")
+@click.option("--min-angle", type=float, default=10.0, show_default=True,
+              help="Plane pairs closer than this angle (degrees) give no edge.")
+@click.option("--min-length", type=float, default=0.5, show_default=True,
+              help="Drop edges shorter than this (m).")
+@common_options
+def edges(path: str, output: str, classes: list[int] | None, source_id: list[int] | None,
+          near_dist: float, min_angle: float, min_length: float, **opts: Any) -> None:
+    """Extract 3D edges: intersections of adjacent planes bounded by their points.
+
+    CSV columns: id,x1,y1,z1,x2,y2,z2, plane_a, plane_b, angle_deg, support_a,
+    support_b, sigma_line (m, at the midpoint), sigma_line_max, length (m).
+    """
+    from .._validate import check_positive, check_range
+    from ..geometry.edges import edges_from_segmentation
+    from ..io.vector import write_segments
+
+    _check_suffix(output)
+    if near_dist is not None:
+        check_positive(near_dist, "--near-dist")
+    check_range(min_angle, "--min-angle", 0.0, 90.0)
+    check_positive(min_length, "--min-length", allow_zero=True)
+    prepare_outputs(output, inputs=(path,))
+    steps = Steps()
+    sub, xyz, f = _load(path, classes, source_id, steps)
+    seg = _segment(xyz, opts, steps)
+    with steps("Intersecting adjacent planes"):
+        e, skipped = edges_from_segmentation(xyz, seg, near_dist=near_dist, min_angle=min_angle,
+                                             min_length=min_length, crs=sub.crs)
+    if f != 1.0:
+        e.start[:, 2] /= f
+        e.end[:, 2] /= f
+    with steps(f"Writing {output}"):
+        write_segments(e, output, overwrite=settings().overwrite, layer="edges")
+    reasons = Counter(s["reason"] for s in skipped)
+    if near_dist is None:
+        from ..geometry.edges import auto_near_dist
+
+        near_dist = auto_near_dist(seg)
+    results = {"n_planes": seg.n_segments, "n_adjacent_pairs": int(len(seg.adjacency)),
+               "n_edges": len(e), "total_length_m": float(e.lengths.sum()) if len(e) else 0.0,
+               "length_m": _stats(e.lengths), "sigma_line_m": _stats(e.attributes["sigma_line"]),
+               "angle_deg": _stats(e.attributes["angle_deg"]), "skipped": dict(reasons),
+               "output": output}
+    echo(f"{len(e)} edges ({results['total_length_m']:.1f} m) from {seg.n_segments} planes; "
+         f"{len(skipped)} adjacent pairs skipped"
+         + (f" ({', '.join(f'{k}: {v}' for k, v in reasons.items())})" if reasons else "")
+         + f" -> {output}")
+    finish("edges", inputs=_inputs(path, classes, source_id, len(xyz), sub.crs),
+           parameters={**seg.parameters, "near_dist": near_dist, "min_angle": min_angle,
+                       "min_length": min_length}, results=results)
+
+
+@click.command()
+@_selection_options
+@click.option("--min-det", type=float, default=0.1, show_default=True,
+              help="Smallest |det| of the three unit normals (conditioning).")
+@click.option("--min-angle", type=float, default=10.0, show_default=True,
+              help="Smallest angle (degrees) between any two of the three planes.")
+@click.option("--max-dist", type=float, default=1.0, show_default=True,
+              help="The corner must lie within this distance (m) of each plane's points.")
+@common_options
+def corners(path: str, output: str, classes: list[int] | None, source_id: list[int] | None,
+            min_det: float, min_angle: float, max_dist: float, **opts: Any) -> None:
+    """Extract corners: intersections of three mutually adjacent planes.
+
+    CSV columns: id,x,y,z, plane_a, plane_b, plane_c, det, min_angle_deg,
+    sigma_x, sigma_y, sigma_z (m).
+    """
+    from .._validate import check_positive, check_range
+    from ..geometry.corners import corners_from_segmentation
+    from ..io.vector import write_points
+
+    _check_suffix(output)
+    check_range(min_det, "--min-det", 0.0, 1.0)
+    check_range(min_angle, "--min-angle", 0.0, 90.0)
+    check_positive(max_dist, "--max-dist")
+    prepare_outputs(output, inputs=(path,))
+    steps = Steps()
+    sub, xyz, f = _load(path, classes, source_id, steps)
+    seg = _segment(xyz, opts, steps)
+    with steps("Intersecting plane triples"):
+        c, refused = corners_from_segmentation(seg, xyz, min_det=min_det, min_angle=min_angle,
+                                               max_dist=max_dist, crs=sub.crs)
+    if f != 1.0:
+        c.xyz[:, 2] /= f
+    with steps(f"Writing {output}"):
+        write_points(c, output, overwrite=settings().overwrite, layer="corners")
+    reasons = Counter(r["reason"] for r in refused)
+    sig = np.sqrt(c.attributes["sigma_x"] ** 2 + c.attributes["sigma_y"] ** 2
+                  + c.attributes["sigma_z"] ** 2) if len(c) else np.zeros(0)
+    results = {"n_planes": seg.n_segments, "n_corners": len(c), "refused": dict(reasons),
+               "sigma_3d_m": _stats(sig), "det": _stats(c.attributes["det"]), "output": output}
+    echo(f"{len(c)} corners from {seg.n_segments} planes; {len(refused)} triples refused"
+         + (f" ({', '.join(f'{k}: {v}' for k, v in reasons.items())})" if reasons else "")
+         + f" -> {output}")
+    finish("corners", inputs=_inputs(path, classes, source_id, len(xyz), sub.crs),
+           parameters={**seg.parameters, "min_det": min_det, "min_angle": min_angle,
+                       "max_dist": max_dist}, results=results)

@@ -1,0 +1,365 @@
+"""Edges as intersections of adjacent planes, bounded by their support (ALGORITHMS.md §4.2)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .._validate import as_points, check_positive, check_range
+from ..errors import DegenerateGeometryError, OptionError
+from ..io.vector import Segments
+from .planes import PlaneFit
+from .segmentation import PlaneSegmentation, segment_planes
+
+__all__ = ["PlanePairSegment", "plane_pair_segment", "extract_edges", "edges_from_segmentation",
+           "EDGE_ATTRIBUTES"]
+
+EDGE_ATTRIBUTES = ("plane_a", "plane_b", "angle_deg", "support_a", "support_b", "sigma_line",
+                   "sigma_line_max", "length")
+
+
+@dataclass(frozen=True, eq=False)
+class PlanePairSegment:
+    """A 3D segment on the intersection line of two planes.
+
+    Attributes
+    ----------
+    start, end : ndarray of shape (3,)
+        Endpoints (m); `start` is the lexicographically smaller (x, then y, then z).
+    direction : ndarray of shape (3,)
+        Unit direction of the line, from `start` to `end`.
+    point : ndarray of shape (3,)
+        Point of the line nearest the midpoint of the two plane centroids (m).
+    angle_deg : float
+        Angle between the two plane normals, in [0, 90] degrees.
+    support_a, support_b : int
+        Points of each plane within `near_dist` of the line.
+    """
+
+    start: np.ndarray
+    end: np.ndarray
+    direction: np.ndarray
+    point: np.ndarray
+    angle_deg: float
+    support_a: int
+    support_b: int
+
+    @property
+    def length(self) -> float:
+        return float(np.linalg.norm(self.end - self.start))
+
+    def to_dict(self) -> dict:
+        return {"start": self.start.tolist(), "end": self.end.tolist(),
+                "direction": self.direction.tolist(), "angle_deg": self.angle_deg,
+                "support_a": self.support_a, "support_b": self.support_b, "length": self.length}
+
+
+def _plane_tuple(pl: Any) -> tuple[np.ndarray, float]:
+    if isinstance(pl, PlaneFit):
+        return np.asarray(pl.normal, float), float(pl.rho)
+    if hasattr(pl, "normal") and hasattr(pl, "rho"):
+        return np.asarray(pl.normal, float), float(pl.rho)
+    try:
+        n, rho = pl
+    except (TypeError, ValueError) as exc:
+        raise OptionError("a plane must be a PlaneFit or a (normal, rho) pair") from exc
+    return np.asarray(n, float).reshape(3), float(rho)
+
+
+def _unit(n: np.ndarray, name: str) -> np.ndarray:
+    ln = float(np.linalg.norm(n))
+    if not np.isfinite(ln) or ln < 1e-12:
+        raise DegenerateGeometryError(f"{name}: the plane normal is zero or not finite")
+    return n / ln
+
+
+def _line(n1: np.ndarray, rho1: float, n2: np.ndarray, rho2: float, c: np.ndarray,
+          min_angle: float) -> tuple[np.ndarray, np.ndarray, float] | None:
+    cr = np.cross(n1, n2)
+    s = float(np.linalg.norm(cr))
+    if s < math.sin(math.radians(min_angle)):
+        return None
+    u = cr / s
+    a = np.vstack([n1, n2, u])
+    x0 = np.linalg.solve(a, np.array([rho1, rho2, u @ c]))
+    return u, x0, math.degrees(math.asin(min(1.0, s)))
+
+
+def plane_pair_segment(
+    pl1: Any,
+    pts1: Any,
+    pl2: Any,
+    pts2: Any,
+    *,
+    near_dist: float = 0.10,
+    min_angle: float = 5.0,
+    q_lo: float = 0.0,
+    q_hi: float = 1.0,
+    min_support: int = 5,
+    return_reason: bool = False,
+) -> PlanePairSegment | None | tuple[PlanePairSegment | None, str]:
+    """Intersect two planes and bound the line by their supporting points (§4.2).
+
+    Parameters
+    ----------
+    pl1, pl2 : PlaneFit or (normal, rho)
+        The planes ``normal · p = rho``; normals need not be unit.
+    pts1, pts2 : ndarray of shape (N1, 3), (N2, 3)
+        Inlier points of each plane (m).
+    near_dist : float, default 0.10
+        Points within this distance (m) of the line support it.
+    min_angle : float, default 5.0
+        Planes closer than this angle (degrees) are near-parallel: no segment.
+    q_lo, q_hi : float, default 0.0 and 1.0
+        Quantiles of the supporting points' positions along the line that bound
+        each plane's interval.
+    min_support : int, default 5
+        Supporting points needed on each plane.
+    return_reason : bool, default False
+        Also return why no segment was made ("" when one was).
+
+    Returns
+    -------
+    PlanePairSegment or None
+        None when the planes are near-parallel, a plane has fewer than
+        `min_support` supporting points, or the two support intervals do not
+        overlap (the segment is their intersection). With `return_reason`, a
+        ``(segment, reason)`` tuple.
+
+    Examples
+    --------
+    >>> g = np.arange(0, 5.01, 1.0)
+    >>> a = np.array([[x, y, 0.] for x in g for y in np.arange(1, 8.01)])
+    >>> b = np.array([[0., y, z] for y in np.arange(2, 9.01) for z in g[:4]])
+    >>> s = plane_pair_segment(((0, 0, 1), 0), a, ((1, 0, 0), 0), b, min_support=2)
+    >>> s.start.tolist(), s.end.tolist()
+    ([0.0, 2.0, 0.0], [0.0, 8.0, 0.0])
+    """
+    n1, rho1 = _plane_tuple(pl1)
+    n2, rho2 = _plane_tuple(pl2)
+    s1, s2 = float(np.linalg.norm(n1)), float(np.linalg.norm(n2))
+    n1, n2 = _unit(n1, "pl1"), _unit(n2, "pl2")
+    rho1, rho2 = rho1 / s1, rho2 / s2
+    p1 = as_points(pts1, "pts1", min_points=1)
+    p2 = as_points(pts2, "pts2", min_points=1)
+    near_dist = check_positive(near_dist, "near_dist")
+    min_angle = check_range(min_angle, "min_angle", 0.0, 90.0)
+    q_lo = check_range(q_lo, "q_lo", 0.0, 1.0)
+    q_hi = check_range(q_hi, "q_hi", 0.0, 1.0)
+    if q_lo > q_hi:
+        raise OptionError(f"q_lo must be <= q_hi, got {q_lo} > {q_hi}")
+    seg, reason = _pair_segment(n1, rho1, p1, n2, rho2, p2, p1.mean(axis=0), p2.mean(axis=0),
+                                near_dist, min_angle, q_lo, q_hi, int(min_support))
+    return (seg, reason) if return_reason else seg
+
+
+def _pair_segment(n1, rho1, p1, n2, rho2, p2, c1, c2, near_dist, min_angle, q_lo, q_hi,
+                  min_support):
+    """Core of :func:`plane_pair_segment` on validated input: (segment or None, reason)."""
+    c = (c1 + c2) / 2.0
+    line = _line(n1, rho1, n2, rho2, c, min_angle)
+    if line is None:
+        return None, "near-parallel"
+    u, x0, angle = line
+    tol = near_dist + 1e-12 * max(1.0, near_dist)
+    ivals = []
+    supports = []
+    for p in (p1, p2):
+        d = p - x0
+        t = d @ u
+        perp = d - t[:, None] * u
+        near = np.einsum("ij,ij->i", perp, perp) <= tol * tol
+        supports.append(int(near.sum()))
+        if near.sum() < max(min_support, 1):
+            return None, "too little support"
+        tn = t[near]
+        lo = np.quantile(tn, q_lo) if q_lo > 0 else tn.min()
+        hi = np.quantile(tn, q_hi) if q_hi < 1 else tn.max()
+        ivals.append((lo, hi))
+    lo = max(ivals[0][0], ivals[1][0])
+    hi = min(ivals[0][1], ivals[1][1])
+    if not lo < hi:
+        return None, "supports do not overlap"
+    a = x0 + lo * u
+    b = x0 + hi * u
+    if tuple(b) < tuple(a):
+        a, b = b, a
+    direction = (b - a) / np.linalg.norm(b - a)
+    return PlanePairSegment(start=a, end=b, direction=direction, point=x0, angle_deg=angle,
+                            support_a=supports[0], support_b=supports[1]), ""
+
+
+def line_sigma(n1: np.ndarray, n2: np.ndarray, var1: np.ndarray, var2: np.ndarray) -> np.ndarray:
+    """Standard deviation (m) of a two-plane line's position, perpendicular to the line.
+
+    `var1`, `var2` are the variances (m²) of each plane's position along its normal
+    at the evaluation points (see :func:`~lidarqa.geometry.planes.plane_covariance`);
+    the displacement of the line is the minimum-norm solution of
+    ``[n1; n2] δx = [δ1; δ2]``, so ``Σ = A⁺ diag(var) A⁺ᵀ`` and σ = sqrt(trace Σ).
+    """
+    a = np.vstack([n1, n2])
+    pinv = np.linalg.pinv(a)  # (3, 2)
+    g = pinv.T @ pinv  # (2, 2): trace(A⁺ D A⁺ᵀ) = Σ_k D_k (A⁺ᵀA⁺)_kk
+    return np.sqrt(np.maximum(np.asarray(var1) * g[0, 0] + np.asarray(var2) * g[1, 1], 0.0))
+
+
+def _plane_var(seg: PlaneSegmentation, k: int, x: np.ndarray) -> np.ndarray:
+    d = x - seg.centroid[k]
+    c = seg.covariance[k]
+    return c[3, 3] + np.einsum("...i,ij,...j->...", d, c[:3, :3], d)
+
+
+def auto_near_dist(seg: PlaneSegmentation) -> float:
+    """Default support distance (m): 1.2 x the point spacing, clipped to [0.15, 1]."""
+    sp = seg.parameters.get("point_spacing")
+    if sp is None or not np.isfinite(sp):
+        return 0.15
+    return float(np.clip(1.2 * sp, 0.15, 1.0))
+
+
+def edges_from_segmentation(
+    points: np.ndarray,
+    seg: PlaneSegmentation,
+    *,
+    near_dist: float | None = None,
+    min_angle: float = 10.0,
+    q_lo: float = 0.0,
+    q_hi: float = 1.0,
+    min_support: int = 5,
+    min_length: float = 0.5,
+    crs: Any = None,
+) -> tuple[Segments, list[dict]]:
+    """Edges of every adjacent, non-near-parallel segment pair of a segmentation.
+
+    Supporting points of a pair are taken among the inliers of each plane that
+    touch the other segment (the contact points of the adjacency), which keeps
+    the cost proportional to the segment boundaries. Returns the edges and a
+    list of the pairs that were skipped, each with its reason.
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    if near_dist is None:
+        near_dist = auto_near_dist(seg)
+    rows = []
+    skipped = []
+    sin_min = math.sin(math.radians(min_angle))
+    inl = seg.inliers
+    for m, (a, b) in enumerate(seg.adjacency):
+        na, nb = seg.normal[a], seg.normal[b]
+        if np.linalg.norm(np.cross(na, nb)) < sin_min:
+            skipped.append({"plane_a": int(a), "plane_b": int(b), "reason": "near-parallel"})
+            continue
+        ci = seg.contact_i[seg.contact_ptr[m]:seg.contact_ptr[m + 1]]
+        cj = seg.contact_j[seg.contact_ptr[m]:seg.contact_ptr[m + 1]]
+        idx = np.unique(np.concatenate([ci, cj]))
+        idx = idx[inl[idx]]
+        lab = seg.labels[idx]
+        pa, pb = pts[idx[lab == a]], pts[idx[lab == b]]
+        if len(pa) == 0 or len(pb) == 0:
+            skipped.append({"plane_a": int(a), "plane_b": int(b), "reason": "too little support"})
+            continue
+        # reference point: midpoint of the contact centroids (the edge region), not of the
+        # whole planes, so x0 lies near the observed edge
+        s, reason = _pair_segment(na, seg.rho[a], pa, nb, seg.rho[b], pb, pa.mean(axis=0),
+                                  pb.mean(axis=0), near_dist, min_angle, q_lo, q_hi, min_support)
+        if s is None:
+            skipped.append({"plane_a": int(a), "plane_b": int(b), "reason": reason})
+            continue
+        if s.length < min_length:
+            skipped.append({"plane_a": int(a), "plane_b": int(b),
+                            "reason": "shorter than min_length"})
+            continue
+        ends = np.stack([s.start, (s.start + s.end) / 2.0, s.end])
+        sig = line_sigma(na, nb, _plane_var(seg, a, ends), _plane_var(seg, b, ends))
+        if not (np.isfinite(s.start).all() and np.isfinite(s.end).all()):
+            skipped.append({"plane_a": int(a), "plane_b": int(b), "reason": "not finite"})
+            continue
+        rows.append((s, int(a), int(b), float(sig[1]), float(sig.max())))
+    n = len(rows)
+    edges = Segments(
+        ids=np.arange(n, dtype=np.int64),
+        start=np.array([r[0].start for r in rows]).reshape(n, 3),
+        end=np.array([r[0].end for r in rows]).reshape(n, 3),
+        attributes={
+            "plane_a": np.array([r[1] for r in rows], dtype=np.int64),
+            "plane_b": np.array([r[2] for r in rows], dtype=np.int64),
+            "angle_deg": np.array([r[0].angle_deg for r in rows], dtype=np.float64),
+            "support_a": np.array([r[0].support_a for r in rows], dtype=np.int64),
+            "support_b": np.array([r[0].support_b for r in rows], dtype=np.int64),
+            "sigma_line": np.array([r[3] for r in rows], dtype=np.float64),
+            "sigma_line_max": np.array([r[4] for r in rows], dtype=np.float64),
+            "length": np.array([r[0].length for r in rows], dtype=np.float64),
+        },
+        crs=crs,
+    )
+    return edges, skipped
+
+
+def extract_edges(
+    points: Any,
+    *,
+    segmentation: PlaneSegmentation | None = None,
+    near_dist: float | None = None,
+    min_angle: float = 10.0,
+    q_lo: float = 0.0,
+    q_hi: float = 1.0,
+    min_support: int = 5,
+    min_length: float = 0.5,
+    crs: Any = None,
+    **segment_options: Any,
+) -> Segments:
+    """3D edges of a cloud: intersections of adjacent planes bounded by their support.
+
+    Parameters
+    ----------
+    points : ndarray of shape (N, 3)
+        x, y, z in metres (e.g. building points).
+    segmentation : PlaneSegmentation, optional
+        A segmentation of `points` from :func:`segment_planes`; computed with
+        `segment_options` when omitted.
+    near_dist : float or None, default None
+        Points within this distance (m) of the intersection line support it and
+        bound the edge. None adapts it to the sampling: 1.2 x the segmentation's
+        ``point_spacing`` (median distance to the 10th neighbour), clipped to
+        [0.15, 1] m, so sparse strips still give enough support.
+    min_angle : float, default 10.0
+        Pairs of planes closer than this angle (degrees) give no edge.
+    q_lo, q_hi : float, default 0 and 1
+        Quantiles bounding each plane's support along the line.
+    min_support : int, default 5
+        Supporting points needed on each plane.
+    min_length : float, default 0.5
+        Shorter edges (m) are dropped.
+    crs : pyproj.CRS, optional
+        Stored on the result.
+    **segment_options
+        Passed to :func:`~lidarqa.geometry.segmentation.segment_planes`.
+
+    Returns
+    -------
+    Segments
+        One edge per row, ids 0..n-1, with attributes ``plane_a, plane_b``
+        (segment ids), ``angle_deg``, ``support_a, support_b``, ``sigma_line``
+        (standard deviation of the line position at the midpoint, m, from the
+        plane covariances), ``sigma_line_max`` (largest of start, middle, end)
+        and ``length`` (m).
+    """
+    pts = as_points(points)
+    if near_dist is not None:
+        near_dist = check_positive(near_dist, "near_dist")
+    min_angle = check_range(min_angle, "min_angle", 0.0, 90.0)
+    q_lo = check_range(q_lo, "q_lo", 0.0, 1.0)
+    q_hi = check_range(q_hi, "q_hi", 0.0, 1.0)
+    min_length = check_positive(min_length, "min_length", allow_zero=True)
+    if segmentation is None:
+        segmentation = segment_planes(pts, **segment_options)
+    elif len(segmentation.labels) != len(pts):
+        raise OptionError("segmentation was computed for a different number of points")
+    if near_dist is None:
+        near_dist = auto_near_dist(segmentation)
+    edges, _ = edges_from_segmentation(pts, segmentation, near_dist=near_dist, min_angle=min_angle,
+                                       q_lo=q_lo, q_hi=q_hi, min_support=int(min_support),
+                                       min_length=min_length, crs=crs)
+    return edges
