@@ -8,8 +8,9 @@ from scipy.spatial import cKDTree
 __all__ = ["low_outliers"]
 
 
-def low_outliers(xyz: np.ndarray, *, distance: float, radius: float, k: int = 16,
-                 rank: int = 2) -> np.ndarray:
+def low_outliers(
+    xyz: np.ndarray, *, distance: float, radius: float, k: int = 16, rank: int = 2
+) -> np.ndarray:
     """Points lying more than `distance` (m) below their `rank`-th lowest neighbour.
 
     Neighbours are the `k` nearest points within `radius` (m, horizontal), the

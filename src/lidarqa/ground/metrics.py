@@ -134,7 +134,10 @@ def filter_errors_from_counts(a: int, b: int, c: int, d: int) -> FilterErrors:
     p_e = (e * g + f * h) / (n * n)
     kappa = (p_o - p_e) / (1.0 - p_e) if p_e < 1.0 else math.nan
     return FilterErrors(
-        a=a, b=b, c=c, d=d,
+        a=a,
+        b=b,
+        c=c,
+        d=d,
         type_i=_ratio(b, e),
         type_ii=_ratio(c, f),
         total=(b + c) / n,
@@ -175,7 +178,8 @@ def filter_errors(ref_ground: Any, pred_ground: Any, *, mask: Any = None) -> Fil
     pred = np.asarray(pred_ground)
     if ref.ndim != 1 or pred.ndim != 1 or ref.shape != pred.shape:
         raise InvalidPointsError(
-            f"ref_ground and pred_ground must be 1-D of the same length, got {ref.shape} and {pred.shape}"
+            "ref_ground and pred_ground must be 1-D of the same length, "
+            f"got {ref.shape} and {pred.shape}"
         )
     ref = ref.astype(bool)
     pred = pred.astype(bool)

@@ -16,8 +16,19 @@ import numpy as np
 
 from .._validate import as_points, check_choice, check_positive, check_range
 from ..errors import InvalidPointsError
-from ._tin import TIN, Criteria, lowest_per_cell, mirror_point, screen_seeds, test_points, virtual_hull
 from ._prefilter import low_outliers
+from ._tin import (
+    TIN,
+    Criteria,
+    IncrementalTIN,
+    _MergedVertices,
+    distance_to_tin,
+    judge_points,
+    mirror_point,
+    screen_seeds,
+    supported_lowest_per_cell,
+    virtual_hull,
+)
 
 __all__ = ["PTD", "PTDResult", "ptd_filter", "mirror_point"]
 
@@ -88,11 +99,25 @@ class PTD:
     edge_mode : {"freeze", "reduce"}, default "freeze"
     min_gain_frac : float, default 0.0
         Stop early when an iteration adds fewer than this fraction of |G|.
-    low_outlier_distance : float, default 1.0
-        Points more than this (m) below every neighbour within `low_outlier_radius`
-        are low outliers: never seeds, never ground. 0 disables the pre-filter.
+    final_distance : float, default 0.0
+        After densification, candidates within this distance (m) of the final TIN
+        are ground too (never inserted). 0 disables. DECISION: at ALS noise levels
+        the iteration angle rejects many ground points next to TIN vertices.
+    mirror_max_distance : float, default inf
+        Mirror only points within this horizontal distance (m) of their mirror
+        vertex. DECISION: unrestricted mirroring accepts roofs on hillsides when
+        the point reflected through a ground vertex lands on the slope below.
+    low_outlier_distance : float, default 0.0
+        Points more than this (m) below their 2nd-lowest neighbour within
+        `low_outlier_radius` are never candidates. 0 disables the pre-filter.
     low_outlier_radius : float, default 5.0
         Neighbourhood radius (m) of the low-outlier test.
+    seed_support, seed_radius, seed_dz, seed_support_ratio : int, float, float, float
+        Robust seeds (DECISION): a cell's seed is its lowest point that has at least
+        `seed_support` other points within `seed_radius` (m, horizontal) and
+        `seed_dz` (m, vertical), and at least `seed_support_ratio` × the points
+        within `seed_radius` in XY. Isolated low outliers and sparse clusters of
+        multipath echoes are skipped. ``seed_support=0`` gives the plain lowest point.
 
     Examples
     --------
@@ -112,8 +137,14 @@ class PTD:
     max_iter: int = 100
     edge_mode: str = "freeze"
     min_gain_frac: float = 0.0
-    low_outlier_distance: float = 1.0
+    low_outlier_distance: float = 0.0
     low_outlier_radius: float = 5.0
+    final_distance: float = 0.0
+    mirror_max_distance: float = float("inf")
+    seed_support: int = 3
+    seed_radius: float = 5.0
+    seed_dz: float = 1.0
+    seed_support_ratio: float = 0.25
 
     def __post_init__(self) -> None:
         check_positive(self.cell_size, "cell_size")
@@ -141,6 +172,7 @@ class PTD:
             min_edge_length=float(self.min_edge_length),
             mirror=bool(self.mirror),
             edge_mode=self.edge_mode,
+            mirror_max_distance=float(self.mirror_max_distance),
         )
 
     def run(self, points: Any, *, candidates: Any = None) -> PTDResult:
@@ -178,11 +210,22 @@ def _as_mask(mask: Any, n: int) -> np.ndarray:
 
 def _empty_result(n: int, n_out: int = 0) -> PTDResult:
     e = np.zeros(0, dtype=np.int64)
-    return PTDResult(np.zeros(n, dtype=bool), e, e, np.zeros((0, 3), dtype=np.int64), 0, (), 0,
-                     "no_candidates", n_out)
+    return PTDResult(
+        np.zeros(n, dtype=bool),
+        e,
+        e,
+        np.zeros((0, 3), dtype=np.int64),
+        0,
+        (),
+        0,
+        "no_candidates",
+        n_out,
+    )
 
 
-def prepare(points: np.ndarray, cand: np.ndarray, low_d: float, low_r: float) -> tuple[np.ndarray, np.ndarray, int]:
+def prepare(
+    points: np.ndarray, cand: np.ndarray, low_d: float, low_r: float
+) -> tuple[np.ndarray, np.ndarray, int]:
     """Shift to a local origin and drop low outliers from the candidates."""
     xyz = points - points.min(axis=0) if points.shape[0] else points.copy()
     n_out = 0
@@ -196,6 +239,126 @@ def prepare(points: np.ndarray, cand: np.ndarray, low_d: float, low_r: float) ->
     return xyz, cand, n_out
 
 
+def initial_seeds(
+    xyz: np.ndarray, ci: np.ndarray, par: Any, crit: Criteria
+) -> tuple[np.ndarray, np.ndarray]:
+    """Seed points (supported lowest per cell, terrain-angle screened) and the virtual hull."""
+    lo = xyz[ci].min(axis=0)
+    hi = xyz[ci].max(axis=0)
+    seeds = supported_lowest_per_cell(
+        xyz,
+        ci,
+        par.cell_size,
+        lo,
+        radius=par.seed_radius,
+        dz=par.seed_dz,
+        min_support=par.seed_support,
+        min_ratio=par.seed_support_ratio,
+    )
+    if seeds.size == 0:
+        seeds = supported_lowest_per_cell(xyz, ci, par.cell_size, lo, radius=0, dz=0, min_support=0)
+    virtual = virtual_hull(xyz, seeds, par.cell_size, lo, hi)
+    seeds = screen_seeds(xyz, seeds, virtual, crit.max_terrain_angle)
+    return seeds, virtual
+
+
+@dataclass
+class DensifyState:
+    """Mutable state of a densification run (private)."""
+
+    ground: np.ndarray  # (N,) bool, labelled ground
+    in_tin: np.ndarray  # (N,) bool, TIN vertex
+    open_: np.ndarray  # (N,) bool, candidate still undecided
+    added: list
+    n_mirror: int = 0
+    n_iter: int = 0
+    stop: str = "no_gain"
+
+
+def densify(
+    xyz: np.ndarray,
+    st: DensifyState,
+    virtual: np.ndarray,
+    crit: Criteria,
+    *,
+    max_iter: int,
+    min_gain_frac: float = 0.0,
+) -> TIN:
+    """Point-wise progressive densification (§1.1 step 5) of `st`; returns the final TIN.
+
+    The TIN grows by insertion (startinpy) instead of being rebuilt each iteration;
+    if startinpy merges two vertices (closer than 1e-7 m) it falls back to rebuilding.
+    """
+    inc: IncrementalTIN | None
+    try:
+        inc = IncrementalTIN(xyz, np.flatnonzero(st.in_tin), virtual)
+    except _MergedVertices:
+        inc = None
+
+    def current() -> TIN:
+        return inc.snapshot() if inc is not None else TIN(xyz, np.flatnonzero(st.in_tin), virtual)
+
+    for k in range(1, int(max_iter) + 1):
+        st.n_iter = k
+        tin = current()
+        oi = np.flatnonzero(st.open_)
+        if oi.size == 0:
+            st.added.append(0)
+            st.stop = "no_gain"
+            return tin
+        res = judge_points(tin, xyz[oi], crit)
+        # XY duplicates of vertices: ground or not, never inserted, decided once
+        st.ground[oi[res.duplicate_ok]] = True
+        st.open_[oi[res.duplicate]] = False
+        # points in frozen triangles within d of the facet: ground, never inserted
+        fz = oi[res.frozen_ok]
+        st.ground[fz] = True
+        st.open_[fz] = False
+        # one point per triangle: smallest score, then beta, then coordinates, then index
+        pi = np.flatnonzero(res.passed)
+        if pi.size == 0:
+            st.added.append(0)
+            st.stop = "no_gain"
+            return tin
+        tri = res.tri[pi]
+        pc = xyz[oi[pi]]
+        order = np.lexsort((oi[pi], pc[:, 2], pc[:, 1], pc[:, 0], res.beta[pi], res.score[pi], tri))
+        t_sorted = tri[order]
+        first = np.ones(order.size, dtype=bool)
+        first[1:] = t_sorted[1:] != t_sorted[:-1]
+        keep = pi[order[first]]
+        new = oi[keep]
+        st.n_mirror += int(res.mirrored[keep].sum())
+        st.ground[new] = True
+        st.in_tin[new] = True
+        st.open_[new] = False
+        st.added.append(int(new.size))
+        if inc is not None:
+            try:
+                inc.add(new)
+            except _MergedVertices:
+                inc = None
+        if min_gain_frac > 0 and new.size / max(1, int(st.in_tin.sum())) < min_gain_frac:
+            st.stop = "min_gain_frac"
+            break
+        if k == max_iter:
+            st.stop = "max_iter"
+    return current()
+
+
+def final_pass(xyz: np.ndarray, st: DensifyState, tin: TIN, distance: float) -> int:
+    """Label undecided candidates within `distance` (m) of the final TIN as ground."""
+    if distance <= 0:
+        return 0
+    oi = np.flatnonzero(st.open_)
+    if oi.size == 0:
+        return 0
+    hit = oi[distance_to_tin(tin, xyz[oi]) <= distance + 1e-12]
+    st.ground[hit] = True
+    st.open_[hit] = False
+    return int(hit.size)
+
+
 def _ptd(points: np.ndarray, cand: np.ndarray, par: PTD) -> PTDResult:
     n = points.shape[0]
     if n == 0 or not cand.any():
@@ -204,68 +367,24 @@ def _ptd(points: np.ndarray, cand: np.ndarray, par: PTD) -> PTDResult:
     if not cand.any():
         return _empty_result(n, n_out)
     crit = par.criteria()
-    ci = np.flatnonzero(cand)
-    lo = xyz[ci].min(axis=0)
-    hi = xyz[ci].max(axis=0)
-    seeds = lowest_per_cell(xyz, ci, par.cell_size, lo)
-    virtual = virtual_hull(xyz, seeds, par.cell_size, lo, hi)
-    seeds = screen_seeds(xyz, seeds, virtual, crit.max_terrain_angle)
-    ground = np.zeros(n, dtype=bool)
-    in_tin = np.zeros(n, dtype=bool)
-    ground[seeds] = True
-    in_tin[seeds] = True
-    open_ = cand & ~ground  # candidates still undecided
-    added: list[int] = []
-    n_mirror = 0
-    stop = "no_gain"
-    n_iter = 0
-    tin = None
-    for k in range(1, int(par.max_iter) + 1):
-        n_iter = k
-        g_idx = np.flatnonzero(in_tin)
-        tin = TIN(xyz, g_idx, virtual)
-        oi = np.flatnonzero(open_)
-        if oi.size == 0:
-            added.append(0)
-            break
-        res = test_points(tin, xyz[oi], crit)
-        # XY duplicates of vertices: ground or not, never inserted, decided once
-        dup_ok = oi[res.duplicate_ok]
-        ground[dup_ok] = True
-        open_[oi[res.duplicate]] = False
-        # one point per triangle: smallest score, then beta, then index
-        pi = np.flatnonzero(res.passed)
-        if pi.size == 0:
-            added.append(0)
-            break
-        tri = res.tri[pi]
-        order = np.lexsort((oi[pi], res.beta[pi], res.score[pi], tri))
-        t_sorted = tri[order]
-        first = np.ones(order.size, dtype=bool)
-        first[1:] = t_sorted[1:] != t_sorted[:-1]
-        keep = pi[order[first]]
-        new = oi[keep]
-        n_mirror += int(res.mirrored[keep].sum())
-        ground[new] = True
-        in_tin[new] = True
-        open_[new] = False
-        added.append(int(new.size))
-        if par.min_gain_frac > 0 and new.size / max(1, int(in_tin.sum())) < par.min_gain_frac:
-            stop = "min_gain_frac"
-            break
-        if k == par.max_iter:
-            stop = "max_iter"
-    g_idx = np.flatnonzero(in_tin)
-    tin = TIN(xyz, g_idx, virtual)
-    tris = tin.simplices[(tin.simplices < tin.n_real).all(axis=1)]
+    seeds, virtual = initial_seeds(xyz, np.flatnonzero(cand), par, crit)
+    st = DensifyState(
+        ground=np.zeros(n, dtype=bool), in_tin=np.zeros(n, dtype=bool), open_=cand.copy(), added=[]
+    )
+    st.ground[seeds] = True
+    st.in_tin[seeds] = True
+    st.open_[seeds] = False
+    tin = densify(xyz, st, virtual, crit, max_iter=par.max_iter, min_gain_frac=par.min_gain_frac)
+    final_pass(xyz, st, tin, par.final_distance)
+    tris = tin.real_triangles()
     return PTDResult(
-        ground_mask=ground,
+        ground_mask=st.ground,
         seed_idx=seeds,
-        tin_vertices=g_idx,
+        tin_vertices=tin.real_idx,
         tin_triangles=tris,
-        n_iter=n_iter,
-        added_per_iter=tuple(added),
-        mirrored_accepts=n_mirror,
-        stop_reason=stop,
+        n_iter=st.n_iter,
+        added_per_iter=tuple(st.added),
+        mirrored_accepts=st.n_mirror,
+        stop_reason=st.stop,
         n_low_outliers=n_out,
     )

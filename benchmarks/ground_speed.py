@@ -1,0 +1,135 @@
+"""Speed and peak memory of ``lidarqa ground`` (read + filter + write) against the CSF wheel.
+
+Runs every measurement in a fresh subprocess so that peak RSS (ru_maxrss) is that
+run's own. Datasets: the unlabelled ISPRS site file FSite5_orig-utm.laz (628 k
+points, if ../shared is present) and a 2 M-point synthetic scene
+(lidarqa.testing.make_scene, 20 pts/m²). CSF = cloth-simulation-filter
+(``pip install cloth-simulation-filter``), default parameters except
+cloth_resolution (0.5 m on the dense synthetic scene, 1.0 m on the sparse ISPRS site,
+which at 0.5 m runs for many minutes) and no slope post-processing.
+
+    python benchmarks/ground_speed.py [--methods segment-ptd,ptd,csf] [--only 2m|fsite5]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED = REPO.parent / "shared" / "lidar-data" / "isprs-filtertest-pdal" / "FSite5_orig-utm.laz"
+
+
+def one(method: str, src: str, out: str, cloth: float = 0.5) -> dict:
+    import numpy as np
+
+    import lidarqa
+
+    t0 = time.perf_counter()
+    cloud = lidarqa.read(src)
+    t1 = time.perf_counter()
+    if method == "csf":
+        import CSF
+
+        csf = CSF.CSF()
+        csf.params.bSloopSmooth = False
+        csf.params.cloth_resolution = cloth
+        csf.setPointCloud(cloud.xyz - cloud.xyz.min(axis=0))
+        g, ng = CSF.VecInt(), CSF.VecInt()
+        csf.do_filtering(g, ng, exportCloth=False)
+        ground = np.zeros(len(cloud), dtype=bool)
+        ground[np.asarray(g, dtype=np.int64)] = True
+    else:
+        from lidarqa.ground import classify_ground
+
+        ground = classify_ground(cloud, method=method).ground_mask
+    t2 = time.perf_counter()
+    from lidarqa.ground import relabel_classification
+
+    cls = cloud.fields.get("classification", np.zeros(len(cloud), dtype=np.uint8))
+    cloud.fields["classification"] = relabel_classification(cls, ground)
+    lidarqa.write(cloud, out, overwrite=True)
+    t3 = time.perf_counter()
+    return {
+        "method": method,
+        "n": len(cloud),
+        "read_s": t1 - t0,
+        "filter_s": t2 - t1,
+        "write_s": t3 - t2,
+        "total_s": t3 - t0,
+        "n_ground": int(ground.sum()),
+        "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+    }
+
+
+def make_2m(path: Path) -> None:
+    import lidarqa
+    from lidarqa.io import PointCloud
+    from lidarqa.testing import make_scene
+
+    sc = make_scene(seed=0, size=(300.0, 300.0), density=20.0, origin=(500000.0, 5400000.0, 100.0))
+    import numpy as np
+
+    cloud = PointCloud(sc.points, fields={"classification": sc.classification.astype(np.uint8)})
+    lidarqa.write(cloud, path, overwrite=True)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--one", nargs=4, metavar=("METHOD", "SRC", "OUT", "CLOTH"))
+    ap.add_argument("--methods", default="segment-ptd,csf")
+    ap.add_argument("--only", default=None)
+    a = ap.parse_args()
+    if a.one:
+        print(json.dumps(one(a.one[0], a.one[1], a.one[2], float(a.one[3]))))
+        return
+    tmp = Path(tempfile.mkdtemp(prefix="lidarqa-ground-speed-"))
+    datasets = []
+    if SHARED.exists() and a.only in (None, "fsite5"):
+        datasets.append(("FSite5_orig (628 k)", SHARED, 1.0))
+    if a.only in (None, "2m"):
+        syn = tmp / "synthetic-2m.laz"
+        make_2m(syn)
+        datasets.append(("synthetic 2 M", syn, 0.5))
+    methods = a.methods.split(",")
+    print(
+        f"{'dataset':<22}{'method':<13}{'points':>10}{'read s':>8}{'filter s':>10}{'write s':>9}"
+        f"{'total s':>9}{'peak MB':>9}{'ground':>10}"
+    )
+    for name, src, cloth in datasets:
+        res = {}
+        for m in methods:
+            out = tmp / f"out-{m}.laz"
+            p = subprocess.run(
+                [sys.executable, __file__, "--one", m, str(src), str(out), str(cloth)],
+                capture_output=True,
+                text=True,
+                env=os.environ.copy(),
+            )
+            if p.returncode != 0:
+                print(f"{name:<22}{m:<13} FAILED: {p.stderr.strip().splitlines()[-1:]}")
+                continue
+            r = json.loads(p.stdout.strip().splitlines()[-1])
+            res[m] = r
+            print(
+                f"{name:<22}{m:<13}{r['n']:>10,}{r['read_s']:>8.1f}{r['filter_s']:>10.1f}"
+                f"{r['write_s']:>9.1f}{r['total_s']:>9.1f}{r['peak_rss_mb']:>9.0f}{r['n_ground']:>10,}"
+            )
+        if "csf" in res:
+            for m, r in res.items():
+                if m != "csf":
+                    print(
+                        f"{'':<22}{m} / csf total time ratio: "
+                        f"{r['total_s'] / res['csf']['total_s']:.2f}"
+                    )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,683 @@
+"""Segment-based progressive TIN densification (Lin & Zhang 2014/2015), ALGORITHMS.md §1.4.
+
+The cloud is segmented into planar surfaces (surface growing, §1.2), object
+segments (façades, vegetation) are removed by orientation and scatterness
+(§1.3), and the PTD framework of §1.1 then decides per *segment*: segments
+holding a seed point are ground, and an undecided segment becomes ground when
+enough of its points pass the point-wise PTD tests against the current TIN.
+Lower parts of objects are rejected with their segment; terrain patches that
+cross break lines (curbs) are kept whole.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+from numba import njit
+
+from .._validate import as_points, check_choice, check_positive, check_range
+from ..errors import DegenerateGeometryWarning, InvalidPointsError, OptionError
+from ._tin import TIN, Criteria
+from .features import detect_object_segments, segment_features
+from .ptd import DensifyState, densify, final_pass, initial_seeds, prepare
+
+__all__ = ["SegmentPTD", "SegmentPTDResult", "segment_ptd", "default_grow_radius"]
+
+
+@dataclass(frozen=True)
+class SegmentPTDResult:
+    """Outcome of segment-based PTD.
+
+    Attributes
+    ----------
+    ground_mask : ndarray of bool, shape (N,)
+    labels : ndarray of int, shape (N,)
+        Segment labels used (-1 = unsegmented or not a candidate).
+    object_segments : ndarray of bool, shape (S,)
+        Segments flagged as objects (façade / vegetation).
+    ground_segments : ndarray of bool, shape (S,)
+        Segments accepted as ground.
+    n_seed_points : int
+        Points of the seed segments (all labelled ground at once).
+    accepted_per_iter : tuple of int
+        Segments accepted in each sweep.
+    n_point_ptd : int
+        Unsegmented points added by the point-wise pass.
+    grow_radius : float
+        Surface-growing radius used (m), nan when labels were given.
+    """
+
+    ground_mask: np.ndarray
+    labels: np.ndarray
+    object_segments: np.ndarray
+    ground_segments: np.ndarray
+    n_seed_points: int
+    accepted_per_iter: tuple[int, ...]
+    n_point_ptd: int
+    grow_radius: float = math.nan
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "n_points": int(self.ground_mask.size),
+            "n_ground": int(self.ground_mask.sum()),
+            "n_segments": int(self.object_segments.size),
+            "n_object_segments": int(self.object_segments.sum()),
+            "n_ground_segments": int(self.ground_segments.sum()),
+            "n_unsegmented": int((self.labels < 0).sum()),
+            "n_seed_points": self.n_seed_points,
+            "accepted_per_iter": list(self.accepted_per_iter),
+            "n_point_ptd": self.n_point_ptd,
+            "grow_radius": self.grow_radius,
+        }
+
+
+def default_grow_radius(points: np.ndarray, *, factor: float = 2.5, floor: float = 0.3) -> float:
+    """Surface-growing radius from the point density: `factor` × mean point spacing (m).
+
+    The spacing is 1/sqrt(density); the density is the median point count of the
+    occupied cells of an XY grid whose cell holds about 50 points on average,
+    divided by the cell area (robust to scan-line patterns and to empty areas).
+    Never below `floor`.
+    """
+    n = points.shape[0]
+    if n < 2:
+        return floor
+    lo = points[:, :2].min(axis=0)
+    span = points[:, :2].max(axis=0) - lo
+    area = float(max(span[0], 1e-9) * max(span[1], 1e-9))
+    if area <= 1e-12:
+        return floor
+    cell = math.sqrt(50.0 * area / n)
+    ij = np.floor((points[:, :2] - lo) / cell).astype(np.int64)
+    key = ij[:, 0] * (int(ij[:, 1].max()) + 1) + ij[:, 1]
+    counts = np.bincount(key)
+    counts = counts[counts > 0]
+    density = float(np.median(counts)) / (cell * cell)
+    if not np.isfinite(density) or density <= 0:
+        return floor
+    return max(floor, factor / math.sqrt(density))
+
+
+@dataclass(frozen=True)
+class SegmentPTD:
+    """Segment-based PTD ground filter.
+
+    Parameters
+    ----------
+    cell_size, max_terrain_angle, iter_angle, iter_distance, min_edge_length, mirror,
+    mirror_max_distance, max_iter, edge_mode, seed_support, seed_radius, seed_dz
+        As in :class:`lidarqa.ground.ptd.PTD` (m, degrees).
+    accept_ratio : float, default 0.5
+        A segment is ground (all its points) when at least this fraction of its
+        points pass the point-wise PTD tests.
+    reject_ratio : float, default 0.5
+        A segment with a smaller fraction of passing points is entirely non-ground;
+        between `reject_ratio` and `accept_ratio` its points keep their point-wise result.
+    seed_segments : bool, default True
+        Every segment holding a seed point is ground as a whole (§1.4 step 2);
+        False: seed segments are judged by the vote like the others.
+    min_tested : int, default 3
+        Segments with fewer tested points (inside the TIN) stay undecided.
+    unsegmented : {"point_ptd", "drop"}, default "point_ptd"
+        Unsegmented points: densify them point-wise against the segment TIN (ALS),
+        or never ground (the MLS paper).
+    orientation_thr : float, default 45.0
+        Degrees; steeper segments are façades (objects).
+    scatter_thr : float, default 0.2
+        Segments with larger mean scatterness are vegetation (objects).
+    k_feat : int, default 10
+        Neighbourhood of the scatterness feature.
+    min_facade_points : int, default 0
+    grow_radius : float or None, default None
+        Surface-growing radius (m); None = `grow_radius_factor` × mean point spacing
+        (see :func:`default_grow_radius`).
+    grow_radius_factor : float, default 2.5
+    max_segment_density : float, default 8.0
+        Denser clouds (points/m², from :func:`default_grow_radius`'s estimate) are
+        segmented on a voxel subsample of about this density (voxel edge
+        1/sqrt(density) m, the point nearest each voxel centre); every other point
+        takes the label of its voxel's sample point.
+        0 = always segment every point.
+    grow_dist : float, default 0.3
+        Surface-growing plane distance (m).
+    seed_dist : float, default 0.2
+        Surface-growing seed plane distance (m).
+    k_seed : int, default 20
+    min_segment_size : int, default 10
+    final_distance : float, default 0.0
+        After densification, undecided non-object points within this distance (m)
+        of the TIN become ground; 0 disables.
+    min_gain_frac : float, default 1e-3
+        A densification stops once an iteration adds fewer than this fraction of the
+        TIN's vertices (saves many near-empty iterations on large clouds).
+    seed_support, seed_radius, seed_dz, seed_support_ratio
+        Seed support test, as in :class:`lidarqa.ground.PTD`.
+    raised_step : float, default 0.0
+        Raised-segment test (m; 0 disables). A segment about to be accepted is
+        rejected for good when at least `raised_ratio` of its border points (points
+        whose nearest already-accepted ground point of another segment lies within
+        `raised_radius` m in XY) are more than `raised_step` m above that point and
+        steeper than `raised_angle` degrees from it: roofs and bridges whose low
+        edge touches the terrain. Curbs (a few decimetres) are not steps.
+    raised_angle : float, default 45.0
+    raised_ratio : float, default 0.5
+    raised_radius : float, default 3.0
+    connect_min_size : int, default 0
+        Connection pass after the densification (0 disables): a rejected non-object
+        segment of at least this many points becomes ground when at least
+        `connect_ratio` of its border points are within ``connect_distance +
+        dxy·tan(connect_angle)`` m (vertically) of their nearest ground point of
+        another segment, and it is not raised (see `raised_step`). Repeated while
+        segments are added (at most 10 rounds). Reaches terrain patches the TIN
+        spanned over (between buildings) that join the ground smoothly.
+    connect_distance : float, default 0.5
+    connect_angle : float, default 20.0
+    connect_ratio : float, default 0.5
+    below_pass : bool, default False
+        Final pass: undecided candidates outside object segments that lie more than
+        `below_distance` m below the facet of the final ground TIN (thinned like the
+        densification TIN; facets with a virtual vertex excluded) become ground.
+        Objects stand on the terrain, so a point under the ground surface is terrain
+        the densification could not reach (pits, concave slopes), or low noise.
+    below_distance : float, default 0.0
+    """
+
+    cell_size: float = 60.0
+    max_terrain_angle: float = 88.0
+    iter_angle: float = 6.0
+    iter_distance: float = 0.5
+    min_edge_length: float = 1.0
+    mirror: bool = True
+    mirror_max_distance: float = float("inf")
+    max_iter: int = 100
+    edge_mode: str = "freeze"
+    accept_ratio: float = 0.5
+    reject_ratio: float = 0.5
+    seed_segments: bool = True
+    min_tested: int = 3
+    adjacency_radius: float | None = None
+    unsegmented: str = "point_ptd"
+    orientation_thr: float = 45.0
+    scatter_thr: float = 0.2
+    k_feat: int = 10
+    min_facade_points: int = 0
+    grow_radius: float | None = None
+    grow_radius_factor: float = 2.5
+    max_segment_density: float = 8.0
+    grow_dist: float = 0.3
+    seed_dist: float = 0.2
+    k_seed: int = 20
+    min_segment_size: int = 10
+    final_distance: float = 0.0
+    min_gain_frac: float = 1e-3
+    seed_support: int = 3
+    seed_radius: float = 5.0
+    seed_dz: float = 1.0
+    seed_support_ratio: float = 0.25
+    raised_step: float = 0.0
+    raised_angle: float = 45.0
+    raised_ratio: float = 0.5
+    raised_radius: float = 3.0
+    connect_min_size: int = 0
+    connect_distance: float = 0.5
+    connect_angle: float = 20.0
+    connect_ratio: float = 0.5
+    below_pass: bool = False
+    below_distance: float = 0.0
+
+    def __post_init__(self) -> None:
+        check_positive(self.cell_size, "cell_size")
+        check_range(self.max_terrain_angle, "max_terrain_angle", 0.0, 90.0, lo_open=True)
+        check_range(self.iter_angle, "iter_angle", 0.0, 90.0, lo_open=True, hi_open=True)
+        check_positive(self.iter_distance, "iter_distance")
+        check_positive(self.min_edge_length, "min_edge_length", allow_zero=True)
+        check_choice(self.edge_mode, ("freeze", "reduce"), "edge_mode")
+        check_choice(self.unsegmented, ("point_ptd", "drop"), "unsegmented")
+        check_range(self.accept_ratio, "accept_ratio", 0.0, 1.0)
+        check_range(self.reject_ratio, "reject_ratio", 0.0, 1.0)
+        if self.reject_ratio > self.accept_ratio:
+            raise OptionError(
+                f"reject_ratio ({self.reject_ratio}) must be <= accept_ratio ({self.accept_ratio})"
+            )
+        check_range(self.orientation_thr, "orientation_thr", 0.0, 90.0)
+        check_positive(self.scatter_thr, "scatter_thr")
+        check_positive(self.grow_dist, "grow_dist")
+        check_positive(self.seed_dist, "seed_dist")
+        check_positive(self.final_distance, "final_distance", allow_zero=True)
+        check_positive(self.min_gain_frac, "min_gain_frac", allow_zero=True)
+        check_positive(self.grow_radius_factor, "grow_radius_factor")
+        check_positive(self.max_segment_density, "max_segment_density", allow_zero=True)
+        check_positive(self.raised_step, "raised_step", allow_zero=True)
+        check_range(self.raised_angle, "raised_angle", 0.0, 90.0, hi_open=True)
+        check_range(self.raised_ratio, "raised_ratio", 0.0, 1.0)
+        check_positive(self.raised_radius, "raised_radius")
+        check_positive(self.connect_distance, "connect_distance", allow_zero=True)
+        check_range(self.connect_angle, "connect_angle", 0.0, 90.0, hi_open=True)
+        check_range(self.connect_ratio, "connect_ratio", 0.0, 1.0)
+        check_positive(self.below_distance, "below_distance", allow_zero=True)
+        if int(self.connect_min_size) != self.connect_min_size or self.connect_min_size < 0:
+            raise OptionError(
+                f"connect_min_size must be an integer >= 0, got {self.connect_min_size!r}"
+            )
+        if self.grow_radius is not None:
+            check_positive(self.grow_radius, "grow_radius")
+        for name in ("max_iter", "min_tested", "k_feat", "k_seed", "min_segment_size"):
+            v = getattr(self, name)
+            if int(v) != v or v < 1:
+                raise OptionError(f"{name} must be an integer >= 1, got {v!r}")
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    def criteria(self) -> Criteria:
+        return Criteria(
+            iter_angle=math.radians(self.iter_angle),
+            iter_distance=float(self.iter_distance),
+            max_terrain_angle=math.radians(self.max_terrain_angle),
+            min_edge_length=float(self.min_edge_length),
+            mirror=bool(self.mirror),
+            edge_mode=self.edge_mode,
+            mirror_max_distance=float(self.mirror_max_distance),
+        )
+
+    def segment(self, points: Any, *, candidates: Any = None) -> tuple[np.ndarray, float]:
+        """Surface-growing labels of the candidate points (others -1) and the radius used."""
+        labels, radius, _ = self._segment(points, candidates=candidates)
+        return labels, radius
+
+    def _segment(self, points: Any, *, candidates: Any = None) -> tuple[np.ndarray, float, Any]:
+        from ..geometry.segmentation import surface_growing
+
+        pts = as_points(points)
+        n = pts.shape[0]
+        cand = np.ones(n, dtype=bool) if candidates is None else np.asarray(candidates, dtype=bool)
+        labels = np.full(n, -1, dtype=np.int64)
+        ci = np.flatnonzero(cand)
+        if ci.size < 3:
+            return labels, math.nan, None
+        sub = pts[ci] - pts[ci].min(axis=0)
+        r0 = default_grow_radius(sub, factor=self.grow_radius_factor, floor=0.0)
+        density = (self.grow_radius_factor / r0) ** 2 if r0 > 0 else 0.0
+        sample = np.arange(ci.size)
+        voxel_of = None
+        if self.max_segment_density > 0 and density > self.max_segment_density:
+            sample, voxel_of = _voxel_sample(sub, 1.0 / math.sqrt(self.max_segment_density))
+        radius = (
+            self.grow_radius
+            if self.grow_radius is not None
+            else max(0.3, r0)  # from the full density, also when segmenting a sample
+        )
+        lab_s = surface_growing(
+            sub[sample],
+            k_seed=int(self.k_seed),
+            seed_dist=float(self.seed_dist),
+            grow_radius=float(radius),
+            grow_dist=float(self.grow_dist),
+            min_segment_size=int(self.min_segment_size),
+            refine_boundaries=False,
+        )
+        if voxel_of is None:
+            labels[ci] = lab_s
+            return labels, float(radius), None
+        labels[ci] = lab_s[voxel_of]  # every point takes the label of its voxel's sample point
+        return labels, float(radius), ci[sample]
+
+    def run(
+        self,
+        points: Any,
+        *,
+        labels: Any = None,
+        candidates: Any = None,
+        object_segments: Any = None,
+    ) -> SegmentPTDResult:
+        """Run the filter.
+
+        Parameters
+        ----------
+        points : ndarray of shape (N, 3)
+            x, y, z in metres; finite.
+        labels : ndarray of int, shape (N,), optional
+            Segment labels (-1 = unsegmented). Default: surface growing of the candidates.
+        candidates : ndarray of bool, shape (N,), optional
+            Points allowed to be ground (others are ignored and never ground).
+        object_segments : ndarray of bool, shape (S,), optional
+            Object flag per segment; default: orientation / scatterness rule (§1.3).
+        """
+        pts = as_points(points)
+        n = pts.shape[0]
+        cand = np.ones(n, dtype=bool) if candidates is None else _mask(candidates, n, "candidates")
+        radius = math.nan
+        feature_idx = None
+        if labels is None:
+            lab, radius, feature_idx = self._segment(pts, candidates=cand)
+        else:
+            lab = np.asarray(labels)
+            if lab.shape != (n,):
+                raise InvalidPointsError(f"labels must have shape ({n},), got {lab.shape}")
+            lab = lab.astype(np.int64).copy()
+        lab[~cand] = -1
+        return _segment_ptd(pts, lab, cand, object_segments, self, radius, feature_idx)
+
+    def ground_mask(self, points: Any, *, labels: Any = None, candidates: Any = None) -> np.ndarray:
+        """Boolean ground mask ``(N,)`` of `points` (see :meth:`run`)."""
+        return self.run(points, labels=labels, candidates=candidates).ground_mask
+
+
+def segment_ptd(
+    points: Any,
+    labels: Any,
+    object_mask_by_segment: Any = None,
+    *,
+    candidates: Any = None,
+    **params: Any,
+) -> np.ndarray:
+    """Functional form of §1.4: ground mask from points, segment labels and object flags."""
+    return (
+        SegmentPTD(**params)
+        .run(points, labels=labels, candidates=candidates, object_segments=object_mask_by_segment)
+        .ground_mask
+    )
+
+
+def _argmin_per_group(
+    key: np.ndarray, value: np.ndarray, p: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """For each distinct `key`, the index of the smallest `value` (ties by x, y, z, then index).
+
+    Returns ``(winner_index_sorted_by_key, inverse)`` where ``inverse[i]`` is the
+    group number of point i (groups numbered in ascending key order). One stable
+    integer sort and a linear numba scan; independent of the input order.
+    """
+    order = np.argsort(key, kind="stable")
+    return _group_argmin_scan(
+        key[order], order, np.ascontiguousarray(value, dtype=np.float64),
+        np.ascontiguousarray(p, dtype=np.float64),
+    )
+
+
+@njit(cache=True)
+def _group_argmin_scan(sorted_key, order, value, p):  # pragma: no cover - numba
+    n = sorted_key.size
+    winners = np.empty(n, np.int64)
+    inv = np.empty(n, np.int64)
+    g = -1
+    best = -1
+    for s in range(n):
+        i = order[s]
+        if s == 0 or sorted_key[s] != sorted_key[s - 1]:
+            if best >= 0:
+                winners[g] = best
+            g += 1
+            best = i
+        else:
+            vi, vb = value[i], value[best]
+            if vi < vb or (
+                vi == vb
+                and (
+                    p[i, 0] < p[best, 0]
+                    or (p[i, 0] == p[best, 0] and (
+                        p[i, 1] < p[best, 1]
+                        or (p[i, 1] == p[best, 1] and p[i, 2] < p[best, 2])
+                    ))
+                )
+            ):
+                best = i
+        inv[i] = g
+    if best >= 0:
+        winners[g] = best
+    return winners[: g + 1], inv
+
+
+def _voxel_sample(p: np.ndarray, voxel: float) -> tuple[np.ndarray, np.ndarray]:
+    """The point nearest each occupied voxel's centre, and each point's voxel number."""
+    q = np.floor(p / voxel).astype(np.int64)
+    q -= q.min(axis=0)
+    dims = q.max(axis=0) + 1
+    key = (q[:, 0] * dims[1] + q[:, 1]) * dims[2] + q[:, 2]
+    d2 = (((p / voxel) - q - 0.5) ** 2).sum(axis=1)
+    return _argmin_per_group(key, d2, p)
+
+
+def _mask(m: Any, n: int, name: str) -> np.ndarray:
+    a = np.asarray(m)
+    if a.shape != (n,):
+        raise InvalidPointsError(f"{name} must have shape ({n},), got {a.shape}")
+    return a.astype(bool)
+
+
+def _thin(xyz: np.ndarray, idx: np.ndarray, cell: float) -> np.ndarray:
+    """Lowest point per `cell` × `cell` XY cell (ties by coordinates), sorted indices."""
+    if cell <= 0 or idx.size == 0:
+        return idx
+    p = xyz[idx]
+    ij = np.floor(p[:, :2] / cell).astype(np.int64)
+    ij -= ij.min(axis=0)
+    key = ij[:, 0] * (int(ij[:, 1].max()) + 1) + ij[:, 1]
+    win, _ = _argmin_per_group(key, p[:, 2], p)
+    return np.sort(idx[win])
+
+
+_BORDER_K = 10
+
+
+def _height_above_tin(tin: TIN, p: np.ndarray) -> np.ndarray:
+    """Vertical height (m) of points above their facet; nan outside or on a virtual facet."""
+    tri = tin.locate(p[:, :2])
+    out = np.full(p.shape[0], np.nan)
+    ok = tri >= 0
+    ok[ok] = (tin.vsrc[tin.simplices[tri[ok]]] >= 0).all(axis=1)
+    if ok.any():
+        t0 = tin.vxyz[tin.simplices[tri[ok], 0]]
+        nrm = tin.normal[tri[ok]]
+        nz = np.maximum(nrm[:, 2], 1e-9)
+        out[ok] = ((p[ok] - t0) * nrm).sum(axis=1) / nz
+    return out
+
+
+def _border_tests(
+    xyz: np.ndarray,
+    lab: np.ndarray,
+    src_mask: np.ndarray,
+    ground: np.ndarray,
+    n_seg: int,
+    par: SegmentPTD,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per segment: (connected, raised) flags from its border points against `ground`.
+
+    A border point of segment S is a point of S (in `src_mask`) that has a ground
+    point of another segment (or unsegmented) among its `_BORDER_K` nearest
+    neighbours of ``ground | src_mask`` within ``par.raised_radius`` m in XY; the
+    nearest such point is its partner. With dz the height
+    above that point and dxy the XY distance: raised when dz > raised_step and
+    dz > dxy·tan(raised_angle); connected when |dz| <= connect_distance +
+    dxy·tan(connect_angle). Segments with fewer than 3 border points are neither.
+    """
+    from scipy.spatial import cKDTree
+
+    conn = np.zeros(n_seg, dtype=bool)
+    raised = np.zeros(n_seg, dtype=bool)
+    src = np.flatnonzero(src_mask)
+    pool = np.flatnonzero(ground | src_mask)
+    if src.size == 0 or not ground.any():
+        return conn, raised
+    tree = cKDTree(xyz[pool, :2])
+    k = min(_BORDER_K, pool.size)
+    d, j = tree.query(xyz[src, :2], k=k, distance_upper_bound=float(par.raised_radius))
+    d = d.reshape(src.size, k)
+    j = j.reshape(src.size, k)
+    ok = np.isfinite(d)
+    nb = pool[np.where(ok, j, 0)]
+    other = ok & ground[nb] & ((lab[nb] != lab[src][:, None]) | (lab[nb] < 0))
+    first = np.argmax(other, axis=1)
+    has = other[np.arange(src.size), first]
+    src = src[has]
+    d = d[np.flatnonzero(has), first[has]]
+    q = nb[np.flatnonzero(has), first[has]]
+    if src.size == 0:
+        return conn, raised
+    dz = xyz[src, 2] - xyz[q, 2]
+    ls = lab[src]
+    n_b = np.bincount(ls, minlength=n_seg)
+    if par.raised_step > 0:
+        up = (dz > par.raised_step) & (dz > d * math.tan(math.radians(par.raised_angle)))
+        n_up = np.bincount(ls[up], minlength=n_seg)
+        raised = (n_b >= 3) & (n_up >= par.raised_ratio * n_b - 1e-9)
+    ok = np.abs(dz) <= par.connect_distance + d * math.tan(math.radians(par.connect_angle))
+    n_ok = np.bincount(ls[ok], minlength=n_seg)
+    conn = (n_b >= 3) & (n_ok >= par.connect_ratio * n_b - 1e-9)
+    return conn, raised
+
+
+def _segment_ptd(
+    points: np.ndarray,
+    lab: np.ndarray,
+    cand: np.ndarray,
+    object_segments: Any,
+    par: SegmentPTD,
+    radius: float,
+    feature_idx: Any = None,
+) -> SegmentPTDResult:
+    n = points.shape[0]
+    n_seg = int(lab.max()) + 1 if n and lab.max() >= 0 else 0
+    empty = np.zeros(n_seg, dtype=bool)
+    if n == 0 or not cand.any():
+        return SegmentPTDResult(np.zeros(n, dtype=bool), lab, empty, empty.copy(), 0, (), 0, radius)
+    xyz, cand2, _ = prepare(points, cand, 0.0, 1.0)
+    if object_segments is None:
+        if feature_idx is None:
+            feats = segment_features(xyz, lab, k_feat=int(par.k_feat))
+        else:  # dense cloud: features of the segmentation sample (same labels, ~8 pts/m²)
+            feats = segment_features(xyz[feature_idx], lab[feature_idx], k_feat=int(par.k_feat))
+        obj = detect_object_segments(
+            feats,
+            orientation_thr=par.orientation_thr,
+            scatter_thr=par.scatter_thr,
+            min_facade_points=int(par.min_facade_points),
+        )
+    else:
+        obj = np.asarray(object_segments, dtype=bool)
+        if obj.shape != (n_seg,):
+            raise InvalidPointsError(f"object_segments must have shape ({n_seg},), got {obj.shape}")
+    crit = par.criteria()
+    n_user = n_seg
+    if n_seg == 0:  # no segment at all: one dummy label keeps the indexing simple
+        n_seg = 1
+        obj = np.zeros(1, dtype=bool)
+    lab_c = np.maximum(lab, 0)
+    obj_pt = (lab >= 0) & obj[lab_c]
+    usable = cand & ~obj_pt  # candidates outside object segments
+    seg_pt = usable & (lab >= 0)
+    unseg_pt = usable & (lab < 0)
+    ground = np.zeros(n, dtype=bool)
+    is_ground_seg = np.zeros(n_seg, dtype=bool)
+    if not seg_pt.any() and (par.unsegmented == "drop" or not unseg_pt.any()):
+        warnings.warn(
+            "segment-PTD: no non-object segment; nothing is ground",
+            DegenerateGeometryWarning,
+            stacklevel=3,
+        )
+        return SegmentPTDResult(ground, lab, obj[:n_user], is_ground_seg[:n_user], 0, (), 0, radius)
+    # 1-2. seed points (robust lowest per cell) -> seed segments, all their points ground
+    pool = np.flatnonzero(usable if par.unsegmented == "point_ptd" else seg_pt)
+    seeds, virtual = initial_seeds(xyz, pool, par, crit)
+    if par.seed_segments:
+        seed_labels = np.unique(lab[seeds])
+        is_ground_seg[seed_labels[seed_labels >= 0]] = True
+    ground[seeds] = True
+    ground |= seg_pt & is_ground_seg[lab_c]
+    n_seed_points = int(ground.sum())
+    thin_cell = par.min_edge_length / math.sqrt(2.0) if par.min_edge_length > 0 else 0.0
+    seg_size = np.bincount(lab[seg_pt], minlength=n_seg)
+    vetoed = np.zeros(n_seg, dtype=bool)  # raised segments, rejected for good
+    accepted: list[int] = []
+    unseg_ground = np.zeros(n, dtype=bool)
+    mixed_ground = np.zeros(n, dtype=bool)
+    # 3-4. densify the TIN point-wise, then decide per segment by vote; repeat until stable
+    for _ in range(int(par.max_iter)):
+        in_tin = np.zeros(n, dtype=bool)
+        in_tin[_thin(xyz, np.flatnonzero(ground), thin_cell)] = True
+        open_ = seg_pt & ~is_ground_seg[lab_c] & ~vetoed[lab_c]
+        if par.unsegmented == "point_ptd":
+            open_ |= unseg_pt & ~ground
+        st = DensifyState(ground=ground.copy(), in_tin=in_tin, open_=open_, added=[])
+        tin = densify(
+            xyz,
+            st,
+            virtual,
+            crit,
+            max_iter=int(par.max_iter),
+            min_gain_frac=float(par.min_gain_frac),
+        )
+        if par.final_distance > 0:
+            final_pass(xyz, st, tin, par.final_distance)
+        passed = st.ground & ~ground
+        unseg_ground = passed & unseg_pt
+        n_pass = np.bincount(lab[seg_pt & passed], minlength=n_seg)
+        ratio = n_pass / np.maximum(seg_size, 1)
+        mixed = ~is_ground_seg & ~obj & (ratio >= par.reject_ratio - 1e-9)
+        mixed_ground = seg_pt & passed & mixed[lab_c]
+        acc = (
+            ~is_ground_seg
+            & ~obj
+            & ~vetoed
+            & (seg_size >= par.min_tested)
+            & (n_pass >= par.accept_ratio * seg_size - 1e-9)
+            & (n_pass > 0)
+        )
+        if not acc.any():
+            break
+        accepted.append(int(acc.sum()))
+        is_ground_seg |= acc
+        ground |= seg_pt & is_ground_seg[lab_c]
+    # 5. leftovers: unsegmented points judged point-wise (or dropped)
+    n_pp = int(unseg_ground.sum())
+    ground |= unseg_ground | (mixed_ground & ~is_ground_seg[lab_c])
+    # 6. raised-segment test against the final ground: roofs / bridges out
+    if par.raised_step > 0:
+        for _ in range(3):
+            src = seg_pt & is_ground_seg[lab_c]
+            _, raised = _border_tests(xyz, lab, src, ground, n_seg, par)
+            raised &= is_ground_seg
+            if not raised.any():
+                break
+            vetoed |= raised
+            is_ground_seg &= ~raised
+            ground &= ~((lab >= 0) & raised[lab_c])
+    # 7. connection pass: large rejected segments joining the ground smoothly
+    if par.connect_min_size > 0:
+        big = ~obj & ~vetoed & (seg_size >= par.connect_min_size)
+        for _ in range(10):
+            open_seg = big & ~is_ground_seg
+            if not open_seg.any():
+                break
+            conn, raised = _border_tests(xyz, lab, seg_pt & open_seg[lab_c], ground, n_seg, par)
+            acc = open_seg & conn & ~raised
+            if not acc.any():
+                break
+            accepted.append(int(acc.sum()))
+            is_ground_seg |= acc
+            ground |= seg_pt & acc[lab_c]
+    # 8. below pass: candidates under the final ground surface
+    if par.below_pass and ground.any():
+        open_ = usable & ~ground
+        if par.unsegmented == "drop":
+            open_ &= lab >= 0
+        oi = np.flatnonzero(open_)
+        if oi.size:
+            tin = TIN(xyz, _thin(xyz, np.flatnonzero(ground), thin_cell), virtual)
+            h = _height_above_tin(tin, xyz[oi])
+            ground[oi[h < -par.below_distance]] = True
+    return SegmentPTDResult(
+        ground,
+        lab,
+        obj[:n_user],
+        is_ground_seg[:n_user],
+        n_seed_points,
+        tuple(accepted),
+        n_pp,
+        radius,
+    )

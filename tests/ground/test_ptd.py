@@ -1,0 +1,179 @@
+"""Point-based PTD (ALGORITHMS.md §1.1) against the spec's test vectors."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from lidarqa.errors import InvalidPointsError, OptionError
+from lidarqa.ground import PTD, mirror_point, ptd_filter
+from lidarqa.ground._tin import TIN, Criteria, _facet_measures, judge_points, virtual_hull
+
+
+def _grid(nx, ny):
+    return np.mgrid[0:nx, 0:ny].reshape(2, -1).T.astype(float)
+
+
+def _roof_scene(seed=0):
+    rng = np.random.default_rng(seed)
+    g = _grid(100, 100)
+    z = rng.normal(0, 0.02, len(g))
+    roof = (g[:, 0] >= 40) & (g[:, 0] < 60) & (g[:, 1] >= 40) & (g[:, 1] < 60)
+    z[roof] = 10.0
+    return np.column_stack([g, z]), roof
+
+
+def test_angle_identity():
+    p = np.array([[0.2, 0.2, 0.1]])
+    t = np.array([[[0.0, 0, 0], [1, 0, 0], [0, 1, 0]]])
+    dist, beta = _facet_measures(p, t, np.array([[0.0, 0, 1]]))
+    assert dist[0] == pytest.approx(0.1)
+    assert math.degrees(beta[0]) == pytest.approx(19.47, abs=0.01)
+    # arcsin(d/|PV|) == atan2(d, |P'V|) (lasR vs PTD.cpp forms)
+    pv = math.sqrt(0.2**2 + 0.2**2 + 0.1**2)
+    assert math.asin(0.1 / pv) == pytest.approx(math.atan2(0.1, math.hypot(0.2, 0.2)))
+
+
+def test_roof_block_rejected():
+    pts, roof = _roof_scene()
+    r = PTD().run(pts)
+    assert r.ground_mask[~roof].mean() >= 0.99
+    assert r.ground_mask[roof].sum() == 0
+
+
+def test_inclined_plane_all_ground():
+    rng = np.random.default_rng(1)
+    g = _grid(100, 100)
+    pts = np.column_stack([g, g[:, 0] * math.tan(math.radians(30)) + rng.normal(0, 0.02, len(g))])
+    assert PTD().ground_mask(pts).mean() >= 0.999
+
+
+def test_frozen_triangle_never_inserted():
+    # three seeds forming a triangle with all edges < l = 1 m, a coplanar point inside
+    pts = np.array([[0.0, 0.0, 0.0], [0.6, 0.0, 0.0], [0.0, 0.6, 0.0], [0.2, 0.2, 0.0]])
+    r = PTD(cell_size=0.5, seed_support=0).run(pts)
+    assert set(r.seed_idx.tolist()) == {0, 1, 2}
+    assert 3 not in r.tin_vertices
+    # DECISION: a point in a frozen triangle within d of it is labelled ground (not inserted)
+    assert r.ground_mask[3]
+    # and at the TIN level it is reported as frozen, not as an insertable pass
+    virt = virtual_hull(pts, np.array([0, 1, 2]), 0.5, pts.min(0), pts.max(0))
+    tin = TIN(pts, np.array([0, 1, 2]), virt)
+    res = judge_points(tin, pts[3:], Criteria(math.radians(6), 0.5, math.radians(88), 1.0))
+    assert res.frozen[0] and not res.passed[0] and res.frozen_ok[0]
+
+
+def test_mirror_point():
+    assert mirror_point([1.0, 2.0, 3.0], [0.0, 0.0, 0.0]).tolist() == [-1.0, -2.0, -3.0]
+    assert mirror_point(np.array([0.0, 0, 0]), np.array([1.0, 1, 1])).tolist() == [2.0, 2.0, 2.0]
+
+
+def test_mirroring_keeps_ground_on_steep_step():
+    rng = np.random.default_rng(0)
+    g = _grid(80, 40)
+    z = np.clip((g[:, 0] - 40) * math.tan(math.radians(60)), 0, 8) + rng.normal(0, 0.02, len(g))
+    pts = np.column_stack([g, z])
+    off = PTD(cell_size=30, mirror=False).ground_mask(pts)
+    on = PTD(cell_size=30, mirror=True).ground_mask(pts)
+    assert off.mean() <= 0.60
+    assert on.mean() >= 0.95
+    assert on[g[:, 0] >= 45].mean() >= 0.95  # the plateau
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_permutation_invariance(seed):
+    rng = np.random.default_rng(1234 + seed)
+    xy = rng.uniform(0, 60, (3000, 2))
+    z = 0.05 * xy[:, 0] + rng.normal(0, 0.05, len(xy))
+    box = (np.abs(xy[:, 0] - 30) < 6) & (np.abs(xy[:, 1] - 30) < 6)
+    z[box] += 4.0
+    pts = np.column_stack([xy, z])
+    perm = rng.permutation(len(pts))
+    a = PTD(cell_size=20).ground_mask(pts)
+    b = PTD(cell_size=20).ground_mask(pts[perm])
+    np.testing.assert_array_equal(a[perm], b)
+    assert a[box].sum() == 0 and a[~box].mean() > 0.75
+
+
+def test_permutation_invariance_on_grid():
+    pts, _ = _roof_scene(3)
+    perm = np.random.default_rng(7).permutation(len(pts))
+    a = PTD().ground_mask(pts)
+    b = PTD().ground_mask(pts[perm])
+    np.testing.assert_array_equal(a[perm], b)
+
+
+def test_candidates_mask_excludes_points():
+    pts, _ = _roof_scene()
+    cand = np.ones(len(pts), dtype=bool)
+    cand[::2] = False
+    g = PTD().ground_mask(pts, candidates=cand)
+    assert not g[~cand].any() and g[cand].mean() > 0.75
+
+
+def test_result_fields_and_to_dict():
+    pts, _ = _roof_scene()
+    r = ptd_filter(pts)
+    d = r.to_dict()
+    assert d["n_ground"] == r.ground_mask.sum()
+    assert r.stop_reason in {"no_gain", "max_iter", "min_gain_frac"}
+    assert len(r.added_per_iter) == r.n_iter
+    assert r.tin_triangles.shape[1] == 3 and r.tin_triangles.max() < r.tin_vertices.size
+    assert PTD(**PTD().to_dict()) == PTD()
+
+
+# ---- bad input: clear error or a defined result ------------------------------------------
+
+
+def test_empty_cloud():
+    g = PTD().ground_mask(np.zeros((0, 3)))
+    assert g.shape == (0,)
+
+
+@pytest.mark.parametrize("n", [1, 2])
+def test_fewer_than_three_points(n):
+    pts = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.1]])[:n]
+    g = PTD().ground_mask(pts)
+    assert g.shape == (n,) and g.all()
+
+
+def test_vertical_line():
+    pts = np.column_stack([np.zeros(20), np.zeros(20), np.linspace(0, 10, 20)])
+    g = PTD().ground_mask(pts)
+    # the lowest point is the seed; duplicates within d of it in z are ground
+    assert g[0] and g.sum() == int((pts[:, 2] <= 0.5).sum())
+
+
+def test_nan_raises():
+    pts = np.zeros((5, 3))
+    pts[2, 1] = np.nan
+    with pytest.raises(InvalidPointsError):
+        PTD().ground_mask(pts)
+
+
+def test_single_z_value():
+    rng = np.random.default_rng(0)
+    pts = np.column_stack([rng.uniform(0, 50, (500, 2)), np.full(500, 3.0)])
+    assert PTD().ground_mask(pts).all()
+
+
+def test_collinear_points():
+    pts = np.column_stack([np.arange(50.0), np.zeros(50), np.zeros(50)])
+    assert PTD().ground_mask(pts).all()
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [
+        dict(cell_size=0),
+        dict(iter_angle=90),
+        dict(iter_distance=-1),
+        dict(edge_mode="x"),
+        dict(max_iter=0),
+    ],
+)
+def test_bad_options(bad):
+    with pytest.raises(OptionError):
+        PTD(**bad)
