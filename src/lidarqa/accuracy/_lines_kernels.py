@@ -20,7 +20,7 @@ the pairs with d ≤ cutoff), so a pair it leaves out provably has d > cutoff.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 from scipy.spatial import cKDTree
 
 __all__ = ["prepare", "pair_distances", "candidate_pairs", "BinnedTree", "broadcast_distances"]
@@ -81,27 +81,54 @@ def _one(ct0, ct1, ct2, ut0, ut1, ut2, lt, cm0, cm1, cm2, um0, um1, um2, lm, rot
     return d_theta, d_par, d_perp
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def _pairs_kernel(ct, ut, lt, cm, um, lm, ii, jj, weight, rotate_test, out):
     n = ii.shape[0]
-    for k in prange(n):
+    for k in range(n):
         i = ii[k]
         j = jj[k]
-        dt, dp, dq = _one(ct[i, 0], ct[i, 1], ct[i, 2], ut[i, 0], ut[i, 1], ut[i, 2], lt[i],
-                          cm[j, 0], cm[j, 1], cm[j, 2], um[j, 0], um[j, 1], um[j, 2], lm[j],
-                          rotate_test)
+        dt, dp, dq = _one(
+            ct[i, 0],
+            ct[i, 1],
+            ct[i, 2],
+            ut[i, 0],
+            ut[i, 1],
+            ut[i, 2],
+            lt[i],
+            cm[j, 0],
+            cm[j, 1],
+            cm[j, 2],
+            um[j, 0],
+            um[j, 1],
+            um[j, 2],
+            lm[j],
+            rotate_test,
+        )
         out[k, 0] = dt
         out[k, 1] = dp
         out[k, 2] = dq
         out[k, 3] = np.sqrt(weight * dt * dt + dp * dp + dq * dq)
 
 
-def pair_distances(ct, ut, lt, cm, um, lm, ii, jj, *, weight: float, rotate_test: bool) -> np.ndarray:
+def pair_distances(
+    ct, ut, lt, cm, um, lm, ii, jj, *, weight: float, rotate_test: bool
+) -> np.ndarray:
     """(n, 4) array of dθ, d∥, d⊥, d for the pairs (ii[k], jj[k])."""
     out = np.empty((len(ii), 4), dtype=np.float64)
     if len(ii):
-        _pairs_kernel(ct, ut, lt, cm, um, lm, np.ascontiguousarray(ii, dtype=np.int64),
-                      np.ascontiguousarray(jj, dtype=np.int64), float(weight), bool(rotate_test), out)
+        _pairs_kernel(
+            ct,
+            ut,
+            lt,
+            cm,
+            um,
+            lm,
+            np.ascontiguousarray(ii, dtype=np.int64),
+            np.ascontiguousarray(jj, dtype=np.int64),
+            float(weight),
+            bool(rotate_test),
+            out,
+        )
     return out
 
 
@@ -186,7 +213,7 @@ def candidate_pairs(a: BinnedTree, b: BinnedTree, cutoff: float) -> tuple[np.nda
 
 @njit(cache=True)
 def group_min(keys, values, n):
-    """Minimum of `values` per key in 0..n-1 (inf where absent) and the index of the first minimum."""
+    """Minimum of `values` per key in 0..n-1 (inf where absent) and the index of its first hit."""
     best = np.full(n, np.inf)
     arg = np.full(n, -1, dtype=np.int64)
     for k in range(keys.shape[0]):

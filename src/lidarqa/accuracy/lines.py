@@ -83,7 +83,9 @@ def _check_lengths(length: np.ndarray, seg: Segments, name: str, scale: float) -
     if bad.any():
         ids = ", ".join(str(x) for x in seg.ids[bad][:5])
         more = "" if bad.sum() <= 5 else f" (and {int(bad.sum()) - 5} more)"
-        raise DegenerateGeometryError(f"{name} has {int(bad.sum())} zero-length segment(s): id {ids}{more}")
+        raise DegenerateGeometryError(
+            f"{name} has {int(bad.sum())} zero-length segment(s): id {ids}{more}"
+        )
 
 
 def _check_weight(weight: float) -> float:
@@ -131,24 +133,36 @@ def segment_distance(t: Any, m: Any, *, weight: float = 10.0, rotate: str = "sho
     t = np.asarray(t, dtype=np.float64)
     m = np.asarray(m, dtype=np.float64)
     if t.shape[-2:] != (2, 3) or m.shape[-2:] != (2, 3):
-        raise InvalidPointsError(f"segments must have shape (..., 2, 3), got {t.shape} and {m.shape}")
+        raise InvalidPointsError(
+            f"segments must have shape (..., 2, 3), got {t.shape} and {m.shape}"
+        )
     vt = t[..., 1, :] - t[..., 0, :]
     vm = m[..., 1, :] - m[..., 0, :]
     lt = np.linalg.norm(vt, axis=-1)
     lm = np.linalg.norm(vm, axis=-1)
     if (lt <= _EPS).any() or (lm <= _EPS).any():
         raise DegenerateGeometryError("zero-length segment: the two end points coincide")
-    origin = t[..., 0, :]
-    ct = 0.5 * (t[..., 0, :] + t[..., 1, :]) - origin
-    cm = 0.5 * (m[..., 0, :] + m[..., 1, :]) - origin
-    out = _k.broadcast_distances(ct, vt / lt[..., None], lt, cm, vm / lm[..., None], lm,
-                                 weight=weight, rotate_test=rotate == "test")
+    origin = t[..., 0, :]  # local origin per pair, for precision at projected coordinates
+    ct = 0.5 * vt
+    cm = 0.5 * (m[..., 0, :] - origin) + 0.5 * (m[..., 1, :] - origin)
+    out = _k.broadcast_distances(
+        ct,
+        vt / lt[..., None],
+        lt,
+        cm,
+        vm / lm[..., None],
+        lm,
+        weight=weight,
+        rotate_test=rotate == "test",
+    )
     if np.ndim(out[3]) == 0:
         return tuple(float(x) for x in out)
     return out
 
 
-def segment_distances(test: Any, model: Any, *, weight: float = 10.0, rotate: str = "shorter") -> tuple:
+def segment_distances(
+    test: Any, model: Any, *, weight: float = 10.0, rotate: str = "shorter"
+) -> tuple:
     """Dense p × q similarity matrices ``(d_theta, d_par, d_perp, d)`` of two segment sets.
 
     `test` and `model` are :class:`~lidarqa.io.vector.Segments` or (n, 2, 3) arrays.
@@ -156,8 +170,11 @@ def segment_distances(test: Any, model: Any, *, weight: float = 10.0, rotate: st
     """
     t = _as_segments(test, "test")
     m = _as_segments(model, "model")
-    ta = np.stack([t.start, t.end], axis=1)
-    ma = np.stack([m.start, m.end], axis=1)
+    origin = np.floor(
+        np.minimum(np.minimum(t.start, t.end).min(axis=0), np.minimum(m.start, m.end).min(axis=0))
+    )
+    ta = np.stack([t.start, t.end], axis=1) - origin
+    ma = np.stack([m.start, m.end], axis=1) - origin
     return segment_distance(ta[:, None], ma[None, :], weight=weight, rotate=rotate)
 
 
@@ -186,14 +203,18 @@ class Threshold:
 
     threshold: float
     found: bool
-    sorted_nearest: np.ndarray
-    second_diff: np.ndarray
+    sorted_nearest: np.ndarray = field(repr=False)
+    second_diff: np.ndarray = field(repr=False)
     peak_index: int
     reason: str
 
     def to_dict(self) -> dict:
-        return {"threshold": self.threshold, "found": self.found, "peak_index": self.peak_index,
-                "reason": self.reason}
+        return {
+            "threshold": self.threshold,
+            "found": self.found,
+            "peak_index": self.peak_index,
+            "reason": self.reason,
+        }
 
 
 def _peaks(v: np.ndarray, sens: float) -> list[tuple[int, float]]:
@@ -383,22 +404,22 @@ class LineMatch:
     rotate: str
     denominator: str
     cutoff: float
-    test_ids: np.ndarray
-    model_ids: np.ndarray
-    test_lengths: np.ndarray
-    model_lengths: np.ndarray
-    nearest_tm: np.ndarray
-    nearest_model: np.ndarray
-    nearest_mt: np.ndarray
-    nearest_test: np.ndarray
-    auto_tm: Threshold
-    auto_mt: Threshold
-    pair_test: np.ndarray
-    pair_model: np.ndarray
-    pair_components: np.ndarray
-    pair_d_mt: np.ndarray
-    match_tm: np.ndarray
-    match_mt: np.ndarray
+    test_ids: np.ndarray = field(repr=False)
+    model_ids: np.ndarray = field(repr=False)
+    test_lengths: np.ndarray = field(repr=False)
+    model_lengths: np.ndarray = field(repr=False)
+    nearest_tm: np.ndarray = field(repr=False)
+    nearest_model: np.ndarray = field(repr=False)
+    nearest_mt: np.ndarray = field(repr=False)
+    nearest_test: np.ndarray = field(repr=False)
+    auto_tm: Threshold = field(repr=False)
+    auto_mt: Threshold = field(repr=False)
+    pair_test: np.ndarray = field(repr=False)
+    pair_model: np.ndarray = field(repr=False)
+    pair_components: np.ndarray = field(repr=False)
+    pair_d_mt: np.ndarray = field(repr=False)
+    match_tm: np.ndarray = field(repr=False)
+    match_mt: np.ndarray = field(repr=False)
     gao_leung_tm: float
     gao_leung_mt: float
     hausdorff_tm: float
@@ -423,26 +444,33 @@ class LineMatch:
     def to_dict(self) -> dict:
         """The JSON ``results`` of ``lidarqa lines`` (issue 5 keys; ground truth keys if given)."""
         out = {
-            "p": self.p, "q": self.q,
-            "threshold_tm": self.threshold_tm, "threshold_mt": self.threshold_mt,
-            "threshold_found_tm": self.threshold_found_tm, "threshold_found_mt": self.threshold_found_mt,
-            "olhd_tm": self.olhd_tm, "olhd_mt": self.olhd_mt, "lhd": self.lhd,
-            "n_pairs_tm": self.n_pairs_tm, "n_pairs_mt": self.n_pairs_mt,
+            "p": self.p,
+            "q": self.q,
+            "threshold_tm": self.threshold_tm,
+            "threshold_mt": self.threshold_mt,
+            "threshold_found_tm": self.threshold_found_tm,
+            "threshold_found_mt": self.threshold_found_mt,
+            "olhd_tm": self.olhd_tm,
+            "olhd_mt": self.olhd_mt,
+            "lhd": self.lhd,
+            "n_pairs_tm": self.n_pairs_tm,
+            "n_pairs_mt": self.n_pairs_mt,
         }
         if self.ground_truth is not None:
             out.update(self.ground_truth)
         return out
 
 
-def _nearest_exact(tree_b, ca, ua, la, cb, ub, lb, rows, start_cutoff, span, *, weight,
-                   rotate_test, swap):
+def _nearest_exact(
+    tree_b, ca, ua, la, cb, ub, lb, rows, start_cutoff, span, *, weight, rotate_test, swap
+):
     """Exact nearest distance for `rows` of set a by an expanding pruned search.
 
     A row is settled in a round with cutoff c when its best candidate has d ≤ c:
     every pair with d ≤ c is a candidate, so nothing outside can be nearer. When
     c exceeds the span of all midpoints every pair is a candidate (exact too).
-    `swap` evaluates d with b as the first (test) argument: rotate="test" in the
-    model→test direction.
+    `swap` evaluates d with b as the first (test) argument: for the model rows with
+    rotate="shorter", so that ties rotate the test segment as in D_MT = D_TMᵀ.
     """
     best = np.full(len(ca), np.inf)
     arg = np.full(len(ca), -1, dtype=np.int64)
@@ -453,9 +481,13 @@ def _nearest_exact(tree_b, ca, ua, la, cb, ub, lb, rows, start_cutoff, span, *, 
         sub = _k.BinnedTree(ca, la, todo)
         ii, jj = _k.candidate_pairs(sub, tree_b, cutoff)
         if swap:
-            d = _k.pair_distances(cb, ub, lb, ca, ua, la, jj, ii, weight=weight, rotate_test=rotate_test)[:, 3]
+            d = _k.pair_distances(
+                cb, ub, lb, ca, ua, la, jj, ii, weight=weight, rotate_test=rotate_test
+            )[:, 3]
         else:
-            d = _k.pair_distances(ca, ua, la, cb, ub, lb, ii, jj, weight=weight, rotate_test=rotate_test)[:, 3]
+            d = _k.pair_distances(
+                ca, ua, la, cb, ub, lb, ii, jj, weight=weight, rotate_test=rotate_test
+            )[:, 3]
         bmin, barg = _k.group_min(ii, d, len(ca))
         done_all = cutoff >= span
         settled = todo[(bmin[todo] <= cutoff) | done_all]
@@ -475,17 +507,21 @@ def _ground_truth_matrix(gt: Any, test: Segments, model: Segments) -> tuple[np.n
         i, j = np.nonzero(arr)
         return i.astype(np.int64), j.astype(np.int64)
     pairs = list(gt)
-    tix = {str(v): k for k, v in enumerate(test.ids.tolist())}
-    mix = {str(v): k for k, v in enumerate(model.ids.tolist())}
+    tix = {_id_str(v): k for k, v in enumerate(test.ids.tolist())}
+    mix = {_id_str(v): k for k, v in enumerate(model.ids.tolist())}
     ii, jj = [], []
     for row in pairs:
         if len(row) != 2:
             raise OptionError(f"ground_truth pairs must be (test_id, model_id), got {row!r}")
         a, b = _id_str(row[0]), _id_str(row[1])
         if a not in tix:
-            raise OptionError(f"ground truth names test id {row[0]!r}, which is not in the test set")
+            raise OptionError(
+                f"ground truth names test id {row[0]!r}, which is not in the test set"
+            )
         if b not in mix:
-            raise OptionError(f"ground truth names model id {row[1]!r}, which is not in the model set")
+            raise OptionError(
+                f"ground truth names model id {row[1]!r}, which is not in the model set"
+            )
         ii.append(tix[a])
         jj.append(mix[b])
     if not ii:
@@ -507,8 +543,13 @@ def _confusion(cor_key: np.ndarray, gt_key: np.ndarray, p: int, q: int, suffix: 
     fp = int(len(cor_key) - tp)
     fn = int(len(gt_key) - tp)
     tn = int(p * q - tp - fp - fn)
-    return {f"tp_{suffix}": tp, f"fp_{suffix}": fp, f"fn_{suffix}": fn, f"tn_{suffix}": tn,
-            f"detection_rate_{suffix}": detection_rate(p, q, fn, fp)}
+    return {
+        f"tp_{suffix}": tp,
+        f"fp_{suffix}": fp,
+        f"fn_{suffix}": fn,
+        f"tn_{suffix}": tn,
+        f"detection_rate_{suffix}": detection_rate(p, q, fn, fp),
+    }
 
 
 def match_segments(
@@ -591,9 +632,13 @@ def match_segments(
 
     def evaluate(c: float):
         ii, jj = _k.candidate_pairs(tree_t, tree_m, c)
-        comp = _k.pair_distances(ct, ut, lt, cm, um, lm, ii, jj, weight=weight, rotate_test=rotate_test)
+        comp = _k.pair_distances(
+            ct, ut, lt, cm, um, lm, ii, jj, weight=weight, rotate_test=rotate_test
+        )
         if rotate_test:
-            dmt = _k.pair_distances(cm, um, lm, ct, ut, lt, jj, ii, weight=weight, rotate_test=True)[:, 3]
+            dmt = _k.pair_distances(
+                cm, um, lm, ct, ut, lt, jj, ii, weight=weight, rotate_test=True
+            )[:, 3]
         else:
             dmt = comp[:, 3]
         return ii, jj, comp, dmt
@@ -607,13 +652,39 @@ def match_segments(
     arg_mt = np.where(karg >= 0, ii[np.maximum(karg, 0)], -1)
     todo_t = np.flatnonzero(~(near_tm <= c0))
     if len(todo_t):
-        b, a = _nearest_exact(tree_m, ct, ut, lt, cm, um, lm, todo_t, c0, span,
-                              weight=weight, rotate_test=rotate_test, swap=False)
+        b, a = _nearest_exact(
+            tree_m,
+            ct,
+            ut,
+            lt,
+            cm,
+            um,
+            lm,
+            todo_t,
+            c0,
+            span,
+            weight=weight,
+            rotate_test=rotate_test,
+            swap=False,
+        )
         near_tm[todo_t], arg_tm[todo_t] = b[todo_t], a[todo_t]
     todo_m = np.flatnonzero(~(near_mt <= c0))
     if len(todo_m):
-        b, a = _nearest_exact(tree_t, cm, um, lm, ct, ut, lt, todo_m, c0, span,
-                              weight=weight, rotate_test=rotate_test, swap=rotate_test)
+        b, a = _nearest_exact(
+            tree_t,
+            cm,
+            um,
+            lm,
+            ct,
+            ut,
+            lt,
+            todo_m,
+            c0,
+            span,
+            weight=weight,
+            rotate_test=rotate_test,
+            swap=not rotate_test,
+        )
         near_mt[todo_m], arg_mt[todo_m] = b[todo_m], a[todo_m]
 
     # thresholds
@@ -622,8 +693,12 @@ def match_segments(
         auto_mt = auto_threshold(near_mt, sensitivity=sensitivity)
     else:
         fixed = float(threshold)
-        auto_tm = Threshold(fixed, False, np.sort(near_tm), np.diff(np.sort(near_tm), n=2), -1, "fixed")
-        auto_mt = Threshold(fixed, False, np.sort(near_mt), np.diff(np.sort(near_mt), n=2), -1, "fixed")
+        auto_tm = Threshold(
+            fixed, False, np.sort(near_tm), np.diff(np.sort(near_tm), n=2), -1, "fixed"
+        )
+        auto_mt = Threshold(
+            fixed, False, np.sort(near_mt), np.diff(np.sort(near_mt), n=2), -1, "fixed"
+        )
     d_tm, d_mt = auto_tm.threshold, auto_mt.threshold
     c_final = c0
     if max(d_tm, d_mt) > c0:
@@ -638,27 +713,56 @@ def match_segments(
         tot_tm = tot_mt = None
     o_tm = olhd(comp[match_tm, 3], lm[jj[match_tm]], total_weight=tot_tm)
     o_mt = olhd(dmt[match_mt], lt[ii[match_mt]], total_weight=tot_mt)
-    lhd = float(np.nanmax([o_tm, o_mt])) if not (np.isnan(o_tm) and np.isnan(o_mt)) else float("nan")
+    lhd = (
+        float(np.nanmax([o_tm, o_mt])) if not (np.isnan(o_tm) and np.isnan(o_mt)) else float("nan")
+    )
 
     gt = None
     if ground_truth is not None:
         gi, gj = _ground_truth_matrix(ground_truth, t, m)
         gkey = gi * q + gj
         key = ii * q + jj
-        gt = {**_confusion(key[match_tm], gkey, p, q, "tm"), **_confusion(key[match_mt], gkey, p, q, "mt")}
+        gt = {
+            **_confusion(key[match_tm], gkey, p, q, "tm"),
+            **_confusion(key[match_mt], gkey, p, q, "mt"),
+        }
 
     return LineMatch(
-        p=p, q=q, threshold_tm=float(d_tm), threshold_mt=float(d_mt),
-        threshold_found_tm=bool(auto_tm.found), threshold_found_mt=bool(auto_mt.found),
-        olhd_tm=o_tm, olhd_mt=o_mt, lhd=lhd,
-        n_pairs_tm=int(match_tm.sum()), n_pairs_mt=int(match_mt.sum()),
-        weight=weight, sensitivity=sensitivity, rotate=rotate, denominator=denominator,
-        cutoff=float(c_final), test_ids=t.ids, model_ids=m.ids, test_lengths=lt, model_lengths=lm,
-        nearest_tm=near_tm, nearest_model=arg_tm, nearest_mt=near_mt, nearest_test=arg_mt,
-        auto_tm=auto_tm, auto_mt=auto_mt, pair_test=ii, pair_model=jj, pair_components=comp,
-        pair_d_mt=dmt, match_tm=match_tm, match_mt=match_mt,
-        gao_leung_tm=primary_lhd(near_tm, lt), gao_leung_mt=primary_lhd(near_mt, lm),
-        hausdorff_tm=float(near_tm.max()), hausdorff_mt=float(near_mt.max()),
+        p=p,
+        q=q,
+        threshold_tm=float(d_tm),
+        threshold_mt=float(d_mt),
+        threshold_found_tm=bool(auto_tm.found),
+        threshold_found_mt=bool(auto_mt.found),
+        olhd_tm=o_tm,
+        olhd_mt=o_mt,
+        lhd=lhd,
+        n_pairs_tm=int(match_tm.sum()),
+        n_pairs_mt=int(match_mt.sum()),
+        weight=weight,
+        sensitivity=sensitivity,
+        rotate=rotate,
+        denominator=denominator,
+        cutoff=float(c_final),
+        test_ids=t.ids,
+        model_ids=m.ids,
+        test_lengths=lt,
+        model_lengths=lm,
+        nearest_tm=near_tm,
+        nearest_model=arg_tm,
+        nearest_mt=near_mt,
+        nearest_test=arg_mt,
+        auto_tm=auto_tm,
+        auto_mt=auto_mt,
+        pair_test=ii,
+        pair_model=jj,
+        pair_components=comp,
+        pair_d_mt=dmt,
+        match_tm=match_tm,
+        match_mt=match_mt,
+        gao_leung_tm=primary_lhd(near_tm, lt),
+        gao_leung_mt=primary_lhd(near_mt, lm),
+        hausdorff_tm=float(near_tm.max()),
+        hausdorff_mt=float(near_mt.max()),
         ground_truth=gt,
     )
-

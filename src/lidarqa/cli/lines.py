@@ -1,0 +1,400 @@
+"""``lidarqa lines`` and ``lidarqa repeatability``: 3D line-segment matching (modified LHD)."""
+
+from __future__ import annotations
+
+import csv
+from collections.abc import Callable
+from itertools import combinations
+from typing import Any
+
+import click
+
+from ._common import (
+    INT_LIST,
+    Steps,
+    common_options,
+    echo,
+    finish,
+    fmt_number,
+    prepare_outputs,
+    settings,
+)
+
+
+def _matching_options(func: Callable[..., Any]) -> Callable[..., Any]:
+    opts = [
+        click.option(
+            "--weight",
+            default=10.0,
+            show_default=True,
+            type=float,
+            help="Weight W of the squared angle distance (dimensionless).",
+        ),
+        click.option(
+            "--sensitivity",
+            default=0.1,
+            show_default=True,
+            type=float,
+            help="A-priori sensitivity of the automatic threshold (m).",
+        ),
+        click.option(
+            "--threshold",
+            type=float,
+            default=None,
+            metavar="D",
+            help="Fixed correspondence threshold (m) instead of the automatic one.",
+        ),
+        click.option(
+            "--rotate",
+            type=click.Choice(["shorter", "test"]),
+            default="shorter",
+            show_default=True,
+            help="Segment rotated in each pair (shorter: symmetric).",
+        ),
+        click.option(
+            "--denominator",
+            type=click.Choice(["matched", "all"]),
+            default="matched",
+            show_default=True,
+            help="OLHD denominator: lengths of matched pairs, or of all segments.",
+        ),
+        click.option(
+            "--classes",
+            type=INT_LIST,
+            default=None,
+            help="Point-cloud input: classes whose edges are extracted, e.g. 6.",
+        ),
+    ]
+    for opt in reversed(opts):
+        func = opt(func)
+    return func
+
+
+@click.command()
+@click.argument("test", type=click.Path(dir_okay=False))
+@click.argument("model", type=click.Path(dir_okay=False))
+@_matching_options
+@click.option(
+    "--ground-truth",
+    type=click.Path(dir_okay=False),
+    default=None,
+    metavar="PAIRS.csv",
+    help="True pairs (columns test_id,model_id): adds TP/FP/FN/TN and detection rates.",
+)
+@click.option(
+    "--matrix",
+    type=click.Path(dir_okay=False),
+    default=None,
+    metavar="SIM.csv",
+    help="Write the p×q similarity matrix (rows test ids, columns model ids; pruned pairs empty).",
+)
+@click.option(
+    "--pairs",
+    "pairs_out",
+    type=click.Path(dir_okay=False),
+    default=None,
+    metavar="PAIRS_OUT.csv",
+    help="Write the matched pairs (test_id,model_id, distances, direction flags).",
+)
+@click.option(
+    "--test-source-id",
+    type=INT_LIST,
+    default=None,
+    help="Point-cloud input: point_source_id(s) (flight strip) of the test points.",
+)
+@click.option(
+    "--model-source-id",
+    type=INT_LIST,
+    default=None,
+    help="Point-cloud input: point_source_id(s) (flight strip) of the model points.",
+)
+@common_options
+def lines(
+    test: str,
+    model: str,
+    weight: float,
+    sensitivity: float,
+    threshold: float | None,
+    rotate: str,
+    denominator: str,
+    classes: list[int] | None,
+    ground_truth: str | None,
+    matrix: str | None,
+    pairs_out: str | None,
+    test_source_id: list[int] | None,
+    model_source_id: list[int] | None,
+) -> None:
+    """Match TEST line segments to MODEL segments; OLHD both ways and LHD (Poreba & Goulette 2013).
+
+    TEST and MODEL are segment files (CSV id,x1,y1,z1,x2,y2,z2, GeoPackage, GeoJSON) or
+    point clouds, whose edges are extracted (select with --classes and --*-source-id, so
+    two strips of one file can be compared).
+    """
+    from ..accuracy._lines_io import load_segments, read_pairs
+    from ..accuracy.lines import match_segments
+
+    inputs = tuple(x for x in (test, model, ground_truth) if x)
+    prepare_outputs(matrix, pairs_out, inputs=inputs)
+    steps = Steps()
+    with steps("Reading test " + test):
+        t = load_segments(test, classes=classes, source_id=test_source_id)
+    with steps("Reading model " + model):
+        m = load_segments(model, classes=classes, source_id=model_source_id)
+    gt = None
+    if ground_truth:
+        with steps("Reading ground truth"):
+            gt = read_pairs(ground_truth)
+    with steps(f"Matching {len(t)} × {len(m)} segments"):
+        r = match_segments(
+            t,
+            m,
+            weight=weight,
+            sensitivity=sensitivity,
+            threshold=threshold,
+            rotate=rotate,
+            denominator=denominator,
+            ground_truth=gt,
+        )
+    from ..io._atomic import atomic_path
+
+    overwrite = settings().overwrite
+    if matrix:
+        with steps("Writing similarity matrix"), atomic_path(matrix, overwrite=overwrite) as tmp:
+            _write_matrix(r, tmp)
+    if pairs_out:
+        with steps("Writing pairs"), atomic_path(pairs_out, overwrite=overwrite) as tmp:
+            _write_pairs(r, tmp)
+    d = r.to_dict()
+    star_tm = "*" if d["olhd_tm"] is not None and d["olhd_tm"] == d["lhd"] else " "
+    star_mt = (
+        "*" if d["olhd_mt"] is not None and d["olhd_mt"] == d["lhd"] and star_tm == " " else " "
+    )
+
+    def how(auto: Any) -> str:
+        return {"peak": "auto", "fixed": "fixed"}.get(auto.reason, f"fallback: {auto.reason}")
+
+    echo(f"test   {test}: p = {r.p} segments")
+    echo(f"model  {model}: q = {r.q} segments")
+    echo(f"{'':22}{'test→model':>12}{'model→test':>14}")
+    echo(
+        f"{'threshold (m)':22}{fmt_number(r.threshold_tm, 3):>12}{fmt_number(r.threshold_mt, 3):>14}"
+        f"   ({how(r.auto_tm)} / {how(r.auto_mt)})"
+    )
+    echo(f"{'pairs':22}{r.n_pairs_tm:>12}{r.n_pairs_mt:>14}")
+    echo(
+        f"{'OLHD (m)':22}{fmt_number(r.olhd_tm, 3) + star_tm:>12}{fmt_number(r.olhd_mt, 3) + star_mt:>14}"
+    )
+    if r.ground_truth is not None:
+        g = r.ground_truth
+        for k in ("tp", "fp", "fn", "tn"):
+            echo(f"{k.upper():22}{g[k + '_tm']:>12}{g[k + '_mt']:>14}")
+        echo(
+            f"{'detection rate (%)':22}{100 * g['detection_rate_tm']:>12.4f}"
+            f"{100 * g['detection_rate_mt']:>14.4f}"
+        )
+    echo(f"LHD (m) = {fmt_number(r.lhd, 3)}  (* = the larger OLHD)")
+    finish(
+        "lines",
+        inputs={"test": test, "model": model, "ground_truth": ground_truth},
+        parameters={
+            "weight": weight,
+            "sensitivity": sensitivity,
+            "threshold": threshold,
+            "rotate": rotate,
+            "denominator": denominator,
+            "classes": classes,
+            "test_source_id": test_source_id,
+            "model_source_id": model_source_id,
+        },
+        results=d,
+    )
+
+
+def _write_matrix(r: Any, path: Any) -> None:
+    import numpy as np
+
+    order = np.argsort(r.pair_test, kind="stable")
+    pt, pm, dd = r.pair_test[order], r.pair_model[order], r.pair_d_tm[order]
+    bounds = np.searchsorted(pt, np.arange(r.p + 1))
+    with open(path, "w", encoding="utf-8", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["test_id", *[str(x) for x in r.model_ids.tolist()]])
+        for i, tid in enumerate(r.test_ids.tolist()):
+            row = [""] * r.q
+            for j, v in zip(
+                pm[bounds[i] : bounds[i + 1]].tolist(),
+                dd[bounds[i] : bounds[i + 1]].tolist(),
+                strict=True,
+            ):
+                row[j] = repr(v)
+            w.writerow([str(tid), *row])
+
+
+def _write_pairs(r: Any, path: Any) -> None:
+    import numpy as np
+
+    keep = np.flatnonzero(r.match_tm | r.match_mt)
+    tids, mids = r.test_ids, r.model_ids
+    with open(path, "w", encoding="utf-8", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(
+            [
+                "test_id",
+                "model_id",
+                "d_theta",
+                "d_par",
+                "d_perp",
+                "d_tm",
+                "d_mt",
+                "match_tm",
+                "match_mt",
+            ]
+        )
+        for k in keep.tolist():
+            c = r.pair_components[k]
+            w.writerow(
+                [
+                    tids[r.pair_test[k]],
+                    mids[r.pair_model[k]],
+                    repr(float(c[0])),
+                    repr(float(c[1])),
+                    repr(float(c[2])),
+                    repr(float(c[3])),
+                    repr(float(r.pair_d_mt[k])),
+                    "true" if r.match_tm[k] else "false",
+                    "true" if r.match_mt[k] else "false",
+                ]
+            )
+
+
+@click.command()
+@click.argument("files", nargs=-1, required=True, type=click.Path(dir_okay=False))
+@click.option(
+    "--by-source-id",
+    is_flag=True,
+    help="Each point_source_id (flight strip) of each cloud is a pass.",
+)
+@click.option(
+    "--source-id",
+    type=INT_LIST,
+    default=None,
+    help="With --by-source-id: only these strips, e.g. 4320,4330.",
+)
+@_matching_options
+@common_options
+def repeatability(
+    files: tuple[str, ...],
+    by_source_id: bool,
+    source_id: list[int] | None,
+    weight: float,
+    sensitivity: float,
+    threshold: float | None,
+    rotate: str,
+    denominator: str,
+    classes: list[int] | None,
+) -> None:
+    """Compare every pair of passes both ways: a table like Poreba & Goulette's Table 1.
+
+    Passes are FILES (segment files or clouds, all compared with each other), or with
+    --by-source-id the flight strips of each cloud (compared within each file). The
+    final LHD of each pair is marked with *.
+    """
+    from ..accuracy._lines_io import load_passes
+    from ..accuracy.lines import match_segments
+    from ..errors import CRSMismatchError, LidarQAError, OptionError
+
+    prepare_outputs(inputs=files)
+    if source_id is not None and not by_source_id:
+        raise OptionError("--source-id selects strips and needs --by-source-id")
+    steps = Steps()
+    with steps("Reading passes and extracting edges"):
+        passes = load_passes(
+            list(files), by_source_id=by_source_id, classes=classes, source_id=source_id
+        )
+    groups: dict[str, list] = {}
+    for group, name, seg in passes:
+        groups.setdefault(group, []).append((name, seg))
+    todo = [(g, a, b) for g, members in groups.items() for a, b in combinations(members, 2)]
+    if not todo:
+        raise OptionError(
+            f"repeatability needs at least two passes, got {len(passes)}"
+            + ("" if by_source_id else " (use --by-source-id for the strips of one file)")
+        )
+    rows: list[dict] = []
+    for group, (na, a), (nb, b) in steps.track(todo, "Matching pass pairs"):
+        row: dict[str, Any] = (
+            {"file": group, "test": na, "model": nb} if group else {"test": na, "model": nb}
+        )
+        if isinstance(a, Exception) or isinstance(b, Exception):
+            bad = a if isinstance(a, Exception) else b
+            row["error"] = str(bad)
+            rows.append(row)
+            continue
+        try:
+            r = match_segments(
+                a,
+                b,
+                weight=weight,
+                sensitivity=sensitivity,
+                threshold=threshold,
+                rotate=rotate,
+                denominator=denominator,
+            )
+        except CRSMismatchError:
+            raise
+        except LidarQAError as exc:
+            row.update(p=len(a), q=len(b), error=str(exc))
+            rows.append(row)
+            continue
+        row.update(r.to_dict())
+        rows.append(row)
+
+    width = max([28] + [len(_row_name(r)) + 2 for r in rows])
+    head = (
+        f"{'Data sets':<{width}}{'p':>6}{'q':>6}{'pairs T→M':>11}{'pairs M→T':>11}"
+        f"{'δ T→M':>9}{'δ M→T':>9}"
+        f"{'OLHD T→M':>11}{'OLHD M→T':>11}"
+    )
+    echo(head)
+    echo("-" * len(head))
+    fallback = False
+    for row in rows:
+        name = _row_name(row)
+        if "error" in row:
+            echo(f"{name:<{width}}  {row['error']}")
+            continue
+        o1, o2, lhd = row["olhd_tm"], row["olhd_mt"], row["lhd"]
+        s1 = "*" if o1 is not None and o1 == lhd else " "
+        s2 = "*" if o2 is not None and o2 == lhd and s1 == " " else " "
+        f1 = "" if row["threshold_found_tm"] or threshold is not None else "!"
+        f2 = "" if row["threshold_found_mt"] or threshold is not None else "!"
+        fallback |= bool(f1 or f2)
+        echo(
+            f"{name:<{width}}{row['p']:>6}{row['q']:>6}{row['n_pairs_tm']:>11}{row['n_pairs_mt']:>11}"
+            f"{fmt_number(row['threshold_tm'], 3) + f1:>9}{fmt_number(row['threshold_mt'], 3) + f2:>9}"
+            f"{fmt_number(o1, 3) + s1:>11}{fmt_number(o2, 3) + s2:>11}"
+        )
+    echo(
+        "* final modified LHD of the pair"
+        + ("; ! threshold fell back (no knee found)" if fallback else "")
+    )
+    finish(
+        "repeatability",
+        inputs={"files": list(files)},
+        parameters={
+            "by_source_id": by_source_id,
+            "source_id": source_id,
+            "weight": weight,
+            "sensitivity": sensitivity,
+            "threshold": threshold,
+            "rotate": rotate,
+            "denominator": denominator,
+            "classes": classes,
+        },
+        results=rows,
+    )
+
+
+def _row_name(row: dict) -> str:
+    prefix = f"{row['file']}: " if row.get("file") else ""
+    return f"{prefix}{row['test']} - {row['model']}"
