@@ -211,7 +211,8 @@ def _validate_pair(source: Any, target: Any) -> tuple[np.ndarray, np.ndarray]:
     tgt = as_points(target, "target")
     if src.shape != tgt.shape:
         raise InvalidPointsError(
-            f"source and target must hold the same number of common points, got {len(src)} and {len(tgt)}"
+            "source and target must hold the same number of common points, "
+            f"got {len(src)} and {len(tgt)}"
         )
     return src, tgt
 
@@ -228,7 +229,9 @@ def _safe_inv(n: np.ndarray, what: str) -> np.ndarray:
     except np.linalg.LinAlgError:
         cond = np.inf
     if not np.isfinite(cond) or cond > 1e14:
-        raise DegenerateGeometryError(f"{what}: the normal equations are singular (condition {cond:.3g})")
+        raise DegenerateGeometryError(
+            f"{what}: the normal equations are singular (condition {cond:.3g})"
+        )
     return np.linalg.inv(n)
 
 
@@ -307,17 +310,22 @@ def fit_similarity2d(source: Any, target: Any) -> TransformFit:
     s0_v = math.sqrt(vv_v / dof_v) if dof_v > 0 else math.nan
     s0 = math.sqrt((vv_h + vv_v) / dof) if dof > 0 else math.nan
     if dof_h <= 0:
-        notes.append("2 points determine a, b, c, d exactly: no horizontal redundancy, their sigmas are undefined")
+        notes.append(
+            "2 points determine a, b, c, d exactly: no horizontal redundancy, "
+            "their sigmas are undefined"
+        )
 
     # covariance: centred parameters (a, b, c', d') have normal matrix diag(S, S, n, n)
     q_c = np.diag([1.0 / s_xy, 1.0 / s_xy, 1.0 / n, 1.0 / n])
     # c = c' - a*x̄1 + b*ȳ1 (c' = x̄2 in the centred model), d = d' - b*x̄1 - a*ȳ1
-    j = np.array([
-        [1.0, 0.0, 0.0, 0.0],
-        [0.0, 1.0, 0.0, 0.0],
-        [-m1[0], m1[1], 1.0, 0.0],
-        [-m1[1], -m1[0], 0.0, 1.0],
-    ])
+    j = np.array(
+        [
+            [1.0, 0.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0, 0.0],
+            [-m1[0], m1[1], 1.0, 0.0],
+            [-m1[1], -m1[0], 0.0, 1.0],
+        ]
+    )
     cov = np.zeros((5, 5))
     cov[:4, :4] = (s0_h**2 if dof_h > 0 else math.nan) * (j @ q_c @ j.T)
     cov[4, 4] = (s0_v**2 if dof_v > 0 else math.nan) / n
@@ -325,14 +333,18 @@ def fit_similarity2d(source: Any, target: Any) -> TransformFit:
     scale = math.hypot(a, b)
     rot = math.degrees(math.atan2(b, a))
     # derived: scale and rotation (first-order propagation from a, b)
-    jd = np.array([[a / scale, b / scale], [-b / scale**2 * 180 / math.pi, a / scale**2 * 180 / math.pi]])
+    jd = np.array(
+        [[a / scale, b / scale], [-b / scale**2 * 180 / math.pi, a / scale**2 * 180 / math.pi]]
+    )
     cov_d = jd @ cov[:2, :2] @ jd.T
     sig_d = _sigma(cov_d) if dof_h > 0 else np.full(2, np.nan)
     names = ("a", "b", "c", "d", "e")
     params = dict(zip(names, (a, b, c, d, e), strict=True)) | {"scale": scale, "rotation_deg": rot}
     sigmas = {k: float(v) for k, v in zip(names, sig, strict=True)}
     sigmas |= {"scale": float(sig_d[0]), "rotation_deg": float(sig_d[1])}
-    rotation = np.array([[a / scale, -b / scale, 0.0], [b / scale, a / scale, 0.0], [0.0, 0.0, 1.0]])
+    rotation = np.array(
+        [[a / scale, -b / scale, 0.0], [b / scale, a / scale, 0.0], [0.0, 0.0, 1.0]]
+    )
     return TransformFit(
         name="similarity2d",
         params=params,
@@ -367,7 +379,9 @@ def _umeyama(p1: np.ndarray, p2: np.ndarray, fix_scale: bool) -> tuple[np.ndarra
     return r, s
 
 
-def fit_helmert(source: Any, target: Any, *, fix_scale: bool = False, max_iter: int = 20) -> TransformFit:
+def fit_helmert(
+    source: Any, target: Any, *, fix_scale: bool = False, max_iter: int = 20
+) -> TransformFit:
     """3D Helmert transformation ``X2 = t + s·R·X1`` by least squares.
 
     Parameters
@@ -409,7 +423,9 @@ def fit_helmert(source: Any, target: Any, *, fix_scale: bool = False, max_iter: 
     n = len(src)
     name = "helmert-fixed-scale" if fix_scale else "helmert"
     if n < 3:
-        raise DegenerateGeometryError(f"{name} needs at least 3 non-collinear common points, got {n}")
+        raise DegenerateGeometryError(
+            f"{name} needs at least 3 non-collinear common points, got {n}"
+        )
     m1 = src.mean(axis=0)
     m2 = tgt.mean(axis=0)
     p1 = src - m1
@@ -436,7 +452,7 @@ def fit_helmert(source: Any, target: Any, *, fix_scale: bool = False, max_iter: 
         if not fix_scale:
             s = s + dx[6]
         step = float(np.max(np.abs(dx[:3]))) / max(1.0, float(np.abs(p2).max()))
-        if step < 1e-14 and float(np.max(np.abs(dx[3:]))) < 1e-14:
+        if step < 1e-12 and float(np.max(np.abs(dx[3:]))) < 1e-12:
             converged = True
             break
     if not converged:

@@ -1,0 +1,348 @@
+"""``lidarqa checkpoints``: accuracy at surveyed check points (ASPRS Ed. 2 2023, NSSDA)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import click
+
+from ..accuracy.transforms import TRANSFORMS
+from ._common import (
+    INT_LIST,
+    Steps,
+    common_options,
+    echo,
+    finish,
+    fmt_number,
+    prepare_outputs,
+    settings,
+)
+
+
+def _parse_ids(value: str | None) -> list[str] | None:
+    if value is None:
+        return None
+    ids = [t.strip() for t in str(value).split(",") if t.strip()]
+    return ids or None
+
+
+def _read_control_file(path: str) -> list[str]:
+    """Control ids from a point file (.gpkg/.geojson, a .csv with an ``id`` column) or a list."""
+    from ..errors import ReadError
+    from ..io.vector import read_points
+
+    p = Path(path)
+    if not p.is_file():
+        raise ReadError(f"control file {p} does not exist")
+    suffix = p.suffix.lower()
+    if suffix in {".gpkg", ".geojson", ".json"}:
+        return [str(v) for v in read_points(p, require_z=False).ids.tolist()]
+    lines = [ln.strip() for ln in p.read_text(encoding="utf-8-sig").splitlines()]
+    lines = [ln for ln in lines if ln and not ln.startswith("#")]
+    if not lines:
+        raise ReadError(f"control file {p} lists no ids")
+    delim = ";" if lines[0].count(";") > lines[0].count(",") else ","
+    header = [h.strip().lower() for h in lines[0].split(delim)]
+    col = header.index("id") if "id" in header else None
+    body = lines[1:] if col is not None else lines
+    col = col or 0
+    ids = [ln.split(delim)[col].strip() for ln in body]
+    ids = [i for i in ids if i]
+    if not ids:
+        raise ReadError(f"control file {p} lists no ids")
+    return ids
+
+
+def _unit_factors(crs: Any, what: str) -> tuple[float, float, str | None, str | None]:
+    """(horizontal, vertical) factors to metres and unit names; refuses geographic CRSs."""
+    from ..errors import CRSMismatchError
+    from ..io.crs import vertical_unit, z_to_metres_factor
+
+    if crs is None:
+        return 1.0, 1.0, None, None
+    subs = list(crs.sub_crs_list) if crs.is_compound else [crs]
+    h_factor, h_name = 1.0, None
+    for c in subs:
+        for axis in c.axis_info:
+            if axis.direction in ("east", "north", "west", "south"):
+                if str(axis.unit_name).lower().startswith("deg") or c.is_geographic:
+                    raise CRSMismatchError(
+                        f"{what} is in a geographic CRS ({crs.name}, degrees): reproject it "
+                        "to a projected CRS in metres first"
+                    )
+                h_factor, h_name = float(axis.unit_conversion_factor), str(axis.unit_name)
+                break
+        if h_name:
+            break
+    v_name, _ = vertical_unit(crs)
+    return h_factor, z_to_metres_factor(crs), h_name, v_name
+
+
+def _scaled(xyz: Any, fh: float, fv: float) -> Any:
+    out = xyz.astype(float, copy=True)
+    out[:, :2] *= fh
+    out[:, 2] *= fv
+    return out
+
+
+@click.command()
+@click.argument("measured", type=click.Path(dir_okay=False))
+@click.argument("check", type=click.Path(dir_okay=False))
+@click.option(
+    "--transform",
+    type=click.Choice(TRANSFORMS),
+    default="none",
+    show_default=True,
+    help="Least-squares transformation of MEASURED onto CHECK, estimated on the control points.",
+)
+@click.option(
+    "--control-ids",
+    default=None,
+    metavar="ID[,ID...]",
+    help="Check-point ids used as control (to estimate the transformation); the rest are checks.",
+)
+@click.option(
+    "--control-file",
+    type=click.Path(dir_okay=False),
+    default=None,
+    help="File listing control ids (one per line, a CSV with an id column, or a point file).",
+)
+@click.option(
+    "--match",
+    "match",
+    type=click.Choice(["id", "nearest"]),
+    default="id",
+    show_default=True,
+    help="Pair points by id, or by nearest neighbour (one-to-one) within --max-distance.",
+)
+@click.option(
+    "--max-distance",
+    type=float,
+    default=None,
+    help="Largest pair distance before transformation (m).",
+)
+@click.option(
+    "--vertical",
+    is_flag=True,
+    help="MEASURED is a point cloud: compare CHECK heights with a TIN of its ground points.",
+)
+@click.option(
+    "--classes",
+    type=INT_LIST,
+    default=None,
+    help="With --vertical: classes forming the ground TIN [default: 2].",
+)
+@click.option(
+    "--max-edge",
+    type=float,
+    default=None,
+    help="With --vertical: flag check points in TIN triangles with a longer edge (m) "
+    "[default: 5 x ground spacing].",
+)
+@click.option(
+    "--checkpoint-rmse-h",
+    type=float,
+    default=0.0,
+    show_default=True,
+    help="Horizontal RMSE of the check-point survey (m), folded into the ASPRS Ed. 2 figures.",
+)
+@click.option(
+    "--checkpoint-rmse-v",
+    type=float,
+    default=0.0,
+    show_default=True,
+    help="Vertical RMSE of the check-point survey (m), folded into the ASPRS Ed. 2 figures.",
+)
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(dir_okay=False),
+    default=None,
+    help="Write per-point residuals (.csv, .gpkg or .geojson).",
+)
+@common_options
+def checkpoints(
+    measured: str,
+    check: str,
+    transform: str,
+    control_ids: str | None,
+    control_file: str | None,
+    match: str,
+    max_distance: float | None,
+    vertical: bool,
+    classes: list[int] | None,
+    max_edge: float | None,
+    checkpoint_rmse_h: float,
+    checkpoint_rmse_v: float,
+    output: str | None,
+) -> None:
+    """Accuracy of MEASURED points against surveyed CHECK points.
+
+    MEASURED is a point list (id,x,y,z; e.g. from `lidarqa corners`) or, with
+    --vertical, a point cloud. Reports per-axis bias, standard deviation, RMSE
+    and max |residual|, RMSE_H, RMSE_3D, the ASPRS Edition 2 (2023) accuracy
+    with the check-point survey accuracy folded in, and NSSDA 95 % figures.
+    Residuals are MEASURED (transformed) minus CHECK, in metres.
+    """
+    from ..errors import OptionError
+    from ..io.crs import crs_name, ensure_same_crs
+    from ..io.vector import VECTOR_SUFFIXES, PointSet, read_points, write_points
+
+    if output is not None and Path(output).suffix.lower() not in VECTOR_SUFFIXES:
+        raise OptionError(f"--output must end in .csv, .gpkg or .geojson, got {output}")
+    if vertical and (transform != "none" or control_ids or control_file or match != "id"):
+        raise OptionError(
+            "--vertical compares heights only: --transform, --control-ids, --control-file "
+            "and --match do not apply"
+        )
+    if not vertical and (classes is not None or max_edge is not None):
+        raise OptionError("--classes and --max-edge apply only with --vertical")
+    if control_ids and control_file:
+        raise OptionError("give --control-ids or --control-file, not both")
+    prepare_outputs(output, inputs=(measured, check, control_file))
+    steps = Steps()
+    notes: list[str] = []
+    ctrl = _parse_ids(control_ids)
+    if control_file:
+        ctrl = _read_control_file(control_file)
+
+    with steps("Reading check points"):
+        chk = read_points(check)
+
+    if vertical:
+        from .. import read
+        from ..accuracy.checkpoints import vertical_check
+
+        with steps("Reading " + measured):
+            cloud = read(measured)
+        ensure_same_crs(cloud.crs, chk.crs, what=("MEASURED", "CHECK"))
+        crs = cloud.crs if cloud.crs is not None else chk.crs
+        fh, fv, hname, vname = _unit_factors(crs, "MEASURED" if cloud.crs is not None else "CHECK")
+        if fv != 1.0 or fh != 1.0:
+            notes.append(
+                f"coordinates converted to metres (horizontal unit: {hname or 'metre'}, "
+                f"vertical unit: {vname or 'metre'})"
+            )
+            if chk.crs is None or cloud.crs is None:
+                notes.append("one input has no CRS and is taken to share the other's CRS and units")
+        cls = cloud.classification
+        if cls is None and classes is not None:
+            raise OptionError(
+                f"{measured} has no classification, so --classes cannot select ground points"
+            )
+        if cls is None:
+            notes.append("the cloud has no classification: all its points form the TIN")
+        with steps("Comparing heights with the ground TIN"):
+            report: Any = vertical_check(
+                _scaled(cloud.xyz, fh, fv),
+                PointSet(chk.ids, _scaled(chk.xyz, fh, fv)),
+                classification=cls,
+                classes=tuple(classes) if classes else (2,),
+                max_edge=max_edge,
+                checkpoint_rmse_v=checkpoint_rmse_v,
+            )
+    else:
+        from ..accuracy.checkpoints import assess_checkpoints
+        from ..io import CLOUD_SUFFIXES
+
+        suffix = Path(measured).suffix.lower()
+        if suffix in CLOUD_SUFFIXES and suffix not in VECTOR_SUFFIXES:
+            raise OptionError(
+                f"{measured} looks like a point cloud; add --vertical to check its heights, or "
+                "give a point list (id,x,y,z) such as the output of `lidarqa corners`"
+            )
+        with steps("Reading measured points"):
+            mea = read_points(measured)
+        ensure_same_crs(mea.crs, chk.crs, what=("MEASURED", "CHECK"))
+        crs = mea.crs if mea.crs is not None else chk.crs
+        fh, fv, hname, vname = _unit_factors(crs, "MEASURED" if mea.crs is not None else "CHECK")
+        if fv != 1.0 or fh != 1.0:
+            notes.append(
+                f"coordinates converted to metres (horizontal unit: {hname or 'metre'}, "
+                f"vertical unit: {vname or 'metre'})"
+            )
+            if mea.crs is None or chk.crs is None:
+                notes.append("one input has no CRS and is taken to share the other's CRS and units")
+        with steps("Matching and estimating"):
+            report = assess_checkpoints(
+                PointSet(mea.ids, _scaled(mea.xyz, fh, fv)),
+                PointSet(chk.ids, _scaled(chk.xyz, fh, fv)),
+                transform=transform,
+                control_ids=ctrl,
+                match=match,
+                max_distance=max_distance,
+                checkpoint_rmse_h=checkpoint_rmse_h,
+                checkpoint_rmse_v=checkpoint_rmse_v,
+            )
+
+    if output is not None:
+        res = report.residual_points()
+        # write the check points in their own (unconverted) coordinates
+        out = PointSet(
+            res.ids, _scaled(res.xyz, 1.0 / fh, 1.0 / fv), res.attributes, crs=chk.crs or crs
+        )
+        with steps("Writing " + output):
+            write_points(out, output, overwrite=settings().overwrite)
+
+    results = report.to_dict()
+    results["warnings"] = notes + results["warnings"]
+    results["units"] = "m"
+    _summary(results, vertical)
+    finish(
+        "checkpoints",
+        inputs={"measured": measured, "check": check, "control_file": control_file},
+        parameters={
+            "transform": transform,
+            "control_ids": ctrl,
+            "match": match,
+            "max_distance": max_distance,
+            "vertical": vertical,
+            "classes": (classes or [2]) if vertical else None,
+            "max_edge": results.get("vertical", {}).get("max_edge") if vertical else None,
+            "checkpoint_rmse_h": checkpoint_rmse_h,
+            "checkpoint_rmse_v": checkpoint_rmse_v,
+            "output": output,
+            "crs": crs_name(crs),
+        },
+        results=results,
+    )
+
+
+def _summary(r: dict, vertical: bool) -> None:
+    echo(
+        f"check points    {r['n_check']}"
+        + (f"   control points {r['n_control']}" if r["n_control"] else "")
+    )
+    t = r["transform"]
+    if t["name"] != "none":
+        echo(f"transform       {t['name']}   sigma0 {fmt_number(t['sigma0'], 4)} m")
+        for k, v in t["params"].items():
+            echo(f"  {k:<14}{v:.8g} ± {fmt_number(t['sigmas'].get(k), 6)}")
+    if not vertical:
+        echo("                x          y          z")
+        for name in ("mean", "std", "rmse", "max_abs"):
+            echo(f"  {name:<12}" + "".join(f"{fmt_number(r[f'{name}_{a}'], 4):>11}" for a in "xyz"))
+        echo(f"RMSE_H {fmt_number(r['rmse_h'], 4)} m   RMSE_3D {fmt_number(r['rmse_3d'], 4)} m")
+    else:
+        v = r["vertical"]
+        echo(
+            f"ground points   {v['n_ground']:,}   max edge {fmt_number(v['max_edge'], 2)} m   flags "
+            + ", ".join(f"{k}: {n}" for k, n in v["flags"].items() if n)
+        )
+        echo(
+            f"dz  mean {fmt_number(r['mean_z'], 4)}  std {fmt_number(r['std_z'], 4)}  RMSE {fmt_number(r['rmse_z'], 4)}  "
+            f"max|dz| {fmt_number(r['max_abs_z'], 4)} m"
+        )
+    a = r["asprs2023"]
+    echo(
+        f"ASPRS Ed. 2     RMSE_H {fmt_number(a['rmse_h'], 4)}  RMSE_V {fmt_number(a['rmse_v'], 4)}  "
+        f"RMSE_3D {fmt_number(a['rmse_3d'], 4)} m"
+    )
+    n = r["nssda"]
+    echo(
+        f"NSSDA 95 %      horizontal {fmt_number(n['accuracy_r'], 4)} m [{n['formula']}]   "
+        f"vertical {fmt_number(n['accuracy_z'], 4)} m [1.9600*RMSE_z]"
+    )
+    for w in r["warnings"]:
+        echo(f"warning: {w}")
