@@ -1,5 +1,40 @@
-"""Accuracy assessment: line-segment matching (modified LHD), check points, height quality."""
+"""Accuracy assessment: line-segment matching (modified LHD), check points, height quality.
 
+- :mod:`lidarqa.accuracy.lines` — Poreba & Goulette (2013): 3D edge segments matched with the
+  modified line-segment Hausdorff distance, for absolute accuracy and repeatability.
+- :mod:`lidarqa.accuracy.checkpoints` and :mod:`lidarqa.accuracy.transforms` — Fang & Huang:
+  corners vs check points, least-squares transformations, RMSE to ASPRS (2023) and NSSDA.
+- :mod:`lidarqa.accuracy.heights` — Oude Elberink & Vosselman: plane-fitted heights with error
+  propagation, TIN precision, w-tests.
+"""
+
+from .checkpoints import (
+    CheckpointReport,
+    VerticalCheckReport,
+    asprs2023_accuracy,
+    assess_checkpoints,
+    match_points,
+    nssda_accuracy,
+    residual_statistics,
+    rmse_3d,
+    vertical_check,
+)
+from .heights import (
+    HeightReport,
+    assess_heights,
+    compare_heights,
+    critical_value,
+    densify_polygons,
+    empirical_model_sigma,
+    fit_plane_height,
+    interpolate_tin,
+    laser_block_sigma,
+    map_point_heights,
+    model_sigma,
+    read_map_points,
+    tin_sigma,
+    w_test,
+)
 from .lines import (
     LineMatch,
     Threshold,
@@ -9,8 +44,10 @@ from .lines import (
     segment_distance,
     segment_distances,
 )
+from .transforms import TRANSFORMS, TransformFit, estimate_transform
 
 __all__ = [
+    # lines
     "LineMatch",
     "Threshold",
     "auto_threshold",
@@ -18,4 +55,32 @@ __all__ = [
     "match_segments",
     "segment_distance",
     "segment_distances",
+    # checkpoints and transforms
+    "CheckpointReport",
+    "VerticalCheckReport",
+    "asprs2023_accuracy",
+    "assess_checkpoints",
+    "match_points",
+    "nssda_accuracy",
+    "residual_statistics",
+    "rmse_3d",
+    "vertical_check",
+    "TRANSFORMS",
+    "TransformFit",
+    "estimate_transform",
+    # heights
+    "HeightReport",
+    "assess_heights",
+    "compare_heights",
+    "critical_value",
+    "densify_polygons",
+    "empirical_model_sigma",
+    "fit_plane_height",
+    "interpolate_tin",
+    "laser_block_sigma",
+    "map_point_heights",
+    "model_sigma",
+    "read_map_points",
+    "tin_sigma",
+    "w_test",
 ]

@@ -9,6 +9,7 @@ one Delaunay ``find_simplex``.
 from __future__ import annotations
 
 import itertools
+from typing import Any
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -23,8 +24,22 @@ TOO_FEW_SEGMENT = "too_few_segment_points"
 COLLINEAR = "collinear"
 
 
-def growth_radius(need: np.ndarray, *, radius: float, max_radius: float,
-                  growth: float | None) -> np.ndarray:
+def spatial_order(xy: np.ndarray, lo: np.ndarray, cell: float) -> np.ndarray:
+    """A permutation that puts points of the same 64x64-cell tile, then cell, together.
+
+    Only for memory locality of KD-tree builds and queries (about 2x faster
+    for 10^6 points); results do not depend on it.
+    """
+    c = np.floor((xy - lo) / cell).astype(np.int64)
+    c = np.maximum(c, 0)
+    tile = c >> 6
+    key = ((tile[:, 0] * (1 << 24) + tile[:, 1]) << 12) + ((c[:, 0] & 63) << 6) + (c[:, 1] & 63)
+    return np.argsort(key, kind="stable")
+
+
+def growth_radius(
+    need: np.ndarray, *, radius: float, max_radius: float, growth: float | None
+) -> np.ndarray:
     """Smallest radius level radius·growth**j (capped at max_radius) that is >= `need`."""
     need = np.maximum(need, radius)
     if growth is None:
@@ -38,9 +53,15 @@ def growth_radius(need: np.ndarray, *, radius: float, max_radius: float,
     return np.minimum(r, max_radius)
 
 
-def neighbourhoods(tree: cKDTree | None, map_xy: np.ndarray, *, radius: float, max_radius: float,
-                   min_points: int, growth: float | None
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def neighbourhoods(
+    tree: cKDTree | None,
+    map_xy: np.ndarray,
+    *,
+    radius: float,
+    max_radius: float,
+    min_points: int,
+    growth: float | None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Laser points used per map point.
 
     Returns ``(group, index, radius_used, n_found)``: flat arrays of (map point,
@@ -63,17 +84,21 @@ def neighbourhoods(tree: cKDTree | None, map_xy: np.ndarray, *, radius: float, m
     if not ok.any():
         return np.empty(0, np.int64), np.empty(0, np.int64), r_used, n_found
     ok_idx = np.flatnonzero(ok)
-    lists = tree.query_ball_point(map_xy[ok_idx], r_used[ok_idx] * (1 + 1e-9), workers=-1,
-                                  return_sorted=True)
+    lists = tree.query_ball_point(
+        map_xy[ok_idx], r_used[ok_idx] * (1 + 1e-9), workers=-1, return_sorted=False
+    )
     counts = np.fromiter(map(len, lists), dtype=np.int64, count=len(lists))
-    index = np.fromiter(itertools.chain.from_iterable(lists), dtype=np.int64, count=int(counts.sum()))
+    index = np.fromiter(
+        itertools.chain.from_iterable(lists), dtype=np.int64, count=int(counts.sum())
+    )
     group = np.repeat(ok_idx, counts)
     n_found[ok_idx] = counts
     return group, index, r_used, n_found
 
 
-def largest_segment_filter(group: np.ndarray, labels_of_entries: np.ndarray, n_groups: int
-                           ) -> np.ndarray:
+def largest_segment_filter(
+    group: np.ndarray, labels_of_entries: np.ndarray, n_groups: int
+) -> np.ndarray:
     """Mask of entries whose segment label is the most frequent one of their group.
 
     Unsegmented entries (label < 0) are dropped; ties go to the smaller label.
@@ -96,8 +121,16 @@ def largest_segment_filter(group: np.ndarray, labels_of_entries: np.ndarray, n_g
     return out
 
 
-def fit_planes(xyz: np.ndarray, group: np.ndarray, map_xy: np.ndarray, *, sigma_z: float,
-               posterior: bool, eq8_diagonal: bool, min_points: int) -> dict[str, np.ndarray]:
+def fit_planes(
+    xyz: np.ndarray,
+    group: np.ndarray,
+    map_xy: np.ndarray,
+    *,
+    sigma_z: float,
+    posterior: bool,
+    eq8_diagonal: bool,
+    min_points: int,
+) -> dict[str, np.ndarray]:
     """Batched least-squares planes z = −x·p1 − y·p2 + p3, centred per group.
 
     `xyz` holds the laser points of each entry (gathered), `group` the map point
@@ -185,8 +218,62 @@ def tin_variance(weights: np.ndarray, sigmas: np.ndarray, correlation: float) ->
     return (1.0 - correlation) * np.sum(ws * ws, axis=-1) + correlation * np.sum(ws, axis=-1) ** 2
 
 
-def triangulate_locate(vertex_xy: np.ndarray, query_xy: np.ndarray
-                       ) -> tuple[np.ndarray, np.ndarray, bool]:
+def _cross(p1: np.ndarray, p2: np.ndarray, p3: np.ndarray) -> np.ndarray:
+    """Twice the signed area of the triangles (p1, p2, p3), row-wise."""
+    return (p2[:, 0] - p1[:, 0]) * (p3[:, 1] - p1[:, 1]) - (p2[:, 1] - p1[:, 1]) * (
+        p3[:, 0] - p1[:, 0]
+    )
+
+
+def locate(tri: Any, query: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Containing triangle and barycentric weights per query point (-1 / NaN outside).
+
+    A vectorised visibility walk over the Delaunay neighbours, starting at a
+    triangle of each query's nearest vertex, so walks are a few steps long.
+    (scipy's ``find_simplex`` walks from one fixed triangle and is ~100x
+    slower for 10^5 vertices.) The walk terminates on a Delaunay
+    triangulation; queries still unresolved after ``len(simplices)`` steps fall
+    back to ``find_simplex``.
+    """
+    pts, simp, nb = tri.points, tri.simplices, tri.neighbors
+    r = len(query)
+    found = np.full(r, -1, dtype=np.int64)
+    weights = np.full((r, 3), np.nan)
+    _, near = cKDTree(pts).query(query)
+    cur = tri.vertex_to_simplex[near].astype(np.int64)
+    cur[cur < 0] = 0
+    active = np.arange(r)
+    for _ in range(len(simp) + 1):
+        if active.size == 0:
+            break
+        s = cur[active]
+        a, b, c, x = pts[simp[s, 0]], pts[simp[s, 1]], pts[simp[s, 2]], query[active]
+        area = _cross(a, b, c)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            lam = (
+                np.column_stack([_cross(x, b, c), _cross(a, x, c), _cross(a, b, x)]) / area[:, None]
+            )
+        j = np.argmin(np.nan_to_num(lam, nan=-np.inf), axis=1)
+        inside = lam[np.arange(len(s)), j] >= -1e-12
+        found[active[inside]] = s[inside]
+        weights[active[inside]] = lam[inside]
+        moving = active[~inside]
+        nxt = nb[s[~inside], j[~inside]]
+        cur[moving] = nxt
+        active = moving[nxt >= 0]
+    if active.size:  # pragma: no cover - not expected on a Delaunay triangulation
+        s = tri.find_simplex(query[active])
+        ok = s >= 0
+        found[active[ok]] = s[ok]
+        t = tri.transform[s[ok]]
+        bary = np.einsum("ijk,ik->ij", t[:, :2, :], query[active[ok]] - t[:, 2, :])
+        weights[active[ok]] = np.column_stack([bary, 1.0 - bary.sum(axis=1)])
+    return found, weights
+
+
+def triangulate_locate(
+    vertex_xy: np.ndarray, query_xy: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, bool]:
     """Delaunay TIN over `vertex_xy`; containing triangle and barycentric weights per query.
 
     Returns ``(vertices (R,3) int64, weights (R,3))`` with -1 / NaN outside the
@@ -194,8 +281,7 @@ def triangulate_locate(vertex_xy: np.ndarray, query_xy: np.ndarray
     Vertices are put in a canonical (x, y) order first, so the triangulation of
     cocircular points does not depend on the input order.
     """
-    from scipy.spatial import Delaunay
-    from scipy.spatial._qhull import QhullError
+    from scipy.spatial import Delaunay, QhullError
 
     r = len(query_xy)
     verts = np.full((r, 3), -1, dtype=np.int64)
@@ -210,26 +296,21 @@ def triangulate_locate(vertex_xy: np.ndarray, query_xy: np.ndarray
         return verts, weights, False
     if r == 0:
         return verts, weights, True
-    q = query_xy - origin
-    simplex = tri.find_simplex(q)
+    simplex, w = locate(tri, query_xy - origin)
     inside = simplex >= 0
     s = simplex[inside]
-    t = tri.transform[s]
-    b = np.einsum("ijk,ik->ij", t[:, :2, :], q[inside] - t[:, 2, :])
-    w = np.column_stack([b, 1.0 - b.sum(axis=1)])
     corners = tri.points[tri.simplices[s]]
-    e1 = corners[:, 1] - corners[:, 0]
-    e2 = corners[:, 2] - corners[:, 0]
-    area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
-    ok = (area >= EPS) & np.isfinite(w).all(axis=1)
+    area = 0.5 * np.abs(_cross(corners[:, 0], corners[:, 1], corners[:, 2]))
+    ok = (area >= EPS) & np.isfinite(w[inside]).all(axis=1)
     rows = np.flatnonzero(inside)[ok]
     verts[rows] = order[tri.simplices[s[ok]]]
-    weights[rows] = w[ok]
+    weights[rows] = w[inside][ok]
     return verts, weights, True
 
 
-def data_snooping(dh: np.ndarray, sigma: np.ndarray, *, critical: float, estimate_offset: bool
-                  ) -> tuple[np.ndarray, np.ndarray, int, float]:
+def data_snooping(
+    dh: np.ndarray, sigma: np.ndarray, *, critical: float, estimate_offset: bool
+) -> tuple[np.ndarray, np.ndarray, int, float]:
     """Iterative data snooping (Baarda): flag max |w| > k, remove, repeat.
 
     Returns ``(w, outlier, n_passes, offset)``. With ``estimate_offset=False``

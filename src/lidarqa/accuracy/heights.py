@@ -84,17 +84,13 @@ MAX_RADIUS = 50.0
 MIN_POINTS = 10
 
 
-def _readonly(a: Any) -> np.ndarray:
-    a = np.asarray(a)
-    if a.flags.writeable and a.base is None or a.flags.owndata:
-        a.setflags(write=False)
-    return a
-
-
 def _freeze(obj: Any) -> None:
+    """Store read-only views of the array fields (the caller's arrays stay writable)."""
     for name, value in vars(obj).items():
         if isinstance(value, np.ndarray):
-            object.__setattr__(obj, name, _readonly(value))
+            view = value.view()
+            view.setflags(write=False)
+            object.__setattr__(obj, name, view)
 
 
 def _nanstat(values: np.ndarray, func: Any) -> float:
@@ -105,8 +101,9 @@ def _nanstat(values: np.ndarray, func: Any) -> float:
 # ------------------------------------------------------------------ scalar helpers
 
 
-def laser_block_sigma(*, sigma_gps: float = SIGMA_GPS, sigma_ins: float = SIGMA_INS,
-                      sigma_strip: float = SIGMA_STRIP) -> float:
+def laser_block_sigma(
+    *, sigma_gps: float = SIGMA_GPS, sigma_ins: float = SIGMA_INS, sigma_strip: float = SIGMA_STRIP
+) -> float:
     """σ_laser_block = √(E2² + E3² + E4²) (eq. 9), in metres.
 
     Examples
@@ -114,8 +111,14 @@ def laser_block_sigma(*, sigma_gps: float = SIGMA_GPS, sigma_ins: float = SIGMA_
     >>> round(laser_block_sigma() * 100, 6)
     5.830952
     """
-    e = [check_positive(v, n, allow_zero=True) for v, n in
-         ((sigma_gps, "sigma_gps"), (sigma_ins, "sigma_ins"), (sigma_strip, "sigma_strip"))]
+    e = [
+        check_positive(v, n, allow_zero=True)
+        for v, n in (
+            (sigma_gps, "sigma_gps"),
+            (sigma_ins, "sigma_ins"),
+            (sigma_strip, "sigma_strip"),
+        )
+    ]
     return float(np.sqrt(sum(x * x for x in e)))
 
 
@@ -169,8 +172,9 @@ def critical_value(alpha: float = 0.001) -> float:
     return float(-ndtri(a / 2.0))
 
 
-def tin_sigma(weights: Any, sigmas: Any, *, correlation: float = 0.0,
-              covariance: Any = None) -> np.ndarray | float:
+def tin_sigma(
+    weights: Any, sigmas: Any, *, correlation: float = 0.0, covariance: Any = None
+) -> np.ndarray | float:
     """σ of a TIN-interpolated height from the vertex σ's and barycentric weights (§6.4).
 
     σ_h² = Σ w_k²σ_k² + 2ρ Σ_{k<l} w_k w_l σ_k σ_l, or wᵀCw with a full 3x3
@@ -241,12 +245,22 @@ class PlaneHeight:
         _freeze(self)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"height": self.height, "sigma_plane": self.sigma_plane, "n": self.n,
-                "sigma0": self.sigma0}
+        return {
+            "height": self.height,
+            "sigma_plane": self.sigma_plane,
+            "n": self.n,
+            "sigma0": self.sigma0,
+        }
 
 
-def fit_plane_height(points: Any, map_xy: Any, *, sigma_point: float = SIGMA_POINT,
-                     eq8_diagonal: bool = False, posterior: bool = False) -> PlaneHeight:
+def fit_plane_height(
+    points: Any,
+    map_xy: Any,
+    *,
+    sigma_point: float = SIGMA_POINT,
+    eq8_diagonal: bool = False,
+    posterior: bool = False,
+) -> PlaneHeight:
     """Fit z = −x·p1 − y·p2 + p3 to laser points and predict the height at a map point (§6.1).
 
     Parameters
@@ -285,17 +299,31 @@ def fit_plane_height(points: Any, map_xy: Any, *, sigma_point: float = SIGMA_POI
     if not np.isfinite(mxy).all():
         raise InvalidPointsError(f"map_xy must be finite, got {map_xy!r}")
     s = check_positive(sigma_point, "sigma_point")
-    res = _k.fit_planes(pts, np.zeros(len(pts), dtype=np.int64), mxy, sigma_z=s,
-                        posterior=posterior, eq8_diagonal=eq8_diagonal, min_points=3)
+    res = _k.fit_planes(
+        pts,
+        np.zeros(len(pts), dtype=np.int64),
+        mxy,
+        sigma_z=s,
+        posterior=posterior,
+        eq8_diagonal=eq8_diagonal,
+        min_points=3,
+    )
     if res["reason"][0] == _k.COLLINEAR:
-        raise DegenerateGeometryError("the x, y of the laser points are collinear "
-                                      "(condition number of AᵀA > 1e12); no plane can be fitted")
+        raise DegenerateGeometryError(
+            "the x, y of the laser points are collinear "
+            "(condition number of AᵀA > 1e12); no plane can be fitted"
+        )
     q11, q12, q22, q33 = res["q"][0]
     cov = np.array([[q11, q12, 0.0], [q12, q22, 0.0], [0.0, 0.0, q33]])
-    return PlaneHeight(height=float(res["height"][0]), sigma_plane=float(res["sigma_plane"][0]),
-                       params=res["p"][0].copy(), covariance=cov,
-                       centroid=mxy[0] + res["centroid_offset"][0], n=int(res["n_used"][0]),
-                       sigma0=float(res["sigma0"][0]))
+    return PlaneHeight(
+        height=float(res["height"][0]),
+        sigma_plane=float(res["sigma_plane"][0]),
+        params=res["p"][0].copy(),
+        covariance=cov,
+        centroid=mxy[0] + res["centroid_offset"][0],
+        n=int(res["n_used"][0]),
+        sigma0=float(res["sigma0"][0]),
+    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -353,8 +381,9 @@ class MapPointHeights:
         }
 
 
-def _check_common(radius: float, max_radius: float, min_points: int, growth: float | None,
-                  posterior: bool) -> tuple[float, float, int, float | None]:
+def _check_common(
+    radius: float, max_radius: float, min_points: int, growth: float | None, posterior: bool
+) -> tuple[float, float, int, float | None]:
     r = check_positive(radius, "radius")
     rmax = check_positive(max_radius, "max_radius")
     if rmax < r:
@@ -364,12 +393,16 @@ def _check_common(radius: float, max_radius: float, min_points: int, growth: flo
     except (TypeError, ValueError):
         raise OptionError(f"min_points must be an integer, got {min_points!r}") from None
     if k != min_points or k < 3 or (posterior and k < 4):
-        raise OptionError(f"min_points must be an integer >= {4 if posterior else 3}"
-                          f"{' with posterior=True' if posterior else ''}, got {min_points!r}")
+        raise OptionError(
+            f"min_points must be an integer >= {4 if posterior else 3}"
+            f"{' with posterior=True' if posterior else ''}, got {min_points!r}"
+        )
     if growth is not None:
         growth = check_positive(growth, "growth")
         if growth <= 1.0:
-            raise OptionError(f"growth must be > 1 (or None for a continuous radius), got {growth!r}")
+            raise OptionError(
+                f"growth must be > 1 (or None for a continuous radius), got {growth!r}"
+            )
     return r, rmax, k, growth
 
 
@@ -384,19 +417,32 @@ def _segment_labels(pts: np.ndarray, labels: Any, largest_segment: bool) -> np.n
     try:
         from ..geometry.segmentation import surface_growing
     except ImportError as exc:  # pragma: no cover - depends on the geometry package
-        raise OptionError("largest_segment=True needs lidarqa.geometry.segmentation.surface_growing, "
-                          "which is not available; pass labels= instead") from exc
+        raise OptionError(
+            "largest_segment=True needs lidarqa.geometry.segmentation.surface_growing, "
+            "which is not available; pass labels= instead"
+        ) from exc
     return np.asarray(surface_growing(pts), dtype=np.int64)
 
 
-def map_point_heights(points: Any, map_xy: Any, *, radius: float = RADIUS,
-                      max_radius: float = MAX_RADIUS, min_points: int = MIN_POINTS,
-                      growth: float | None = 2.0, sigma_point: float = SIGMA_POINT,
-                      sigma_gps: float = SIGMA_GPS, sigma_ins: float = SIGMA_INS,
-                      sigma_strip: float = SIGMA_STRIP, curvature: float = CURVATURE,
-                      s_mode: str = "centroid", eq8_diagonal: bool = False,
-                      posterior: bool = False, largest_segment: bool = False,
-                      labels: Any = None) -> MapPointHeights:
+def map_point_heights(
+    points: Any,
+    map_xy: Any,
+    *,
+    radius: float = RADIUS,
+    max_radius: float = MAX_RADIUS,
+    min_points: int = MIN_POINTS,
+    growth: float | None = 2.0,
+    sigma_point: float = SIGMA_POINT,
+    sigma_gps: float = SIGMA_GPS,
+    sigma_ins: float = SIGMA_INS,
+    sigma_strip: float = SIGMA_STRIP,
+    curvature: float = CURVATURE,
+    s_mode: str = "centroid",
+    eq8_diagonal: bool = False,
+    posterior: bool = False,
+    largest_segment: bool = False,
+    labels: Any = None,
+) -> MapPointHeights:
     """Height and error budget of every map point from the laser points around it (§6.1–6.3).
 
     The laser points within `radius` (horizontal distance) are used; where there
@@ -453,22 +499,31 @@ def map_point_heights(points: Any, map_xy: Any, *, radius: float = RADIUS,
     lab = _segment_labels(pts, labels, largest_segment)
     m = len(mxy)
     tree = None
+    order = np.empty(0, dtype=np.int64)
+    cell = 4.0 * r
     if len(pts):
         from scipy.spatial import cKDTree
 
         origin = pts[:, :2].min(axis=0)
-        tree = cKDTree(pts[:, :2] - origin)
+        order = _k.spatial_order(pts[:, :2], origin, cell)
+        tree = cKDTree(pts[order, :2] - origin, balanced_tree=False)
     else:
         origin = np.zeros(2)
-    group, index, r_used, n_found = _k.neighbourhoods(
-        tree, mxy - origin, radius=r, max_radius=rmax, min_points=k, growth=growth)
+    q_order = _k.spatial_order(mxy, origin, cell) if m else np.empty(0, dtype=np.int64)
+    q_group, q_index, q_r, q_n = _k.neighbourhoods(
+        tree, mxy[q_order] - origin, radius=r, max_radius=rmax, min_points=k, growth=growth
+    )
+    group, index = q_order[q_group], order[q_index]
+    r_used, n_found = np.empty(m), np.empty(m, dtype=np.int64)
+    r_used[q_order], n_found[q_order] = q_r, q_n
     enough_before = np.bincount(group, minlength=m) >= k
     if lab is not None and len(group):
         keep = _k.largest_segment_filter(group, lab[index], m)
         group, index = group[keep], index[keep]
     sel = pts[index]
-    res = _k.fit_planes(sel, group, mxy, sigma_z=s_z, posterior=posterior,
-                        eq8_diagonal=eq8_diagonal, min_points=k)
+    res = _k.fit_planes(
+        sel, group, mxy, sigma_z=s_z, posterior=posterior, eq8_diagonal=eq8_diagonal, min_points=k
+    )
     reason = res["reason"]
     if lab is not None:
         reason = np.where(enough_before & (reason == _k.TOO_FEW), _k.TOO_FEW_SEGMENT, reason)
@@ -482,11 +537,19 @@ def map_point_heights(points: Any, map_xy: Any, *, radius: float = RADIUS,
     sig_plane = res["sigma_plane"]
     sig_block = np.where(good, block, np.nan)
     sigma = np.sqrt(sig_plane**2 + sig_block**2 + sig_model**2)
-    return MapPointHeights(xy=mxy, height=res["height"], sigma=sigma, sigma_plane=sig_plane,
-                           sigma_block=sig_block, sigma_model=sig_model,
-                           n_points=n_pts.astype(np.int64), radius=r_used,
-                           distance=np.where(good, dist, np.nan), failed=~good,
-                           reason=np.asarray(reason, dtype=object))
+    return MapPointHeights(
+        xy=mxy,
+        height=res["height"],
+        sigma=sigma,
+        sigma_plane=sig_plane,
+        sigma_block=sig_block,
+        sigma_model=sig_model,
+        n_points=n_pts.astype(np.int64),
+        radius=r_used,
+        distance=np.where(good, dist, np.nan),
+        failed=~good,
+        reason=np.asarray(reason, dtype=object),
+    )
 
 
 def _as_xy(xy: Any, name: str) -> np.ndarray:
@@ -536,8 +599,9 @@ class TinInterpolation:
         _freeze(self)
 
 
-def interpolate_tin(vertices: Any, sigma: Any, query_xy: Any, *, correlation: float = 0.0,
-                    covariance: Any = None) -> TinInterpolation:
+def interpolate_tin(
+    vertices: Any, sigma: Any, query_xy: Any, *, correlation: float = 0.0, covariance: Any = None
+) -> TinInterpolation:
     """Interpolate heights and precisions in a Delaunay TIN (§6.4).
 
     Parameters
@@ -576,8 +640,10 @@ def interpolate_tin(vertices: Any, sigma: Any, query_xy: Any, *, correlation: fl
         if covariance is not None:
             c = covariance
             if getattr(c, "shape", None) != (len(v), len(v)):
-                raise InvalidPointsError(f"covariance must have shape ({len(v)}, {len(v)}), "
-                                         f"got {getattr(c, 'shape', None)}")
+                raise InvalidPointsError(
+                    f"covariance must have shape ({len(v)}, {len(v)}), "
+                    f"got {getattr(c, 'shape', None)}"
+                )
             rows = np.repeat(vi, 3, axis=1).ravel()
             cols = np.tile(vi, (1, 3)).ravel()
             sub = np.asarray(c[rows, cols], dtype=np.float64).reshape(-1, 3, 3)
@@ -585,8 +651,9 @@ def interpolate_tin(vertices: Any, sigma: Any, query_xy: Any, *, correlation: fl
         else:
             var = _k.tin_variance(wi, s[vi], rho)
         sig[inside] = np.sqrt(np.maximum(var, 0.0))
-    return TinInterpolation(height=height, sigma=sig, inside=inside, vertices=verts, weights=w,
-                            has_tin=has_tin)
+    return TinInterpolation(
+        height=height, sigma=sig, inside=inside, vertices=verts, weights=w, has_tin=has_tin
+    )
 
 
 # ------------------------------------------------------------------ comparison
@@ -638,8 +705,9 @@ class WTestResult:
         }
 
 
-def w_test(dh: Any, sigma_dh: Any, *, alpha: float = 0.001,
-           estimate_offset: bool = False) -> WTestResult:
+def w_test(
+    dh: Any, sigma_dh: Any, *, alpha: float = 0.001, estimate_offset: bool = False
+) -> WTestResult:
     """w_i = Δh_i/σ_Δh,i with iterative data snooping at level α₀ (§6.5).
 
     Entries with a NaN Δh or σ are not tested (w NaN, never an outlier).
@@ -674,12 +742,18 @@ def w_test(dh: Any, sigma_dh: Any, *, alpha: float = 0.001,
     k = critical_value(alpha)
     w = np.full(d.shape, np.nan)
     outlier = np.zeros(d.shape, dtype=bool)
-    wk, ok_out, passes, offset = _k.data_snooping(d[ok], s[ok], critical=k,
-                                                  estimate_offset=bool(estimate_offset))
+    wk, ok_out, passes, offset = _k.data_snooping(
+        d[ok], s[ok], critical=k, estimate_offset=bool(estimate_offset)
+    )
     w[ok] = wk
     outlier[ok] = ok_out
-    return WTestResult(w=w, outlier=outlier, critical=k, n_passes=passes,
-                       offset=offset if ok.any() else float("nan"))
+    return WTestResult(
+        w=w,
+        outlier=outlier,
+        critical=k,
+        n_passes=passes,
+        offset=offset if ok.any() else float("nan"),
+    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -720,12 +794,19 @@ class HeightComparison:
 
     def to_dict(self) -> dict[str, Any]:
         """``{"n", "mean", "std", "rms", "max_abs", "sigma_model_empirical"}``."""
-        return {"n": self.n, "mean": self.mean, "std": self.std, "rms": self.rms,
-                "max_abs": self.max_abs, "sigma_model_empirical": self.sigma_model_empirical}
+        return {
+            "n": self.n,
+            "mean": self.mean,
+            "std": self.std,
+            "rms": self.rms,
+            "max_abs": self.max_abs,
+            "sigma_model_empirical": self.sigma_model_empirical,
+        }
 
 
-def compare_heights(model_height: Any, model_sigma: Any, reference_z: Any, *,
-                    sigma_ref: float = SIGMA_REF) -> HeightComparison:
+def compare_heights(
+    model_height: Any, model_sigma: Any, reference_z: Any, *, sigma_ref: float = SIGMA_REF
+) -> HeightComparison:
     """Δh statistics of model against reference heights (§6.5).
 
     Parameters
@@ -741,8 +822,10 @@ def compare_heights(model_height: Any, model_sigma: Any, reference_z: Any, *,
     sm = np.asarray(model_sigma, dtype=np.float64).reshape(-1)
     z = np.asarray(reference_z, dtype=np.float64).reshape(-1)
     if not (h.shape == sm.shape == z.shape):
-        raise InvalidPointsError(f"model_height, model_sigma and reference_z must have the same "
-                                 f"length, got {h.shape}, {sm.shape}, {z.shape}")
+        raise InvalidPointsError(
+            f"model_height, model_sigma and reference_z must have the same "
+            f"length, got {h.shape}, {sm.shape}, {z.shape}"
+        )
     s_ref = check_positive(sigma_ref, "sigma_ref", allow_zero=True)
     dh = h - z
     sig = np.sqrt(sm * sm + s_ref * s_ref)
@@ -753,11 +836,17 @@ def compare_heights(model_height: Any, model_sigma: Any, reference_z: Any, *,
     emp = empirical_model_sigma(std, s_ref)
     flags = () if np.isfinite(emp) else ("sigma_model_empirical_undefined",)
     return HeightComparison(
-        dh=np.where(ok, dh, np.nan), sigma_dh=np.where(ok, sig, np.nan), n=n,
-        mean=float(d.mean()) if n else float("nan"), std=std,
+        dh=np.where(ok, dh, np.nan),
+        sigma_dh=np.where(ok, sig, np.nan),
+        n=n,
+        mean=float(d.mean()) if n else float("nan"),
+        std=std,
         rms=float(np.sqrt(np.mean(d * d))) if n else float("nan"),
         max_abs=float(np.abs(d).max()) if n else float("nan"),
-        sigma_model_empirical=emp, sigma_ref=s_ref, flags=flags)
+        sigma_model_empirical=emp,
+        sigma_ref=s_ref,
+        flags=flags,
+    )
 
 
 # ------------------------------------------------------------------ the whole chain
@@ -826,20 +915,38 @@ class HeightReport:
 
     def to_dict(self) -> dict[str, Any]:
         """The ``results`` of ``lidarqa heights --json``: map_points, comparison, w."""
-        return {"map_points": self.map_points.to_dict(), "comparison": self.comparison.to_dict(),
-                "w": self.w.to_dict()}
+        return {
+            "map_points": self.map_points.to_dict(),
+            "comparison": self.comparison.to_dict(),
+            "w": self.w.to_dict(),
+        }
 
 
-def assess_heights(points: Any, map_xy: Any, reference_xyz: Any, *, radius: float = RADIUS,
-                   max_radius: float = MAX_RADIUS, min_points: int = MIN_POINTS,
-                   growth: float | None = 2.0, sigma_point: float = SIGMA_POINT,
-                   sigma_gps: float = SIGMA_GPS, sigma_ins: float = SIGMA_INS,
-                   sigma_strip: float = SIGMA_STRIP, sigma_ref: float = SIGMA_REF,
-                   curvature: float = CURVATURE, s_mode: str = "centroid",
-                   correlation: float = 0.0, covariance: Any = None, alpha: float = 0.001,
-                   estimate_offset: bool = False, eq8_diagonal: bool = False,
-                   posterior: bool = False, largest_segment: bool = False,
-                   labels: Any = None) -> HeightReport:
+def assess_heights(
+    points: Any,
+    map_xy: Any,
+    reference_xyz: Any,
+    *,
+    radius: float = RADIUS,
+    max_radius: float = MAX_RADIUS,
+    min_points: int = MIN_POINTS,
+    growth: float | None = 2.0,
+    sigma_point: float = SIGMA_POINT,
+    sigma_gps: float = SIGMA_GPS,
+    sigma_ins: float = SIGMA_INS,
+    sigma_strip: float = SIGMA_STRIP,
+    sigma_ref: float = SIGMA_REF,
+    curvature: float = CURVATURE,
+    s_mode: str = "centroid",
+    correlation: float = 0.0,
+    covariance: Any = None,
+    alpha: float = 0.001,
+    estimate_offset: bool = False,
+    eq8_diagonal: bool = False,
+    posterior: bool = False,
+    largest_segment: bool = False,
+    labels: Any = None,
+) -> HeightReport:
     """Predict map point heights and precisions, and test them against reference points (§6).
 
     Map point heights come from :func:`map_point_heights`; the fitted map
@@ -880,26 +987,47 @@ def assess_heights(points: Any, map_xy: Any, reference_xyz: Any, *, radius: floa
     ref = as_points(reference_xyz, "reference_xyz")
     rho = check_range(correlation, "correlation", 0.0, 1.0)
     k = critical_value(alpha)
-    mp = map_point_heights(points, map_xy, radius=radius, max_radius=max_radius,
-                           min_points=min_points, growth=growth, sigma_point=sigma_point,
-                           sigma_gps=sigma_gps, sigma_ins=sigma_ins, sigma_strip=sigma_strip,
-                           curvature=curvature, s_mode=s_mode, eq8_diagonal=eq8_diagonal,
-                           posterior=posterior, largest_segment=largest_segment, labels=labels)
+    mp = map_point_heights(
+        points,
+        map_xy,
+        radius=radius,
+        max_radius=max_radius,
+        min_points=min_points,
+        growth=growth,
+        sigma_point=sigma_point,
+        sigma_gps=sigma_gps,
+        sigma_ins=sigma_ins,
+        sigma_strip=sigma_strip,
+        curvature=curvature,
+        s_mode=s_mode,
+        eq8_diagonal=eq8_diagonal,
+        posterior=posterior,
+        largest_segment=largest_segment,
+        labels=labels,
+    )
     fitted = np.flatnonzero(~mp.failed)
     cov = None
     if covariance is not None:
         m = len(mp)
         if getattr(covariance, "shape", None) != (m, m):
-            raise InvalidPointsError(f"covariance must have shape ({m}, {m}), "
-                                     f"got {getattr(covariance, 'shape', None)}")
+            raise InvalidPointsError(
+                f"covariance must have shape ({m}, {m}), got {getattr(covariance, 'shape', None)}"
+            )
         cov = covariance[fitted][:, fitted]
     vertices = np.column_stack([mp.xy[fitted], mp.height[fitted]])
     tin = interpolate_tin(vertices, mp.sigma[fitted], ref[:, :2], correlation=rho, covariance=cov)
     # vertex indices back to map point numbering
-    verts = np.where(tin.vertices >= 0, fitted[np.maximum(tin.vertices, 0)] if len(fitted) else -1,
-                     -1)
-    tin = TinInterpolation(height=tin.height, sigma=tin.sigma, inside=tin.inside, vertices=verts,
-                           weights=tin.weights, has_tin=tin.has_tin)
+    verts = np.full_like(tin.vertices, -1)
+    found = tin.vertices >= 0
+    verts[found] = fitted[tin.vertices[found]]
+    tin = TinInterpolation(
+        height=tin.height,
+        sigma=tin.sigma,
+        inside=tin.inside,
+        vertices=verts,
+        weights=tin.weights,
+        has_tin=tin.has_tin,
+    )
     comp = compare_heights(tin.height, tin.sigma, ref[:, 2], sigma_ref=sigma_ref)
     wt = w_test(comp.dh, comp.sigma_dh, alpha=alpha, estimate_offset=estimate_offset)
     flags: list[str] = []
@@ -912,16 +1040,36 @@ def assess_heights(points: Any, map_xy: Any, reference_xyz: Any, *, radius: floa
     flags.extend(comp.flags)
     if mp.failed.any():
         flags.append("map_points_failed")
-    params = {"radius": radius, "max_radius": max_radius, "min_points": min_points,
-              "growth": growth, "sigma_point": sigma_point, "sigma_gps": sigma_gps,
-              "sigma_ins": sigma_ins, "sigma_strip": sigma_strip, "sigma_ref": sigma_ref,
-              "curvature": curvature, "s_mode": s_mode, "correlation": rho,
-              "covariance": covariance is not None, "alpha": alpha, "critical": k,
-              "estimate_offset": bool(estimate_offset), "eq8_diagonal": bool(eq8_diagonal),
-              "posterior": bool(posterior),
-              "largest_segment": bool(largest_segment or labels is not None)}
-    return HeightReport(map_points=mp, reference_xyz=ref, tin=tin, comparison=comp, w=wt,
-                        parameters=params, flags=tuple(flags))
+    params = {
+        "radius": radius,
+        "max_radius": max_radius,
+        "min_points": min_points,
+        "growth": growth,
+        "sigma_point": sigma_point,
+        "sigma_gps": sigma_gps,
+        "sigma_ins": sigma_ins,
+        "sigma_strip": sigma_strip,
+        "sigma_ref": sigma_ref,
+        "curvature": curvature,
+        "s_mode": s_mode,
+        "correlation": rho,
+        "covariance": covariance is not None,
+        "alpha": alpha,
+        "critical": k,
+        "estimate_offset": bool(estimate_offset),
+        "eq8_diagonal": bool(eq8_diagonal),
+        "posterior": bool(posterior),
+        "largest_segment": bool(largest_segment or labels is not None),
+    }
+    return HeightReport(
+        map_points=mp,
+        reference_xyz=ref,
+        tin=tin,
+        comparison=comp,
+        w=wt,
+        parameters=params,
+        flags=tuple(flags),
+    )
 
 
 # ------------------------------------------------------------------ map points from files
@@ -953,7 +1101,9 @@ def densify_polygons(polygons: Any, *, spacing: float = 10.0) -> tuple[np.ndarra
         return np.empty((0, 2)), np.empty(0, dtype=np.int64)
     bad = [g for g in geoms if g is not None and g.geom_type not in ("Polygon", "MultiPolygon")]
     if bad:
-        raise InvalidPointsError(f"expected Polygon/MultiPolygon geometries, got {bad[0].geom_type}")
+        raise InvalidPointsError(
+            f"expected Polygon/MultiPolygon geometries, got {bad[0].geom_type}"
+        )
     valid = np.array([g is not None and not g.is_empty for g in geoms])
     src = np.flatnonzero(valid)
     if src.size == 0:
@@ -1006,10 +1156,17 @@ def read_map_points(path: str | os.PathLike, *, spacing: float = 10.0) -> Any:
                 raise ReadError(f"cannot read {p}: {exc}") from exc
             names = [n.lower() for n in meta["fields"]]
             geoms = shapely.from_wkb(wkb)
-            ids = (np.asarray(field_data[names.index("id")]) if "id" in names
-                   else np.arange(len(geoms)))
+            ids = (
+                np.asarray(field_data[names.index("id")])
+                if "id" in names
+                else np.arange(len(geoms))
+            )
             xy, poly = densify_polygons(geoms, spacing=spacing)
             xyz = np.column_stack([xy, np.full(len(xy), np.nan)])
-            return PointSet(ids=np.arange(len(xy)), xyz=xyz, attributes={"polygon": ids[poly]},
-                            crs=_crs_from_meta(meta))
+            return PointSet(
+                ids=np.arange(len(xy)),
+                xyz=xyz,
+                attributes={"polygon": ids[poly]},
+                crs=_crs_from_meta(meta),
+            )
     return read_points(p, require_z=False)

@@ -1,0 +1,318 @@
+"""``lidarqa heights``: predicted height precision of map points, tested against references."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import click
+import numpy as np
+
+from ..accuracy.heights import (
+    CURVATURE,
+    MAX_RADIUS,
+    MIN_POINTS,
+    RADIUS,
+    SIGMA_GPS,
+    SIGMA_INS,
+    SIGMA_POINT,
+    SIGMA_REF,
+    SIGMA_STRIP,
+)
+from ._common import INT_LIST, Steps, common_options, echo, finish, prepare_outputs, settings
+
+OUT_SUFFIXES = (".csv", ".gpkg")  # GeoJSON cannot hold the NaN z of unfitted map points
+
+
+def _horizontal_vertical(crs: Any) -> tuple[Any, Any]:
+    if crs is None:
+        return None, None
+    if crs.is_compound and len(crs.sub_crs_list) >= 2:
+        return crs.sub_crs_list[0], crs.sub_crs_list[1]
+    return crs, None
+
+
+def _check_crs(a: Any, b: Any, names: tuple[str, str]) -> None:
+    from ..io.crs import ensure_same_crs
+
+    ha, va = _horizontal_vertical(a)
+    hb, vb = _horizontal_vertical(b)
+    ensure_same_crs(ha, hb, what=names)
+    ensure_same_crs(va, vb, what=(names[0] + " vertical", names[1] + " vertical"))
+
+
+def _read_reference(path: str) -> Any:
+    from ..io.vector import PointSet, read_points
+
+    p = Path(path)
+    if p.is_file() and p.stat().st_size == 0:  # an empty file: no reference points
+        return PointSet(ids=np.empty(0, dtype=np.int64), xyz=np.empty((0, 3)))
+    return read_points(p, require_z=True)
+
+
+def _ids(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    a, b = np.asarray(a), np.asarray(b)
+    if a.dtype.kind in "iu" and b.dtype.kind in "iu":
+        return np.concatenate([a.astype(np.int64), b.astype(np.int64)])
+    return np.concatenate([a.astype(str), b.astype(str)]).astype(object)
+
+
+def _output_rows(report: Any, map_ids: np.ndarray, ref_ids: np.ndarray, crs: Any) -> Any:
+    from ..io.vector import PointSet
+
+    mp = report.map_points
+    m, r = len(mp), len(report.reference_xyz)
+    nan_m, nan_r = np.full(m, np.nan), np.full(r, np.nan)
+    zero_m, zero_r = np.zeros(m, dtype=np.int64), np.zeros(r, dtype=np.int64)
+    xyz = np.vstack([np.column_stack([mp.xy, mp.height]), report.reference_xyz]).reshape(-1, 3)
+    attrs = {
+        "kind": np.array(["map"] * m + ["reference"] * r, dtype=object),
+        "height": np.concatenate([mp.height, nan_r]),
+        "sigma": np.concatenate([mp.sigma, nan_r]),
+        "sigma_plane": np.concatenate([mp.sigma_plane, nan_r]),
+        "sigma_block": np.concatenate([mp.sigma_block, nan_r]),
+        "sigma_model": np.concatenate([mp.sigma_model, nan_r]),
+        "n_points": np.concatenate([mp.n_points, zero_r]),
+        "radius": np.concatenate([mp.radius, nan_r]),
+        "distance": np.concatenate([mp.distance, nan_r]),
+        "failed": np.concatenate([mp.failed.astype(np.int64), zero_r]),
+        "reason": np.concatenate([mp.reason.astype(str), np.full(r, "")]).astype(object),
+        "model_height": np.concatenate([nan_m, report.tin.height]),
+        "model_sigma": np.concatenate([nan_m, report.tin.sigma]),
+        "dh": np.concatenate([nan_m, report.dh]),
+        "sigma_dh": np.concatenate([nan_m, report.sigma_dh]),
+        "w": np.concatenate([nan_m, report.w_values]),
+        "outlier": np.concatenate([zero_m, report.outlier.astype(np.int64)]),
+        "inside": np.concatenate([zero_m, report.inside.astype(np.int64)]),
+    }
+    return PointSet(ids=_ids(map_ids, ref_ids), xyz=xyz, attributes=attrs, crs=crs)
+
+
+def _fmt(v: float, scale: float = 100.0, unit: str = "cm") -> str:
+    return "n/a" if v is None or not np.isfinite(v) else f"{v * scale:.1f} {unit}"
+
+
+@click.command()
+@click.argument("cloud", type=click.Path())
+@click.argument("map_path", metavar="MAP", type=click.Path())
+@click.argument("reference", type=click.Path())
+@click.option(
+    "--radius",
+    type=float,
+    default=RADIUS,
+    show_default=True,
+    help="First search radius for laser points around a map point (m).",
+)
+@click.option(
+    "--max-radius",
+    type=float,
+    default=MAX_RADIUS,
+    show_default=True,
+    help="The radius grows (x2 per step) up to this until --min-points are found (m).",
+)
+@click.option(
+    "--min-points",
+    type=int,
+    default=MIN_POINTS,
+    show_default=True,
+    help="Laser points needed for a plane fit; map points with fewer are flagged.",
+)
+@click.option(
+    "--sigma-point",
+    type=float,
+    default=SIGMA_POINT,
+    show_default=True,
+    help="E1: laser point height noise (m).",
+)
+@click.option(
+    "--sigma-gps", type=float, default=SIGMA_GPS, show_default=True, help="E2: GPS noise (m)."
+)
+@click.option(
+    "--sigma-ins", type=float, default=SIGMA_INS, show_default=True, help="E3: INS noise (m)."
+)
+@click.option(
+    "--sigma-strip",
+    type=float,
+    default=SIGMA_STRIP,
+    show_default=True,
+    help="E4: strip adjustment noise (m).",
+)
+@click.option(
+    "--sigma-ref",
+    type=float,
+    default=SIGMA_REF,
+    show_default=True,
+    help="Reference height noise (m).",
+)
+@click.option(
+    "--curvature",
+    type=float,
+    default=CURVATURE,
+    show_default=True,
+    help="Maximum surface curvature (1/m) for the model term κ·s²/6; 0 = off.",
+)
+@click.option(
+    "--correlation",
+    type=float,
+    default=0.0,
+    show_default=True,
+    help="Correlation 0..1 between the heights of the three TIN vertices.",
+)
+@click.option(
+    "--alpha",
+    type=float,
+    default=0.001,
+    show_default=True,
+    help="Significance level of the w-tests (0.001 -> critical value 3.29).",
+)
+@click.option(
+    "--classes",
+    type=INT_LIST,
+    default=None,
+    help="Use only laser points of these classes, e.g. 2 or 2,11.",
+)
+@click.option(
+    "--spacing",
+    type=float,
+    default=10.0,
+    show_default=True,
+    help="Map points every this many metres along polygon boundaries (polygon MAP).",
+)
+@click.option(
+    "--eq8",
+    "eq8_diagonal",
+    is_flag=True,
+    help="σ_plane by the paper's eq. 8 (no p1-p2 covariance) instead of the full form.",
+)
+@click.option(
+    "--posterior",
+    is_flag=True,
+    help="Laser noise from each plane fit's residuals instead of --sigma-point.",
+)
+@click.option(
+    "--estimate-offset",
+    is_flag=True,
+    help="Data snooping re-estimates a common height offset on each pass.",
+)
+@click.option(
+    "--largest-segment",
+    is_flag=True,
+    help="Fit only the laser points of the largest surface-growing segment.",
+)
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(dir_okay=False),
+    default=None,
+    help="Per-point output (.csv or .gpkg, layer 'heights'): a row per map point and per "
+    "reference point, told apart by the 'kind' column.",
+)
+@common_options
+def heights(
+    cloud: str,
+    map_path: str,
+    reference: str,
+    radius: float,
+    max_radius: float,
+    min_points: int,
+    sigma_point: float,
+    sigma_gps: float,
+    sigma_ins: float,
+    sigma_strip: float,
+    sigma_ref: float,
+    curvature: float,
+    correlation: float,
+    alpha: float,
+    classes: list[int] | None,
+    spacing: float,
+    eq8_diagonal: bool,
+    posterior: bool,
+    estimate_offset: bool,
+    largest_segment: bool,
+    output: str | None,
+) -> None:
+    """Height quality of map points by error propagation, tested with w-tests.
+
+    Each map point (MAP: a point list id,x,y[,z], or polygons whose boundaries
+    get a point every --spacing m) gets a height from a plane fitted to the
+    CLOUD's laser points around it and a predicted σ (plane + laser block +
+    model). Heights and σ are interpolated in a TIN of the map points to the
+    REFERENCE points (id,x,y,z), and Δh/σ_Δh is w-tested (Oude Elberink &
+    Vosselman).
+    """
+    from ..accuracy.heights import assess_heights, read_map_points
+    from ..errors import OptionError
+    from ..io import read
+    from ..io.crs import z_to_metres_factor
+
+    if output is not None and Path(output).suffix.lower() not in OUT_SUFFIXES:
+        raise OptionError(f"--output must end in {', '.join(OUT_SUFFIXES)}; got {output!r}")
+    prepare_outputs(output, inputs=(cloud, map_path, reference))
+    steps = Steps()
+    with steps("Reading " + cloud):
+        pc = read(cloud)
+        if classes:
+            pc = pc.select(classes=classes)
+        xyz = pc.xyz.copy()
+        xyz[:, 2] *= z_to_metres_factor(pc.crs)
+    with steps("Reading map and reference points"):
+        mp = read_map_points(map_path, spacing=spacing)
+        ref = _read_reference(reference)
+        _check_crs(pc.crs, mp.crs, ("cloud", "map"))
+        _check_crs(pc.crs, ref.crs, ("cloud", "reference"))
+        _check_crs(mp.crs, ref.crs, ("map", "reference"))
+        ref_xyz = ref.xyz.copy()
+        ref_xyz[:, 2] *= z_to_metres_factor(ref.crs if ref.crs is not None else pc.crs)
+    with steps(f"Fitting {len(mp):,} map points, testing {len(ref):,} reference points"):
+        report = assess_heights(
+            xyz,
+            mp.xyz[:, :2],
+            ref_xyz,
+            radius=radius,
+            max_radius=max_radius,
+            min_points=min_points,
+            sigma_point=sigma_point,
+            sigma_gps=sigma_gps,
+            sigma_ins=sigma_ins,
+            sigma_strip=sigma_strip,
+            sigma_ref=sigma_ref,
+            curvature=curvature,
+            correlation=correlation,
+            alpha=alpha,
+            estimate_offset=estimate_offset,
+            eq8_diagonal=eq8_diagonal,
+            posterior=posterior,
+            largest_segment=largest_segment,
+        )
+    if output is not None:
+        from ..io.vector import write_points
+
+        with steps("Writing " + output):
+            rows = _output_rows(report, mp.ids, ref.ids, pc.crs or mp.crs or ref.crs)
+            write_points(rows, output, overwrite=settings().overwrite, layer="heights")
+    res = report.to_dict()
+    m, c, w = res["map_points"], res["comparison"], res["w"]
+    echo(f"map points        {m['n']:,} ({m['n_failed']:,} not fitted)")
+    echo(f"  σ mean / p95    {_fmt(m['sigma_mean'])} / {_fmt(m['sigma_p95'])}")
+    outside = report.n_outside
+    echo(f"reference points  {len(ref):,} ({c['n']:,} compared, {outside:,} outside the TIN)")
+    echo(f"  Δh mean / std   {_fmt(c['mean'])} / {_fmt(c['std'])}")
+    echo(f"  RMS / max |Δh|  {_fmt(c['rms'])} / {_fmt(c['max_abs'])}")
+    echo(f"  σ_model (emp.)  {_fmt(c['sigma_model_empirical'])}")
+    echo(f"w-tests           k = {w['critical']:.4f}, {w['n_outliers']:,} outlier(s)")
+
+    def num(v: Any) -> str:
+        return "n/a" if v is None or not np.isfinite(v) else f"{v:.3f}"
+
+    echo(f"  std(w)          {num(w['std'])} (without outliers {num(w['std_without_outliers'])})")
+    echo(f"  |w| < 1 / < 2   {_fmt(w['frac_lt1'], 100, '%')} / {_fmt(w['frac_lt2'], 100, '%')}")
+    if report.flags:
+        echo("flags             " + ", ".join(report.flags))
+    params = dict(report.parameters)
+    params.update(classes=classes, spacing=spacing)
+    finish(
+        "heights",
+        inputs={"cloud": cloud, "map": map_path, "reference": reference, "output": output},
+        parameters=params,
+        results=res,
+    )
