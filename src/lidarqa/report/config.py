@@ -44,6 +44,7 @@ from ..errors import ConfigError, CRSMismatchError
 
 __all__ = [
     "ConfigCRSMismatchError",
+    "AnalysisUnavailableError",
     "Key",
     "InputSpec",
     "AnalysisItem",
@@ -57,6 +58,10 @@ __all__ = [
 
 class ConfigCRSMismatchError(ConfigError, CRSMismatchError):
     """Inputs of an assessment declare different CRSs."""
+
+
+class AnalysisUnavailableError(ConfigError):
+    """An analysis needs a part of lidarqa (or an extra) that this installation lacks."""
 
 
 # ------------------------------------------------------------------ value types
@@ -128,8 +133,9 @@ class Key:
     help: str = ""
 
 
-def _check_table(table: Any, keys: Mapping[str, Key], where: str, *,
-                 extra: Mapping[str, Any] | None = None) -> dict[str, Any]:
+def _check_table(
+    table: Any, keys: Mapping[str, Key], where: str, *, extra: Mapping[str, Any] | None = None
+) -> dict[str, Any]:
     """Validate `table` against `keys` (+ `extra` library params name -> default)."""
     if not isinstance(table, Mapping):
         raise ConfigError(f"{where} must be a table, got {_describe(table)}")
@@ -137,14 +143,20 @@ def _check_table(table: Any, keys: Mapping[str, Key], where: str, *,
     valid = list(keys) + [k for k in extra if k not in keys]
     for name in table:
         if name not in keys and name not in extra:
+            import difflib
+
+            close = difflib.get_close_matches(str(name), valid, n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
             raise ConfigError(
-                f"unknown key {name!r} in {where}; valid keys: {', '.join(sorted(valid))}"
+                f"unknown key {name!r} in {where}{hint}; valid keys: {', '.join(sorted(valid))}"
             )
     out: dict[str, Any] = {}
     for name, key in keys.items():
         if name not in table:
             if key.required:
-                raise ConfigError(f"missing key {name!r} in {where} ({key.help or _TYPE_NAMES[key.type]})")
+                raise ConfigError(
+                    f"missing key {name!r} in {where} ({key.help or _TYPE_NAMES[key.type]})"
+                )
             out[name] = key.default
             continue
         value = table[name]
@@ -165,14 +177,27 @@ def _check_table(table: Any, keys: Mapping[str, Key], where: str, *,
     return out
 
 
-def check_params(table: Mapping[str, Any], defaults: Mapping[str, Any], where: str) -> dict[str, Any]:
+def check_params(
+    table: Mapping[str, Any], defaults: Mapping[str, Any], where: str
+) -> dict[str, Any]:
     """Type-check library parameters against their defaults (same names as the API)."""
     out: dict[str, Any] = {}
+    annotations = getattr(defaults, "annotations", {})
     for name, value in table.items():
         if name not in defaults:
             continue
         default = defaults[name]
         kind = _kind_of_default(default)
+        if kind is None and name in annotations:
+            kinds = _kinds_of_annotation(annotations[name])
+            if kinds and not any(_type_ok(k, value) for k in kinds):
+                expected = " or ".join(_TYPE_NAMES[k] for k in kinds)
+                raise ConfigError(
+                    f"key {name!r} in {where} must be {expected}, got {_describe(value)}"
+                )
+            if kinds == ["float"]:
+                value = float(value)
+            kind = None
         if kind is not None and not _type_ok(kind, value):
             raise ConfigError(
                 f"key {name!r} in {where} must be {_TYPE_NAMES[kind]}, got {_describe(value)}"
@@ -183,6 +208,24 @@ def check_params(table: Mapping[str, Any], defaults: Mapping[str, Any], where: s
             value = tuple(value)
         out[name] = value
     return out
+
+
+_ANNOTATION_KINDS = {"float": "float", "int": "int", "bool": "bool", "str": "str"}
+
+
+def _kinds_of_annotation(annotation: str) -> list[str]:
+    """Value kinds allowed by a simple annotation such as ``"float | None"`` ([] = do not check)."""
+    kinds = []
+    for token in str(annotation).replace("Optional[", "").replace("]", "").split("|"):
+        token = token.strip()
+        if token in ("None", "NoneType"):
+            continue
+        if token not in _ANNOTATION_KINDS:
+            return []
+        kinds.append(_ANNOTATION_KINDS[token])
+    if "float" in kinds and "int" in kinds:
+        kinds.remove("int")
+    return kinds
 
 
 def _kind_of_default(default: Any) -> str | None:
@@ -232,8 +275,9 @@ _COMMON = {
     "enabled": Key("bool", default=True),
 }
 
-_FORMAT = Key("str", default="gpkg", choices=("gpkg", "csv", "geojson"),
-              help="vector output format")
+_FORMAT = Key(
+    "str", default="gpkg", choices=("gpkg", "csv", "geojson"), help="vector output format"
+)
 
 
 @dataclass(frozen=True)
@@ -245,6 +289,7 @@ class Target:
     direction: str  # "max" (value must be <= target) or "min" (>= target)
     label: str
     unit: str = ""
+    scale: float = 1.0  # display factor (e.g. 100 for fractions shown in %)
 
 
 def _targets(*items: Target) -> dict[str, Target]:
@@ -254,9 +299,9 @@ def _targets(*items: Target) -> dict[str, Target]:
 ANALYSIS_TARGETS: dict[str, dict[str, Target]] = {
     "info": {},
     "ground": _targets(
-        Target("total", ("total",), "max", "total error", ""),
-        Target("type_i", ("type_i",), "max", "type I error", ""),
-        Target("type_ii", ("type_ii",), "max", "type II error", ""),
+        Target("total", ("total",), "max", "total error", "%", 100.0),
+        Target("type_i", ("type_i",), "max", "type I error", "%", 100.0),
+        Target("type_ii", ("type_ii",), "max", "type II error", "%", 100.0),
         Target("kappa", ("kappa",), "min", "Cohen's κ", ""),
     ),
     "edges": _targets(Target("n_edges", ("n_edges",), "min", "edges found", "")),
@@ -286,45 +331,73 @@ ANALYSIS_KEYS: dict[str, dict[str, Key]] = {
         "cloud": Key("str", required=True, help="name of a cloud in [inputs.clouds]"),
         "method": Key("str", default="segment-ptd", choices=("segment-ptd", "ptd")),
         "evaluate": Key("bool", default=True, help="score against the input's classes"),
-        "ignore_classes": Key("int_list", default=None,
-                              help="classes left out of the evaluation"),
+        "ignore_classes": Key("int_list", default=None, help="classes left out of the evaluation"),
         "write_cloud": Key("bool", default=True, help="write the classified cloud"),
         "cloud_format": Key("str", default="laz", choices=("laz", "las")),
     },
     "edges": {
         "cloud": Key("str", required=True, help="name of a cloud in [inputs.clouds]"),
         "classes": Key("int_list", default=None, help="classes to use (e.g. [6], buildings)"),
-        "source_ids": Key("int_list", default=None,
-                          help="flight strips (point_source_id), each processed separately"),
+        "source_ids": Key(
+            "int_list",
+            default=None,
+            help="flight strips (point_source_id), each processed separately",
+        ),
         "format": _FORMAT,
     },
     "lines": {
-        "test": Key("ref", required=True,
-                    help="a segments input name or { cloud = ..., classes = [...], source_id = N }"),
-        "model": Key("ref", required=True,
-                     help="a segments input name or { cloud = ..., classes = [...], source_id = N }"),
-        "ground_truth": Key("str", help="CSV of true pairs (test_id,model_id), relative to the config"),
+        "test": Key(
+            "ref",
+            required=True,
+            help="a segments input name or { cloud = ..., classes = [...], source_id = N }",
+        ),
+        "model": Key(
+            "ref",
+            required=True,
+            help="a segments input name or { cloud = ..., classes = [...], source_id = N }",
+        ),
+        "ground_truth": Key(
+            "str", help="CSV of true pairs (test_id,model_id), relative to the config"
+        ),
         "edges": Key("table", default=None, help="edge-extraction options for cloud inputs"),
         "format": _FORMAT,
     },
     "checkpoints": {
-        "measured": Key("str", required=True,
-                        help="a points input name, or a cloud input name with vertical = true"),
-        "check": Key("ref", required=True,
-                     help="a points input name or { from_cloud = ..., classes = [...], n = 20, seed = 0 }"),
-        "vertical": Key("bool", default=False, help="compare check heights with a TIN of the cloud"),
-        "classes": Key("int_list", default=[2], help="cloud classes of the TIN (vertical check)"),
-        "source_ids": Key("int_list", default=None, help="cloud strips of the TIN (vertical check)"),
+        "measured": Key(
+            "str",
+            required=True,
+            help="a points input name, or a cloud input name with vertical = true",
+        ),
+        "check": Key(
+            "ref",
+            required=True,
+            help="a points input name or { from_cloud = ..., classes = [...], n = 20, seed = 0 }",
+        ),
+        "vertical": Key(
+            "bool", default=False, help="compare check heights with a TIN of the cloud"
+        ),
+        "source_ids": Key(
+            "int_list", default=None, help="cloud strips of the TIN (vertical check)"
+        ),
         "format": _FORMAT,
     },
     "heights": {
         "cloud": Key("str", required=True, help="name of a cloud in [inputs.clouds]"),
         "classes": Key("int_list", default=[2], help="laser-point classes used for the planes"),
         "source_ids": Key("int_list", default=None, help="laser-point strips used for the planes"),
-        "map": Key("ref", required=True,
-                   help="a points/polygons input name, or { grid = 5.0 } for a grid of map points"),
-        "reference": Key("ref", required=True,
-                         help="a points input name, or { from_cloud = true, fraction = 0.5, seed = 0 }"),
+        "map": Key(
+            "ref",
+            required=True,
+            help="a points/polygons input name, or { grid = 5.0 } for a grid of map points",
+        ),
+        "reference": Key(
+            "ref",
+            required=True,
+            help="a points input name, or { from_cloud = true, fraction = 0.5, seed = 0 }",
+        ),
+        "map_spacing": Key(
+            "float", default=10.0, help="spacing of map points along polygon boundaries (m)"
+        ),
         "format": _FORMAT,
     },
 }
@@ -336,7 +409,9 @@ _SELECTION_KEYS = {
     "source_id": Key("int_list", default=None),
 }
 _SAMPLE_KEYS = {  # check points sampled from a cloud
-    "from_cloud": Key("any", required=True, help="a cloud input name (or true: the analysis' cloud)"),
+    "from_cloud": Key(
+        "any", required=True, help="a cloud input name (or true: the analysis' cloud)"
+    ),
     "classes": Key("int_list", default=[2]),
     "source_id": Key("int_list", default=None),
     "n": Key("int", default=20, help="number of points"),
@@ -356,6 +431,7 @@ _GRID_KEYS = {
 
 
 # ----------------------------------------------------------------- results
+
 
 @dataclass(frozen=True)
 class InputSpec:
@@ -397,6 +473,7 @@ class AssessmentConfig:
     raw: dict[str, Any]
     path: Path | None = None
     base_dir: Path = field(default_factory=Path.cwd)
+    skipped: list[tuple[str, str, str]] = field(default_factory=list)  # (kind, title, reason)
 
     def input(self, name: str) -> InputSpec:
         return self.inputs[name]
@@ -417,9 +494,13 @@ _DEFAULT_TITLES = {
 }
 
 
-def load_config(path: str | os.PathLike, *,
-                library_params: Callable[[str, dict], dict[str, Any]] | None = None,
-                check_crs: bool = True) -> AssessmentConfig:
+def load_config(
+    path: str | os.PathLike,
+    *,
+    library_params: Callable[[str, dict], dict[str, Any]] | None = None,
+    check_crs: bool = True,
+    skip_unavailable: bool = False,
+) -> AssessmentConfig:
     """Read and validate an assessment configuration file (TOML).
 
     Parameters
@@ -431,6 +512,9 @@ def load_config(path: str | os.PathLike, *,
         analysis accepts; by default :func:`lidarqa.report.analyses.library_params`.
     check_crs : bool, default True
         Read the inputs' headers and refuse differing CRSs.
+    skip_unavailable : bool, default False
+        Leave out (and list in ``skipped``) analyses whose library part is not
+        installed, instead of refusing the config. ``lidarqa demo`` uses this.
 
     Raises
     ------
@@ -442,19 +526,32 @@ def load_config(path: str | os.PathLike, *,
 
     p = Path(path)
     if not p.is_file():
-        raise ConfigError(f"config file {p} does not exist" if not p.exists() else f"config {p} is not a file")
+        raise ConfigError(
+            f"config file {p} does not exist" if not p.exists() else f"config {p} is not a file"
+        )
     try:
         raw = tomllib.loads(p.read_text(encoding="utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise ConfigError(f"config {p} is not valid TOML: {exc}") from exc
-    return parse_config(raw, base_dir=p.resolve().parent, path=p, library_params=library_params,
-                        check_crs=check_crs)
+    return parse_config(
+        raw,
+        base_dir=p.resolve().parent,
+        path=p,
+        library_params=library_params,
+        check_crs=check_crs,
+        skip_unavailable=skip_unavailable,
+    )
 
 
-def parse_config(raw: Mapping[str, Any], *, base_dir: str | os.PathLike | None = None,
-                 path: Path | None = None,
-                 library_params: Callable[[str, dict], dict[str, Any]] | None = None,
-                 check_crs: bool = True) -> AssessmentConfig:
+def parse_config(
+    raw: Mapping[str, Any],
+    *,
+    base_dir: str | os.PathLike | None = None,
+    path: Path | None = None,
+    library_params: Callable[[str, dict], dict[str, Any]] | None = None,
+    check_crs: bool = True,
+    skip_unavailable: bool = False,
+) -> AssessmentConfig:
     """Validate a configuration already parsed into a dict (see :func:`load_config`)."""
     if library_params is None:
         from .analyses import library_params as _lp
@@ -468,6 +565,7 @@ def parse_config(raw: Mapping[str, Any], *, base_dir: str | os.PathLike | None =
     inputs = _parse_inputs(top["inputs"], base)
 
     analyses: list[AnalysisItem] = []
+    skipped: list[tuple[str, str, str]] = []
     seen_ids: set[str] = set()
     for kind in ANALYSIS_KINDS:
         if kind not in raw:
@@ -480,20 +578,35 @@ def parse_config(raw: Mapping[str, Any], *, base_dir: str | os.PathLike | None =
         elif isinstance(value, Mapping):
             tables = [value]
         else:
-            raise ConfigError(f"key {kind!r} must be a table ([{kind}]) or an array of tables "
-                              f"([[{kind}]]), got {_describe(value)}")
+            raise ConfigError(
+                f"key {kind!r} must be a table ([{kind}]) or an array of tables "
+                f"([[{kind}]]), got {_describe(value)}"
+            )
         for i, table in enumerate(tables):
             where = f"[{kind}]" if len(tables) == 1 else f"[[{kind}]] #{i + 1}"
-            item = _parse_analysis(kind, table, where, inputs, base, library_params, i, len(tables))
+            try:
+                item = _parse_analysis(
+                    kind, table, where, inputs, base, library_params, i, len(tables)
+                )
+            except AnalysisUnavailableError as exc:
+                if not skip_unavailable:
+                    raise
+                title = table.get("title") if isinstance(table, Mapping) else None
+                skipped.append((kind, str(title or _DEFAULT_TITLES[kind]), str(exc)))
+                continue
             if item is None:
                 continue
             if item.id in seen_ids:
-                raise ConfigError(f"two analyses are named {item.id!r}; give each a distinct 'name'")
+                raise ConfigError(
+                    f"two analyses are named {item.id!r}; give each a distinct 'name'"
+                )
             seen_ids.add(item.id)
             analyses.append(item)
     if not analyses:
-        raise ConfigError("the config runs no analysis; add at least one of: "
-                          + ", ".join(f"[{k}]" for k in ANALYSIS_KINDS))
+        raise ConfigError(
+            "the config runs no analysis; add at least one of: "
+            + ", ".join(f"[{k}]" for k in ANALYSIS_KINDS)
+        )
     used = _used_inputs(analyses)
     if check_crs:
         inputs = _check_crs(inputs, crs, used)
@@ -506,6 +619,7 @@ def parse_config(raw: Mapping[str, Any], *, base_dir: str | os.PathLike | None =
         raw=_plain(raw),
         path=path,
         base_dir=base,
+        skipped=skipped,
     )
 
 
@@ -540,17 +654,23 @@ def _parse_inputs(table: Any, base: Path) -> dict[str, InputSpec]:
         for name, value in groups[kind].items():
             where = f"[inputs.{kind}] entry {name!r}"
             if not _NAME_RE.match(name):
-                raise ConfigError(f"{where}: input names may only use letters, digits, '_', '-', '.'")
+                raise ConfigError(
+                    f"{where}: input names may only use letters, digits, '_', '-', '.'"
+                )
             if name in out:
-                raise ConfigError(f"input name {name!r} is used twice ([inputs.{out[name].kind}] and "
-                                  f"[inputs.{kind}])")
+                raise ConfigError(
+                    f"input name {name!r} is used twice ([inputs.{out[name].kind}] and "
+                    f"[inputs.{kind}])"
+                )
             if isinstance(value, str):
                 entry = {"path": value, "crs": None}
             elif isinstance(value, Mapping):
                 entry = _check_table(value, _INPUT_KEYS, where)
             else:
-                raise ConfigError(f"key {name!r} in [inputs.{kind}] must be a path string or a table "
-                                  f"{{ path = ..., crs = ... }}, got {_describe(value)}")
+                raise ConfigError(
+                    f"key {name!r} in [inputs.{kind}] must be a path string or a table "
+                    f"{{ path = ..., crs = ... }}, got {_describe(value)}"
+                )
             p = Path(os.path.expanduser(entry["path"]))
             if not p.is_absolute():
                 p = base / p
@@ -561,31 +681,45 @@ def _parse_inputs(table: Any, base: Path) -> dict[str, InputSpec]:
             suffix = p.suffix.lower()
             if suffix not in _INPUT_SUFFIXES[kind]:
                 raise ConfigError(
-                    f"input {name!r} ([inputs.{kind}]): cannot read {suffix or 'files without suffix'} "
-                    f"as {kind}; expected one of {', '.join(sorted(_INPUT_SUFFIXES[kind]))}")
+                    f"input {name!r} ([inputs.{kind}]): cannot read "
+                    f"{suffix or 'files without suffix'} "
+                    f"as {kind}; expected one of {', '.join(sorted(_INPUT_SUFFIXES[kind]))}"
+                )
             crs = _parse_crs(entry["crs"], where) if entry["crs"] is not None else None
             out[name] = InputSpec(name=name, kind=kind, path=p, crs=crs)
     return out
 
 
-def _need_input(inputs: Mapping[str, InputSpec], name: Any, kinds: tuple[str, ...], where: str,
-                key: str) -> str:
+def _need_input(
+    inputs: Mapping[str, InputSpec], name: Any, kinds: tuple[str, ...], where: str, key: str
+) -> str:
     if not isinstance(name, str):
         raise ConfigError(f"key {key!r} in {where} must name an input, got {_describe(name)}")
     if name not in inputs:
         declared = [n for n, s in inputs.items() if s.kind in kinds]
         listed = ", ".join(declared) if declared else "none declared"
-        raise ConfigError(f"key {key!r} in {where} names input {name!r}, which is not declared in "
-                          f"[inputs.{' / '.join(kinds)}] (declared: {listed})")
+        raise ConfigError(
+            f"key {key!r} in {where} names input {name!r}, which is not declared in "
+            f"[inputs.{' / '.join(kinds)}] (declared: {listed})"
+        )
     if inputs[name].kind not in kinds:
-        raise ConfigError(f"key {key!r} in {where}: input {name!r} is in [inputs.{inputs[name].kind}], "
-                          f"expected [inputs.{' or '.join(kinds)}]")
+        raise ConfigError(
+            f"key {key!r} in {where}: input {name!r} is in [inputs.{inputs[name].kind}], "
+            f"expected [inputs.{' or '.join(kinds)}]"
+        )
     return name
 
 
-def _parse_analysis(kind: str, table: Any, where: str, inputs: Mapping[str, InputSpec], base: Path,
-                    library_params: Callable[[str, dict], dict[str, Any]], index: int,
-                    count: int) -> AnalysisItem | None:
+def _parse_analysis(
+    kind: str,
+    table: Any,
+    where: str,
+    inputs: Mapping[str, InputSpec],
+    base: Path,
+    library_params: Callable[[str, dict], dict[str, Any]],
+    index: int,
+    count: int,
+) -> AnalysisItem | None:
     if not isinstance(table, Mapping):
         raise ConfigError(f"{where} must be a table, got {_describe(table)}")
     keys = {**_COMMON, **ANALYSIS_KEYS[kind]}
@@ -599,7 +733,16 @@ def _parse_analysis(kind: str, table: Any, where: str, inputs: Mapping[str, Inpu
         return None
     params_defaults = library_params(kind, opts)
     opts = _check_table(table, framework, where, extra=params_defaults)
-    params = check_params({k: v for k, v in table.items() if k not in framework}, params_defaults, where)
+    params = check_params(
+        {k: v for k, v in table.items() if k not in framework}, params_defaults, where
+    )
+    validate = getattr(params_defaults, "validate", None)
+    if validate is not None:  # cheap value checks by the library itself, before any work
+        try:
+            validate(params)
+        except Exception as exc:  # the library's own OptionError etc.
+            reason = " ".join(str(exc).split())
+            raise ConfigError(f"{where}: {reason}") from exc
 
     # Input references and nested tables.
     if kind in ("info", "ground", "edges", "heights"):
@@ -607,11 +750,11 @@ def _parse_analysis(kind: str, table: Any, where: str, inputs: Mapping[str, Inpu
     if kind == "lines":
         for side in ("test", "model"):
             opts[side] = _parse_segment_source(opts[side], inputs, where, side)
-        if opts["edges"] is not None:
+        if "cloud" in opts["test"] or "cloud" in opts["model"] or opts["edges"] is not None:
             edge_defaults = library_params("edges", {})
             sub = f"{where} key 'edges'"
-            _check_table(opts["edges"], {}, sub, extra=edge_defaults)
-            opts["edges"] = check_params(opts["edges"], edge_defaults, sub)
+            _check_table(opts["edges"] or {}, {}, sub, extra=edge_defaults)
+            opts["edges"] = check_params(opts["edges"] or {}, edge_defaults, sub)
         else:
             opts["edges"] = {}
         if opts["ground_truth"] is not None:
@@ -633,8 +776,10 @@ def _parse_analysis(kind: str, table: Any, where: str, inputs: Mapping[str, Inpu
             src = sub["from_cloud"]
             if src is True:
                 if not opts["vertical"]:
-                    raise ConfigError(f"key 'check' in {where}: from_cloud = true needs vertical = true "
-                                      "(or name a cloud input)")
+                    raise ConfigError(
+                        f"key 'check' in {where}: from_cloud = true needs vertical = true "
+                        "(or name a cloud input)"
+                    )
                 src = opts["measured"]
             _need_input(inputs, src, ("clouds",), f"{where} key 'check'", "from_cloud")
             sub["from_cloud"] = src
@@ -656,27 +801,47 @@ def _parse_analysis(kind: str, table: Any, where: str, inputs: Mapping[str, Inpu
         else:
             sub = _check_table(r, _SPLIT_KEYS, f"{where} key 'reference'")
             if sub["from_cloud"] is not True:
-                raise ConfigError(f"key 'from_cloud' in {where} key 'reference' must be true "
-                                  "(or give reference = \"<points input>\")")
+                raise ConfigError(
+                    f"key 'from_cloud' in {where} key 'reference' must be true "
+                    '(or give reference = "<points input>")'
+                )
             if not 0.0 < sub["fraction"] < 1.0:
-                raise ConfigError(f"key 'fraction' in {where} key 'reference' must be in (0, 1), "
-                                  f"got {sub['fraction']}")
+                raise ConfigError(
+                    f"key 'fraction' in {where} key 'reference' must be in (0, 1), "
+                    f"got {sub['fraction']}"
+                )
             opts["reference"] = sub
     ident = opts["name"] or (kind if count == 1 else f"{kind}-{index + 1}")
     if not _NAME_RE.match(ident):
         raise ConfigError(f"key 'name' in {where} may only use letters, digits, '_', '-', '.'")
-    title = opts["title"] or (_DEFAULT_TITLES[kind] + ("" if count == 1 or opts["name"] is None
-                                                        else f" ({ident})"))
-    if count > 1 and opts["title"] is None and opts["name"] is None:
-        title = f"{_DEFAULT_TITLES[kind]} #{index + 1}"
+    default_title = _DEFAULT_TITLES[kind]
+    if kind == "checkpoints" and opts["vertical"]:
+        default_title = "Vertical check"
+    if opts["title"]:
+        title = opts["title"]
+    elif count == 1:
+        title = default_title
+    elif opts["name"]:
+        title = f"{default_title} ({ident})"
+    else:
+        title = f"{default_title} #{index + 1}"
     tvals = {targets[k].metric: opts.pop(k) for k in list(target_keys) if opts.get(k) is not None}
     for k in target_keys:
         opts.pop(k, None)
-    return AnalysisItem(kind=kind, id=ident, title=title, options=opts, params=params, targets=tvals,
-                        raw=_plain(dict(table)))
+    return AnalysisItem(
+        kind=kind,
+        id=ident,
+        title=title,
+        options=opts,
+        params=params,
+        targets=tvals,
+        raw=_plain(dict(table)),
+    )
 
 
-def _parse_segment_source(value: Any, inputs: Mapping[str, InputSpec], where: str, side: str) -> dict:
+def _parse_segment_source(
+    value: Any, inputs: Mapping[str, InputSpec], where: str, side: str
+) -> dict:
     sub_where = f"{where} key {side!r}"
     if isinstance(value, str):
         _need_input(inputs, value, ("segments", "clouds"), where, side)
@@ -734,7 +899,9 @@ def read_header_crs(spec: InputSpec) -> Any:
         reason = " ".join(str(exc).split())
         if isinstance(exc, LidarQAError):
             raise ConfigError(f"input {spec.name!r}: {reason}") from exc
-        raise ConfigError(f"input {spec.name!r}: cannot read the header of {spec.path}: {reason}") from exc
+        raise ConfigError(
+            f"input {spec.name!r}: cannot read the header of {spec.path}: {reason}"
+        ) from exc
     return None
 
 
@@ -754,7 +921,8 @@ def _check_crs(inputs: dict[str, InputSpec], expected: Any, used: set[str]) -> d
         if file_crs is not None and spec.crs is not None and not same(file_crs, spec.crs):
             raise ConfigCRSMismatchError(
                 f"input {name!r}: its file declares CRS {crs_name(file_crs)}, the config says "
-                f"{crs_name(spec.crs)} (key 'crs')")
+                f"{crs_name(spec.crs)} (key 'crs')"
+            )
         spec = InputSpec(spec.name, spec.kind, spec.path, spec.crs, file_crs)
         out[name] = spec
         crs = spec.effective_crs
@@ -762,8 +930,10 @@ def _check_crs(inputs: dict[str, InputSpec], expected: Any, used: set[str]) -> d
             continue
         if expected is not None and not same(crs, expected):
             raise ConfigCRSMismatchError(
-                f"input {name!r} has CRS {crs_name(crs)} but the config's 'crs' is {crs_name(expected)}; "
-                "reproject it first")
+                f"input {name!r} has CRS {crs_name(crs)} but the config's 'crs' is "
+                f"{crs_name(expected)}; "
+                "reproject it first"
+            )
         if name not in used:
             continue
         if first is None:
@@ -771,5 +941,6 @@ def _check_crs(inputs: dict[str, InputSpec], expected: Any, used: set[str]) -> d
         elif not same(crs, first[1]):
             raise ConfigCRSMismatchError(
                 f"inputs {first[0]!r} ({crs_name(first[1])}) and {name!r} ({crs_name(crs)}) have "
-                "different CRSs; reproject one of them first")
+                "different CRSs; reproject one of them first"
+            )
     return out

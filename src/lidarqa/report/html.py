@@ -77,6 +77,7 @@ class Report:
     inputs: list[dict[str, Any]]
     versions: dict[str, Any]
     attribution: str | None = None
+    config_text: str | None = None
 
 
 def fmt(value: Any, digits: int = 4) -> str:
@@ -97,7 +98,7 @@ def fmt(value: Any, digits: int = 4) -> str:
             return f"{value:.3e}"
         if a >= 1000:
             return f"{value:,.1f}"
-        return f"{value:.{digits}g}" if a < 1 else f"{value:.{max(digits - 1, 1)}f}".rstrip("0").rstrip(".")
+        return f"{value:.{digits}g}"
     try:
         import numpy as np
 
@@ -126,35 +127,43 @@ body { margin: 0; padding: 0 1rem 3rem; font: 15px/1.5 -apple-system, "Segoe UI"
 main { max-width: 60rem; margin: 0 auto; }
 header { padding: 1.2rem 0 0.6rem; border-bottom: 2px solid var(--line); margin-bottom: 1rem; }
 h1 { font-size: 1.5rem; margin: 0 0 .3rem; }
-h2 { font-size: 1.25rem; margin: 2rem 0 .5rem; padding-top: .5rem; border-top: 1px solid var(--line); }
+h2 { font-size: 1.25rem; margin: 2rem 0 .5rem; padding-top: .5rem;
+     border-top: 1px solid var(--line); }
 h3 { font-size: 1.05rem; margin: 1.2rem 0 .4rem; }
 p, li { overflow-wrap: anywhere; }
 .sub, .muted, figcaption, .note { color: var(--muted); font-size: .9rem; }
 .attribution { font-size: .9rem; margin-top: .4rem; }
 nav ul { padding-left: 1.2rem; margin: .3rem 0; }
-.table-wrap { width: 100%; overflow-x: auto; -webkit-overflow-scrolling: touch; margin: .4rem 0 .8rem;
-              border: 1px solid var(--line); border-radius: 4px; }
-table { border-collapse: collapse; width: 100%; font-size: .9rem; font-variant-numeric: tabular-nums; }
+.table-wrap { width: 100%; overflow-x: auto; -webkit-overflow-scrolling: touch;
+              margin: .4rem 0 .8rem; border: 1px solid var(--line); border-radius: 4px; }
+table { border-collapse: collapse; width: 100%; font-size: .9rem;
+        font-variant-numeric: tabular-nums; }
 th, td { padding: .35rem .6rem; border-bottom: 1px solid var(--line); text-align: left;
          vertical-align: top; white-space: nowrap; }
 td.wrap { white-space: normal; min-width: 12rem; }
+td.name { white-space: normal; min-width: 7rem; max-width: 16rem; }
 th { background: var(--head); font-weight: 600; position: sticky; top: 0; }
 tr:last-child td { border-bottom: 0; }
 td.num { text-align: right; }
-.verdict { font-weight: 700; padding: .1rem .45rem; border-radius: 3px; color: #fff; font-size: .8rem;
+.verdict { font-weight: 700; padding: .1rem .45rem; border-radius: 3px; color: #fff;
+           font-size: .8rem;
            text-transform: uppercase; letter-spacing: .03em; }
 .verdict.pass { background: var(--pass); } .verdict.fail { background: var(--fail); }
 .verdict.na { background: var(--na); } .verdict.error { background: #6d1b1b; }
 .headline { font-size: 1rem; margin: .2rem 0 .6rem; }
 figure { margin: .8rem 0 1.2rem; }
-figure img { display: block; max-width: 100%; height: auto; border: 1px solid var(--line); }
-.figs { display: grid; grid-template-columns: repeat(auto-fit, minmax(18rem, 1fr)); gap: .8rem; }
+figure img { display: block; max-width: 100%; height: auto;
+             border: 1px solid var(--line); }
+.figs { display: grid; gap: .8rem;
+        grid-template-columns: repeat(auto-fit, minmax(min(100%, 26rem), 1fr)); }
 .error-box { border-left: 4px solid var(--fail); background: #fdecea; padding: .5rem .8rem; }
 .notes li { color: #8a5a00; }
-code, pre { font-family: ui-monospace, SFMono-Regular, Menlo, Consolas, monospace; font-size: .85rem; }
+code, pre { font-family: ui-monospace, SFMono-Regular, Menlo, Consolas, monospace;
+            font-size: .85rem; }
 pre { background: var(--head); padding: .6rem; overflow-x: auto; white-space: pre; }
 footer { margin-top: 2.5rem; color: var(--muted); font-size: .85rem; }
-@media (max-width: 40rem) { body { font-size: 14px; padding: 0 .6rem 2rem; } h1 { font-size: 1.25rem; }
+@media (max-width: 40rem) { body { font-size: 14px; padding: 0 .6rem 2rem; }
+  h1 { font-size: 1.25rem; }
   th, td { padding: .3rem .45rem; } }
 @media print { .table-wrap { overflow: visible; } }
 """
@@ -164,17 +173,38 @@ def _e(text: Any) -> str:
     return html.escape(str(text), quote=True)
 
 
+def _is_num(v: Any) -> bool:
+    try:
+        import numpy as np
+
+        if isinstance(v, np.number):
+            return True
+    except ImportError:  # pragma: no cover
+        pass
+    return isinstance(v, int | float) and not isinstance(v, bool)
+
+
 def _table(t: Table, *, numeric_right: bool = True) -> str:
     out = []
     if t.title:
         out.append(f"<h3>{_e(t.title)}</h3>")
     out.append('<div class="table-wrap"><table>')
-    out.append("<thead><tr>" + "".join(f'<th scope="col">{_e(c)}</th>' for c in t.columns)
-               + "</tr></thead><tbody>")
+    out.append(
+        "<thead><tr>"
+        + "".join(f'<th scope="col">{_e(c)}</th>' for c in t.columns)
+        + "</tr></thead><tbody>"
+    )
+    ncol = max((len(r) for r in t.rows), default=0)
+    numeric_col = [
+        numeric_right
+        and any(_is_num(r[j]) for r in t.rows if j < len(r))
+        and all(_is_num(r[j]) or r[j] is None for r in t.rows if j < len(r))
+        for j in range(ncol)
+    ]
     for row in t.rows:
         cells = []
-        for v in row:
-            num = numeric_right and isinstance(v, int | float) and not isinstance(v, bool)
+        for j, v in enumerate(row):
+            num = numeric_col[j]
             text = fmt(v)
             cls = ' class="num"' if num else (' class="wrap"' if len(text) > 60 else "")
             cells.append(f"<td{cls}>{_e(text)}</td>")
@@ -188,13 +218,17 @@ def _table(t: Table, *, numeric_right: bool = True) -> str:
 def _figure(f: Figure) -> str:
     data = base64.b64encode(f.png).decode("ascii")
     cap = _e(f.title) + (f" — {_e(f.caption)}" if f.caption else "")
-    return (f'<figure><img src="data:image/png;base64,{data}" alt="{_e(f.title)}" loading="eager">'
-            f"<figcaption>{cap}</figcaption></figure>")
+    return (
+        f'<figure><img src="data:image/png;base64,{data}" alt="{_e(f.title)}" loading="eager">'
+        f"<figcaption>{cap}</figcaption></figure>"
+    )
 
 
 def _verdict(v: str) -> str:
     cls = {"pass": "pass", "fail": "fail", "error": "error"}.get(v, "na")
-    label = {"pass": "pass", "fail": "fail", "error": "error"}.get(v, "no target")
+    label = {"pass": "pass", "fail": "fail", "error": "error", "skipped": "not run"}.get(
+        v, "no target"
+    )
     return f'<span class="verdict {cls}">{_e(label)}</span>'
 
 
@@ -229,19 +263,24 @@ def render_html(report: Report) -> str:
 
     # Summary verdict table first.
     parts.append('<section id="summary"><h2 style="border-top:0;margin-top:.5rem">Summary</h2>')
-    parts.append('<div class="table-wrap"><table><thead><tr><th scope="col">Analysis</th>'
-                 '<th scope="col">Result</th><th scope="col">Verdict</th><th scope="col">Target</th>'
-                 "</tr></thead><tbody>")
+    parts.append(
+        '<div class="table-wrap"><table class="summary"><thead><tr><th scope="col">Analysis</th>'
+        '<th scope="col">Verdict</th><th scope="col">Result</th><th scope="col">Target</th>'
+        "</tr></thead><tbody>"
+    )
     for row in report.summary:
         parts.append(
-            f'<tr><td><a href="#{_e(row.anchor)}">{_e(row.analysis)}</a></td>'
-            f'<td class="wrap">{_e(row.headline)}</td><td>{_verdict(row.verdict)}</td>'
-            f'<td class="wrap">{_e(row.detail)}</td></tr>')
+            f'<tr><td class="name"><a href="#{_e(row.anchor)}">{_e(row.analysis)}</a></td>'
+            f'<td>{_verdict(row.verdict)}</td><td class="wrap">{_e(row.headline)}</td>'
+            f'<td class="wrap">{_e(row.detail)}</td></tr>'
+        )
     parts.append("</tbody></table></div>")
-    parts.append("<nav><ul>" + "".join(f'<li><a href="#{_e(s.id)}">{_e(s.title)}</a></li>'
-                                       for s in report.sections)
-                 + '<li><a href="#parameters">Parameters</a></li>'
-                 + '<li><a href="#provenance">Provenance</a></li></ul></nav></section>')
+    parts.append(
+        "<nav><ul>"
+        + "".join(f'<li><a href="#{_e(s.id)}">{_e(s.title)}</a></li>' for s in report.sections)
+        + '<li><a href="#parameters">Parameters</a></li>'
+        + '<li><a href="#provenance">Provenance</a></li></ul></nav></section>'
+    )
 
     for s in report.sections:
         parts.append(f'<section id="{_e(s.id)}"><h2>{_e(s.title)}</h2>')
@@ -252,14 +291,19 @@ def render_html(report: Report) -> str:
         for p in s.paragraphs:
             parts.append(f"<p>{_e(p)}</p>")
         if s.notes:
-            parts.append('<ul class="notes">' + "".join(f"<li>{_e(n)}</li>" for n in s.notes) + "</ul>")
+            parts.append(
+                '<ul class="notes">' + "".join(f"<li>{_e(n)}</li>" for n in s.notes) + "</ul>"
+            )
         for t in s.tables:
             parts.append(_table(t))
         if s.figures:
             parts.append('<div class="figs">' + "".join(_figure(f) for f in s.figures) + "</div>")
         if s.outputs:
-            parts.append('<p class="muted">Output files: '
-                         + ", ".join(f"<code>{_e(o)}</code>" for o in s.outputs) + "</p>")
+            parts.append(
+                '<p class="muted">Output files: '
+                + ", ".join(f'<a href="{_e(o)}"><code>{_e(o)}</code></a>' for o in s.outputs)
+                + "</p>"
+            )
         parts.append("</section>")
 
     # Parameters and provenance at the end.
@@ -267,20 +311,53 @@ def render_html(report: Report) -> str:
     for sid, params in report.parameters.items():
         rows: list[tuple[str, Any]] = []
         _flatten("", params, rows)
-        parts.append(_table(Table(sid, ["parameter", "value"], [list(r) for r in rows]),
-                            numeric_right=False))
+        parts.append(
+            _table(Table(sid, ["parameter", "value"], [list(r) for r in rows]), numeric_right=False)
+        )
     parts.append("</section>")
     parts.append('<section id="provenance"><h2>Provenance</h2>')
-    parts.append(_table(Table("", ["item", "value"], [list(r) for r in report.provenance]),
-                        numeric_right=False))
+    parts.append(
+        _table(
+            Table("", ["item", "value"], [list(r) for r in report.provenance]), numeric_right=False
+        )
+    )
     if report.inputs:
-        parts.append(_table(Table("Input files", ["name", "kind", "path", "size (bytes)", "sha256", "CRS"],
-                                  [[i.get("name"), i.get("kind"), i.get("path"), i.get("size"),
-                                    i.get("sha256"), i.get("crs")] for i in report.inputs]),
-                            numeric_right=False))
-    parts.append(_table(Table("Software versions", ["package", "version"],
-                              [[k, v if v is not None else "not installed"]
-                               for k, v in report.versions.items()]), numeric_right=False))
+        parts.append(
+            _table(
+                Table(
+                    "Input files",
+                    ["name", "kind", "path", "size (bytes)", "sha256", "CRS"],
+                    [
+                        [
+                            i.get("name"),
+                            i.get("kind"),
+                            i.get("path"),
+                            i.get("size"),
+                            i.get("sha256"),
+                            i.get("crs"),
+                        ]
+                        for i in report.inputs
+                    ],
+                ),
+                numeric_right=False,
+            )
+        )
+    if report.config_text:
+        parts.append(
+            "<details><summary>Configuration file</summary><pre>"
+            + _e(report.config_text)
+            + "</pre></details>"
+        )
+    parts.append(
+        _table(
+            Table(
+                "Software versions",
+                ["package", "version"],
+                [[k, v if v is not None else "not installed"] for k, v in report.versions.items()],
+            ),
+            numeric_right=False,
+        )
+    )
     parts.append("</section>")
     foot = "Generated by lidarqa. This page is self-contained: it needs no network access."
     if report.attribution:

@@ -1,0 +1,108 @@
+"""``lidarqa assess CONFIG.toml --out DIR`` and ``lidarqa demo --out DIR``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from ._common import Steps, common_options, echo, finish, prepare_outputs, settings
+
+
+def _run(
+    config_path: str | Path, out: str, command: str, *, skip_unavailable: bool = False
+) -> None:
+    from ..report.config import load_config
+    from ..report.run import check_out_dir, run_assessment
+
+    s = settings()
+    steps = Steps()
+    # Everything is checked before any work: config (keys, types, inputs, CRSs) and outputs.
+    with steps("Checking the configuration"):
+        cfg = load_config(config_path, skip_unavailable=skip_unavailable)
+    prepare_outputs(inputs=tuple(str(p) for p in cfg.input_paths()))
+    check_out_dir(out, overwrite=s.overwrite)
+    run = run_assessment(cfg, out, overwrite=s.overwrite, steps=steps, command=command)
+    echo(f"{cfg.title}")
+    width = max((len(r.analysis) for r in run.summary), default=10)
+    for r in run.summary:
+        verdict = {"pass": "PASS", "fail": "FAIL", "error": "ERROR", "skipped": "SKIP"}.get(
+            r.verdict, ""
+        )
+        echo(f"  {r.analysis:<{width}}  {verdict:<5}  {r.headline}")
+    echo(f"Report: {run.html_path}")
+    echo(f"JSON:   {run.json_path}")
+    doc = run.document
+    finish(
+        command,
+        inputs=doc["inputs"],
+        parameters=doc["parameters"],
+        results={
+            "report_html": str(run.html_path),
+            "report_json": str(run.json_path),
+            "verdicts": doc["verdicts"],
+            "errors": doc["errors"],
+            "analyses": doc["results"],
+        },
+    )
+    if run.errors:
+        # The report and JSON are complete (they show the failures); scripts still need to know.
+        from ..errors import AnalysisError
+
+        raise AnalysisError(
+            f"{len(run.errors)} analysis(es) failed: "
+            + "; ".join(f"{k}: {v}" for k, v in run.errors.items())
+            + f" (details in {run.html_path})"
+        )
+
+
+@click.command()
+@click.argument("config", type=click.Path(dir_okay=False))
+@click.option(
+    "-o",
+    "--out",
+    "out",
+    required=True,
+    type=click.Path(file_okay=False),
+    help="Output folder: report.html, report.json and outputs/.",
+)
+@common_options
+def assess(config: str, out: str) -> None:
+    """Run the accuracy assessment described by CONFIG (TOML) and write an HTML report.
+
+    The config names the inputs, the analyses (info, ground, edges, lines,
+    checkpoints, heights) and their parameters (same names as the commands'
+    options). It is validated completely before any work starts. A minimal
+    config (see lidarqa/data/demo.toml for every analysis):
+
+    \b
+        [inputs.clouds]
+        tile = "tile.laz"
+        [ground]
+        cloud = "tile"
+        target_total = 0.05
+    """
+    _run(config, out, "assess")
+
+
+@click.command()
+@click.option(
+    "-o",
+    "--out",
+    "out",
+    required=True,
+    type=click.Path(file_okay=False),
+    help="Output folder: report.html, report.json and outputs/.",
+)
+@common_options
+def demo(out: str) -> None:
+    """Assess the bundled IGN LiDAR HD tile (IGN – LiDAR HD, Licence Ouverte 2.0).
+
+    Runs the bundled config (lidarqa/data/demo.toml): ground filtering scored
+    against IGN's classes, building edges per flight strip and their
+    repeatability, height quality against held-apart ground points, and a
+    vertical check against points of the other strip.
+    """
+    from ..report.run import demo_config_path
+
+    _run(demo_config_path(), out, "demo", skip_unavailable=True)

@@ -1,0 +1,129 @@
+"""Open report.html in headless Chromium: no console errors, every image loaded, a screenshot.
+
+Needs the Debian packages ``chromium`` and ``chromium-driver`` and selenium. Skips
+when they are absent, except under CI (``CI`` set), where their absence fails.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import sys
+import tempfile
+from pathlib import Path
+
+import pytest
+
+CHROMIUM = ("/usr/bin/chromium", "/usr/bin/chromium-browser", "/usr/bin/google-chrome")
+CHROMEDRIVER = ("/usr/bin/chromedriver", "/usr/lib/chromium/chromedriver")
+#: Screenshots go to $LIDARQA_SCREENSHOT_DIR when set (e.g. tests/report/_artifacts, kept out of
+#: git), else into pytest's temporary folder; the test prints where.
+SCREENSHOT_ENV = "LIDARQA_SCREENSHOT_DIR"
+
+
+def _find(candidates: tuple[str, ...]) -> str | None:
+    return next((c for c in candidates if Path(c).is_file() and os.access(c, os.X_OK)), None)
+
+
+def _need_browser() -> tuple[str, str]:
+    browser, driver = _find(CHROMIUM), _find(CHROMEDRIVER)
+    try:
+        import selenium  # noqa: F401
+
+        has_selenium = True
+    except ImportError:
+        has_selenium = False
+    missing = [
+        name
+        for name, ok in (
+            ("chromium", browser),
+            ("chromedriver", driver),
+            ("selenium", has_selenium),
+        )
+        if not ok
+    ]
+    if missing:
+        msg = (
+            "browser test needs "
+            + ", ".join(missing)
+            + " (apt-get install chromium chromium-driver)"
+        )
+        if os.environ.get("CI", "").strip().lower() not in ("", "0", "false", "no"):
+            pytest.fail(msg + "; CI is set, so this is a failure, not a skip")
+        pytest.skip(msg)
+    return browser, driver  # type: ignore[return-value]
+
+
+@pytest.fixture(scope="module")
+def demo_report(demo_run) -> Path:
+    assert demo_run["result"].exit_code == 0, demo_run["result"].output
+    return demo_run["out"] / "report.html"
+
+
+@pytest.mark.browser
+def test_report_opens_in_headless_chromium(demo_report: Path, tmp_path_factory) -> None:
+    browser, driver_path = _need_browser()
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+
+    profile = tempfile.mkdtemp(prefix="lidarqa-chromium-")
+    opts = webdriver.ChromeOptions()
+    opts.binary_location = browser
+    for arg in (
+        "--headless",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--disable-background-networking",
+        f"--user-data-dir={profile}",
+        "--window-size=1280,2600",
+        "--disable-dev-shm-usage",
+    ):
+        opts.add_argument(arg)
+    opts.set_capability("goog:loggingPrefs", {"browser": "ALL"})
+    # An explicit Service path: selenium-manager never downloads anything.
+    driver = webdriver.Chrome(service=Service(driver_path), options=opts)
+    try:
+        driver.set_page_load_timeout(60)
+        driver.get(demo_report.resolve().as_uri())
+        assert driver.title, "page has no title"
+        # The summary table comes first.
+        first_table = driver.find_element("css selector", "section#summary table")
+        assert "Analysis" in first_table.text
+        images = driver.execute_script(
+            "return Array.from(document.images).map(i => [i.alt, i.complete, i.naturalWidth]);"
+        )
+        assert images, "the report has no plots"
+        broken = [alt for alt, complete, width in images if not complete or width == 0]
+        assert not broken, f"images that did not load: {broken}"
+        # Nothing was fetched from the network: every resource is inline.
+        external = driver.execute_script(
+            "return performance.getEntriesByType('resource').map(e => e.name)"
+            ".filter(n => !n.startsWith('data:') && !n.startsWith('file:'));"
+        )
+        assert external == [], external
+        severe = [e for e in driver.get_log("browser") if e.get("level") == "SEVERE"]
+        assert not severe, f"console errors: {severe}"
+        shots = Path(os.environ.get(SCREENSHOT_ENV) or tmp_path_factory.mktemp("screenshots"))
+        shots.mkdir(parents=True, exist_ok=True)
+        shot = shots / "report.png"
+        driver.save_screenshot(str(shot))
+        # A narrow (phone-sized) window must not make the page itself scroll sideways.
+        driver.set_window_size(390, 844)
+        overflow = driver.execute_script(
+            "return document.documentElement.scrollWidth - document.documentElement.clientWidth;"
+        )
+        driver.save_screenshot(str(shots / "report-phone.png"))
+        print(f"screenshots: {shot} and {shots / 'report-phone.png'} ({len(images)} images)")
+        assert overflow <= 1, f"page scrolls horizontally by {overflow} px on a phone-sized window"
+    finally:
+        driver.quit()
+        shutil.rmtree(profile, ignore_errors=True)
+
+
+@pytest.mark.parametrize("ci, outcome", [("", "skip"), ("true", "fail"), ("false", "skip")])
+def test_missing_browser_skips_locally_and_fails_under_ci(monkeypatch, ci, outcome):
+    monkeypatch.setattr(sys.modules[__name__], "CHROMIUM", ("/nonexistent/chromium",))
+    monkeypatch.setenv("CI", ci)
+    expected = pytest.skip.Exception if outcome == "skip" else pytest.fail.Exception
+    with pytest.raises(expected, match="chromium"):
+        _need_browser()

@@ -1,0 +1,102 @@
+"""The HTML page: self-contained, escaped, phone-friendly, summary first, parameters last."""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+
+from lidarqa.report.html import Figure, Report, Section, SummaryRow, Table, fmt, render_html
+
+
+def _report(**kw) -> Report:
+    from lidarqa.report import plots
+
+    png = plots.plot_histogram(np.arange(10.0), "h", xlabel="x")
+    base = dict(
+        title="QA <script>alert(1)</script>",
+        subtitle="sub",
+        summary=[
+            SummaryRow("Ground", "ground", "total 3 %", "pass", "total ≤ 5 %"),
+            SummaryRow("Lines", "lines", "LHD 0.3 m", "fail", "LHD ≤ 0.2 m"),
+        ],
+        sections=[
+            Section(
+                id="ground",
+                title="Ground",
+                kind="ground",
+                headline="h",
+                tables=[Table("t", ["a", "b"], [[1, "x & y"], [2.5, None]])],
+                figures=[Figure("fig", png, "cap")],
+            ),
+            Section(id="lines", title="Lines", kind="lines", error="boom <b>"),
+        ],
+        parameters={"ground": {"options": {"cloud": "tile"}, "parameters": {"radius": 2.0}}},
+        provenance=[("lidarqa version", "0.1.0")],
+        inputs=[
+            {
+                "name": "tile",
+                "kind": "clouds",
+                "path": "/x.laz",
+                "size": 10,
+                "sha256": "ab",
+                "crs": "EPSG:2154",
+            }
+        ],
+        versions={"numpy": "2.0", "dask": None},
+        attribution="IGN – LiDAR HD",
+    )
+    base.update(kw)
+    return Report(**base)
+
+
+def test_page_structure_and_order():
+    html = render_html(_report())
+    assert html.startswith("<!DOCTYPE html>")
+    assert '<meta name="viewport" content="width=device-width, initial-scale=1">' in html
+    i_summary = html.index('id="summary"')
+    i_ground = html.index('<section id="ground"')
+    i_params = html.index('id="parameters"')
+    i_prov = html.index('id="provenance"')
+    assert i_summary < i_ground < i_params < i_prov
+    assert 'class="verdict pass"' in html and 'class="verdict fail"' in html
+    assert "This analysis failed: boom &lt;b&gt;" in html
+    assert "Data: IGN – LiDAR HD" in html
+    assert "not installed" in html  # dask: None
+
+
+def test_text_is_escaped():
+    html = render_html(_report())
+    assert "<script>" not in html
+    assert "QA &lt;script&gt;" in html
+    assert "x &amp; y" in html
+
+
+def test_self_contained_and_scrollable_tables():
+    html = render_html(_report())
+    srcs = re.findall(r'src="([^"]*)"', html)
+    assert srcs and all(s.startswith("data:image/png;base64,") for s in srcs)
+    assert "http://" not in html and "https://" not in html
+    assert ".table-wrap" in html and "overflow-x: auto" in html
+    # every table sits in a scrolling wrapper
+    assert html.count("<table>") == html.count('<div class="table-wrap"><table>')
+    assert "max-width: 100%" in html
+
+
+@pytest.mark.parametrize(
+    "value, text",
+    [
+        (None, "–"),
+        (True, "yes"),
+        (1234567, "1,234,567"),
+        (0.0123456, "0.01235"),
+        (12.3456, "12.35"),
+        (float("nan"), "–"),
+        (np.float64(2.0), "2"),
+        ([1, 2], "1, 2"),
+        (3e-7, "3.000e-07"),
+    ],
+)
+def test_fmt(value, text):
+    assert fmt(value) == text
