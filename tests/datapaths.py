@@ -1,4 +1,7 @@
-"""Paths of the bundled and shared real data, importable from any test (``from datapaths import ...``)."""
+"""Paths of the bundled and shared real data, importable from any test.
+
+Use ``from datapaths import SHARED, HAS_SHARED, needs_shared``.
+"""
 
 from __future__ import annotations
 

@@ -20,9 +20,27 @@ def show_versions() -> dict[str, str]:
     import importlib.metadata as md
     import platform
 
-    out = {"lidarqa": __version__, "python": platform.python_version(), "platform": platform.platform()}
-    for dist in ("numpy", "scipy", "laspy", "lazrs", "pyproj", "numba", "startinpy", "shapely",
-                 "pyogrio", "matplotlib", "click", "rich", "dask", "distributed"):
+    out = {
+        "lidarqa": __version__,
+        "python": platform.python_version(),
+        "platform": platform.platform(),
+    }
+    for dist in (
+        "numpy",
+        "scipy",
+        "laspy",
+        "lazrs",
+        "pyproj",
+        "numba",
+        "startinpy",
+        "shapely",
+        "pyogrio",
+        "matplotlib",
+        "click",
+        "rich",
+        "dask",
+        "distributed",
+    ):
         try:
             out[dist] = md.version(dist)
         except md.PackageNotFoundError:

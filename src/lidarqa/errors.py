@@ -19,6 +19,7 @@ __all__ = [
     "DegenerateGeometryError",
     "EstimationError",
     "ConfigError",
+    "AnalysisError",
     "TilingError",
     "MissingDependencyError",
     "LidarQAWarning",
@@ -69,6 +70,10 @@ class EstimationError(LidarQAError, ValueError):
 
 class ConfigError(LidarQAError, ValueError):
     """An assessment configuration is invalid (unknown key, wrong type, ...)."""
+
+
+class AnalysisError(LidarQAError):
+    """One or more analyses of an assessment run failed (the report says which and why)."""
 
 
 class TilingError(LidarQAError):

@@ -94,8 +94,19 @@ def _bad_inputs(tmp_path, data_dir):
     return cases
 
 
-@pytest.mark.parametrize("case", ["missing", "directory", "empty", "random-bytes", "truncated-laz",
-                                  "header-count", "csv-no-xyz", "nan"])
+@pytest.mark.parametrize(
+    "case",
+    [
+        "missing",
+        "directory",
+        "empty",
+        "random-bytes",
+        "truncated-laz",
+        "header-count",
+        "csv-no-xyz",
+        "nan",
+    ],
+)
 def test_bad_input_one_line_no_traceback_no_output(tmp_path, data_dir, case):
     path = _bad_inputs(tmp_path, data_dir)[case]
     out = tmp_path / "out.json"
@@ -124,8 +135,11 @@ def test_verbose_shows_traceback(tmp_path):
 
 def test_console_script_subprocess(data_dir):
     """The installed entry point: errors go to stderr, exit code is non-zero."""
-    proc = subprocess.run([sys.executable, "-m", "lidarqa.cli.main", "info", str(data_dir / "missing.laz")],
-                          capture_output=True, text=True)
+    proc = subprocess.run(
+        [sys.executable, "-m", "lidarqa.cli.main", "info", str(data_dir / "missing.laz")],
+        capture_output=True,
+        text=True,
+    )
     assert proc.returncode == 1
     assert proc.stderr.strip().startswith("Error:") and proc.stdout == ""
 

@@ -4,19 +4,30 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from datapaths import HAS_SHARED, SHARED
 
 import lidarqa
 from lidarqa.errors import LasReadError, OutputExistsError
-
-from datapaths import HAS_SHARED, SHARED
 
 laspy = pytest.importorskip("laspy")
 
 _SHARED_LAS = sorted(SHARED.glob("*/*.la[sz]")) if HAS_SHARED else []
 # Header fields that describe the data (not the encoding layout, which depends on the LAZ backend).
-_HEADER_FIELDS = ("version", "point_format", "scales", "offsets", "mins", "maxs", "point_count",
-                  "system_identifier", "generating_software", "creation_date", "file_source_id",
-                  "uuid", "number_of_points_by_return")
+_HEADER_FIELDS = (
+    "version",
+    "point_format",
+    "scales",
+    "offsets",
+    "mins",
+    "maxs",
+    "point_count",
+    "system_identifier",
+    "generating_software",
+    "creation_date",
+    "file_source_id",
+    "uuid",
+    "number_of_points_by_return",
+)
 
 
 def _assert_same_file(a_path, b_path):
@@ -31,12 +42,15 @@ def _assert_same_file(a_path, b_path):
     assert a.header.global_encoding.value == b.header.global_encoding.value
 
     def vlrs(h):
-        return [(v.user_id, v.record_id, v.description, bytes(v.record_data_bytes())) for v in h.vlrs]
+        return [
+            (v.user_id, v.record_id, v.description, bytes(v.record_data_bytes())) for v in h.vlrs
+        ]
 
     assert vlrs(a.header) == vlrs(b.header)
     ea, eb = getattr(a, "evlrs", None) or [], getattr(b, "evlrs", None) or []
-    assert [(v.user_id, v.record_id, bytes(v.record_data_bytes())) for v in ea] == \
-           [(v.user_id, v.record_id, bytes(v.record_data_bytes())) for v in eb]
+    assert [(v.user_id, v.record_id, bytes(v.record_data_bytes())) for v in ea] == [
+        (v.user_id, v.record_id, bytes(v.record_data_bytes())) for v in eb
+    ]
 
 
 @pytest.mark.parametrize("path", _SHARED_LAS, ids=lambda p: p.name)
@@ -98,8 +112,9 @@ def test_subset_writes_consistent_header(data_dir, tmp_path):
 def test_new_cloud_written_as_las14(tmp_path):
     rng = np.random.default_rng(1234)
     xyz = rng.uniform(0, 100, (500, 3)) + [500000, 5400000, 0]
-    cloud = lidarqa.PointCloud(xyz=xyz, fields={"classification": np.full(500, 2, np.uint8),
-                                                "score": rng.normal(size=500)})
+    cloud = lidarqa.PointCloud(
+        xyz=xyz, fields={"classification": np.full(500, 2, np.uint8), "score": rng.normal(size=500)}
+    )
     out = tmp_path / "n.laz"
     lidarqa.write(cloud, out)
     back = lidarqa.read(out)
@@ -166,3 +181,32 @@ def test_las_header_count_disagrees_with_records(data_dir, tmp_path, delta):
     bad.write_bytes(bytes(raw))
     with pytest.raises(LasReadError, match="header declares"):
         lidarqa.read(bad)
+
+
+def test_evlrs_and_extra_bytes_survive(tmp_path):
+    """No shared file carries EVLRs, so build a LAS 1.4 file with one (and extra bytes)."""
+    header = laspy.LasHeader(point_format=6, version="1.4")
+    header.add_extra_dims([laspy.ExtraBytesParams(name="reflectance", type=np.float32),
+                           laspy.ExtraBytesParams(name="echo_width", type=np.uint16)])
+    header.scales = [0.001, 0.001, 0.001]
+    header.offsets = [700000, 6600000, 0]
+    las = laspy.LasData(header)
+    rng = np.random.default_rng(1234)
+    n = 1000
+    las.x = 700000 + rng.uniform(0, 50, n)
+    las.y = 6600000 + rng.uniform(0, 50, n)
+    las.z = rng.uniform(0, 20, n)
+    las.reflectance = rng.normal(size=n).astype(np.float32)
+    las.echo_width = rng.integers(0, 500, n).astype(np.uint16)
+    from laspy.vlrs.vlrlist import VLRList
+
+    las.evlrs = VLRList([laspy.VLR(user_id="lidarqa_test", record_id=42, description="an EVLR",
+                                   record_data=b"x" * 70000)])
+    src = tmp_path / "evlr.las"
+    las.write(src)
+    cloud = lidarqa.read(src)
+    assert set(cloud.fields) >= {"reflectance", "echo_width"}
+    out = tmp_path / "out.laz"
+    lidarqa.write(cloud, out)
+    _assert_same_file(src, out)
+    assert len(laspy.read(out).evlrs) == 1

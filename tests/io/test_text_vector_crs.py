@@ -10,7 +10,14 @@ import lidarqa
 from lidarqa.errors import CRSMismatchError, InvalidPointsError, OutputExistsError, ReadError
 from lidarqa.io.crs import crs_epsg, ensure_same_crs, reproject, vertical_unit, z_to_metres_factor
 from lidarqa.io.polar import Station, polar_to_cartesian, read_polar_csv
-from lidarqa.io.vector import PointSet, Segments, read_points, read_segments, write_points, write_segments
+from lidarqa.io.vector import (
+    PointSet,
+    Segments,
+    read_points,
+    read_segments,
+    write_points,
+    write_segments,
+)
 
 
 def test_csv_header_any_case_and_extra_columns(tmp_path):
@@ -50,8 +57,10 @@ def test_unknown_extension(tmp_path):
 
 
 def test_csv_round_trip(tmp_path):
-    cloud = lidarqa.PointCloud(xyz=np.array([[0.1, 0.2, 0.3], [1e6, 5e6, 12.5]]),
-                               fields={"classification": np.array([2, 6])})
+    cloud = lidarqa.PointCloud(
+        xyz=np.array([[0.1, 0.2, 0.3], [1e6, 5e6, 12.5]]),
+        fields={"classification": np.array([2, 6])},
+    )
     lidarqa.write(cloud, tmp_path / "o.csv")
     back = lidarqa.read(tmp_path / "o.csv")
     np.testing.assert_array_equal(back.xyz, cloud.xyz)
@@ -61,8 +70,10 @@ def test_csv_round_trip(tmp_path):
 @pytest.mark.parametrize("fmt", ["ascii", "binary_little_endian"])
 def test_ply(tmp_path, fmt):
     xyz = np.array([[0, 0, 0], [1, 2, 3.5]], dtype=np.float64)
-    head = f"ply\nformat {fmt} 1.0\nelement vertex 2\nproperty double x\nproperty double y\n" \
-           "property double z\nproperty uchar label\nend_header\n"
+    head = (
+        f"ply\nformat {fmt} 1.0\nelement vertex 2\nproperty double x\nproperty double y\n"
+        "property double z\nproperty uchar label\nend_header\n"
+    )
     p = tmp_path / "c.ply"
     if fmt == "ascii":
         p.write_text(head + "0 0 0 1\n1 2 3.5 7\n")
@@ -78,9 +89,13 @@ def test_ply(tmp_path, fmt):
 @pytest.mark.parametrize("ext", ["csv", "gpkg", "geojson"])
 def test_segments_round_trip(tmp_path, ext):
     pytest.importorskip("pyogrio")
-    seg = Segments(ids=np.array([3, 9]), start=[[0, 0, 0], [1e5, 2e6, 10]],
-                   end=[[1, 0, 0], [1e5 + 3, 2e6 + 4, 10.5]], attributes={"angle_deg": np.array([90.0, 45.0])},
-                   crs=CRS.from_epsg(2154))
+    seg = Segments(
+        ids=np.array([3, 9]),
+        start=[[0, 0, 0], [1e5, 2e6, 10]],
+        end=[[1, 0, 0], [1e5 + 3, 2e6 + 4, 10.5]],
+        attributes={"angle_deg": np.array([90.0, 45.0])},
+        crs=CRS.from_epsg(2154),
+    )
     path = tmp_path / f"s.{ext}"
     write_segments(seg, path)
     back = read_segments(path)
@@ -149,16 +164,20 @@ def test_polar_spec_vectors():
     np.testing.assert_allclose(polar_to_cartesian([10], [90], [0]), [[10, 0, 0]], atol=1e-12)
     np.testing.assert_allclose(polar_to_cartesian([10], [0], [30]), [[0, 8.660254, 5]], atol=1e-6)
     # zenith 60 deg = elevation 30 deg; 100 gon = 90 deg
-    np.testing.assert_allclose(polar_to_cartesian([10], [0], [60], vertical_kind="zenith"),
-                               [[0, 8.660254, 5]], atol=1e-6)
-    np.testing.assert_allclose(polar_to_cartesian([10], [100], [0], angle_unit="gon"), [[10, 0, 0]],
-                               atol=1e-12)
+    np.testing.assert_allclose(
+        polar_to_cartesian([10], [0], [60], vertical_kind="zenith"), [[0, 8.660254, 5]], atol=1e-6
+    )
+    np.testing.assert_allclose(
+        polar_to_cartesian([10], [100], [0], angle_unit="gon"), [[10, 0, 0]], atol=1e-12
+    )
 
 
 def test_polar_station_and_csv(tmp_path):
     p = tmp_path / "obs.csv"
     p.write_text("id,distance,hz,zenith\nA,10,0,90\nB,5,90,90\n")
-    ids, xyz = read_polar_csv(p, station=Station(100, 200, 50, orientation=90, instrument_height=1.5))
+    ids, xyz = read_polar_csv(
+        p, station=Station(100, 200, 50, orientation=90, instrument_height=1.5)
+    )
     assert ids.tolist() == ["A", "B"]
     np.testing.assert_allclose(xyz, [[110, 200, 51.5], [100, 195, 51.5]], atol=1e-9)
     with pytest.raises(InvalidPointsError):

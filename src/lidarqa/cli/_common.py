@@ -33,6 +33,7 @@ __all__ = [
     "prepare_outputs",
     "Steps",
     "echo",
+    "fmt_number",
     "parse_int_list",
     "INT_LIST",
 ]
@@ -75,15 +76,38 @@ def common_options(func: Callable[..., Any]) -> Callable[..., Any]:
     The values land in :func:`settings`; the command function does not receive them.
     """
     opts = [
-        click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None,
-                     expose_value=False, callback=_merge_flag("json_path"),
-                     help="Also write the results as a JSON document to this path."),
-        click.option("--overwrite", is_flag=True, expose_value=False, callback=_merge_flag("overwrite"),
-                     help="Replace output files that already exist."),
-        click.option("-q", "--quiet", is_flag=True, expose_value=False, callback=_merge_flag("quiet"),
-                     help="No progress display."),
-        click.option("-v", "--verbose", count=True, expose_value=False, callback=_merge_flag("verbose"),
-                     help="Show tracebacks on errors."),
+        click.option(
+            "--json",
+            "json_path",
+            type=click.Path(dir_okay=False),
+            default=None,
+            expose_value=False,
+            callback=_merge_flag("json_path"),
+            help="Also write the results as a JSON document to this path.",
+        ),
+        click.option(
+            "--overwrite",
+            is_flag=True,
+            expose_value=False,
+            callback=_merge_flag("overwrite"),
+            help="Replace output files that already exist.",
+        ),
+        click.option(
+            "-q",
+            "--quiet",
+            is_flag=True,
+            expose_value=False,
+            callback=_merge_flag("quiet"),
+            help="No progress display.",
+        ),
+        click.option(
+            "-v",
+            "--verbose",
+            count=True,
+            expose_value=False,
+            callback=_merge_flag("verbose"),
+            help="Show tracebacks on errors.",
+        ),
     ]
     for opt in reversed(opts):
         func = opt(func)
@@ -160,7 +184,9 @@ def json_document(command: str, inputs: Any, parameters: Mapping[str, Any], resu
 def write_json(doc: Any, path: str | Path, *, overwrite: bool = False) -> Path:
     """Write a JSON document atomically (strict JSON: no NaN)."""
     with atomic_path(path, overwrite=overwrite) as tmp:
-        tmp.write_text(json.dumps(to_jsonable(doc), indent=2, allow_nan=False) + "\n", encoding="utf-8")
+        tmp.write_text(
+            json.dumps(to_jsonable(doc), indent=2, allow_nan=False) + "\n", encoding="utf-8"
+        )
     return Path(path)
 
 
@@ -184,6 +210,17 @@ def finish(command: str, *, inputs: Any, parameters: Mapping[str, Any], results:
     if s.json_path:
         write_json(doc, s.json_path, overwrite=s.overwrite)
     return doc
+
+
+def fmt_number(value: Any, digits: int = 3, missing: str = "n/a") -> str:
+    """Format a number for human output; None, NaN and inf become `missing`."""
+    if value is None:
+        return missing
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        return str(value)
+    return f"{v:.{digits}f}" if math.isfinite(v) else missing
 
 
 def echo(text: str = "") -> None:
@@ -220,7 +257,9 @@ class Steps:
         t0 = time.perf_counter()
         with self._console.status(description + " ..."):
             yield
-        self._console.print(f"[green]✓[/green] {description} [dim]({time.perf_counter() - t0:.1f} s)[/dim]")
+        self._console.print(
+            f"[green]✓[/green] {description} [dim]({time.perf_counter() - t0:.1f} s)[/dim]"
+        )
 
     def track(self, iterable: Any, description: str, total: int | None = None) -> Iterator[Any]:
         if self._console is None:
@@ -228,5 +267,6 @@ class Steps:
             return
         from rich.progress import track
 
-        yield from track(iterable, description=description, total=total, console=self._console,
-                         transient=True)
+        yield from track(
+            iterable, description=description, total=total, console=self._console, transient=True
+        )

@@ -25,7 +25,10 @@ def info(path: str) -> None:
         echo(f"  x               {b['min_x']:.3f} .. {b['max_x']:.3f}")
         echo(f"  y               {b['min_y']:.3f} .. {b['max_y']:.3f}")
         echo(f"  z               {b['min_z']:.3f} .. {b['max_z']:.3f}")
-    echo(f"  CRS             {d['crs_name'] or 'none'}" + (f" (EPSG:{d['crs_epsg']})" if d["crs_epsg"] else ""))
+    echo(
+        f"  CRS             {d['crs_name'] or 'none'}"
+        + (f" (EPSG:{d['crs_epsg']})" if d["crs_epsg"] else "")
+    )
     if d["vertical_unit"]:
         echo(f"  vertical unit   {d['vertical_unit']}")
     if d["density_per_m2"]:
@@ -33,11 +36,23 @@ def info(path: str) -> None:
     if d["classes"]:
         echo("  classes         " + ", ".join(f"{k}: {v:,}" for k, v in d["classes"].items()))
     if d["point_source_ids"]:
-        echo("  strips          " + ", ".join(f"{k}: {v:,}" for k, v in d["point_source_ids"].items()))
+        echo(
+            "  strips          "
+            + ", ".join(f"{k}: {v:,}" for k, v in d["point_source_ids"].items())
+        )
     r = d["returns"]
-    echo("  returns         " + ("absent" if not r["present"] else
-                                 ("valid" if r["valid"] else
-                                  f"present, {r['n_zero_return_number']:,} zero / {r['n_invalid']:,} invalid")))
+    echo(
+        "  returns         "
+        + (
+            "absent"
+            if not r["present"]
+            else (
+                "valid"
+                if r["valid"]
+                else f"present, {r['n_zero_return_number']:,} zero / {r['n_invalid']:,} invalid"
+            )
+        )
+    )
     finish("info", inputs={"path": path}, parameters={}, results=d)
 
 
@@ -55,17 +70,36 @@ def _station(value: str | None) -> tuple[float, float, float]:
 
 @click.command()
 @click.argument("observations", type=click.Path(dir_okay=True))
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
-              help="Point list (.csv/.gpkg/.geojson) or point cloud (.las/.laz).")
+@click.option(
+    "-o",
+    "--output",
+    required=True,
+    type=click.Path(dir_okay=False),
+    help="Point list (.csv/.gpkg/.geojson) or point cloud (.las/.laz).",
+)
 @click.option("--station", default=None, help="Station position X,Y,Z in metres (default 0,0,0).")
-@click.option("--orientation", type=float, default=0.0, show_default=True,
-              help="Azimuth of the instrument's zero direction, in the angle unit.")
+@click.option(
+    "--orientation",
+    type=float,
+    default=0.0,
+    show_default=True,
+    help="Azimuth of the instrument's zero direction, in the angle unit.",
+)
 @click.option("--instrument-height", type=float, default=0.0, show_default=True, help="Metres.")
-@click.option("--angle-unit", type=click.Choice(["deg", "gon", "rad"]), default="deg", show_default=True)
+@click.option(
+    "--angle-unit", type=click.Choice(["deg", "gon", "rad"]), default="deg", show_default=True
+)
 @click.option("--crs", default=None, help="CRS of the output (EPSG code or WKT).")
 @common_options
-def polar(observations: str, output: str, station: str | None, orientation: float,
-          instrument_height: float, angle_unit: str, crs: str | None) -> None:
+def polar(
+    observations: str,
+    output: str,
+    station: str | None,
+    orientation: float,
+    instrument_height: float,
+    angle_unit: str,
+    crs: str | None,
+) -> None:
     """Convert polar scanner observations (distance, azimuth, elevation/zenith) to X, Y, Z."""
     from pathlib import Path
 
@@ -88,14 +122,29 @@ def polar(observations: str, output: str, station: str | None, orientation: floa
     suffix = Path(output).suffix.lower()
     check_output(output, overwrite=settings().overwrite)
     if suffix in {".las", ".laz"}:
-        write(PointCloud(xyz=xyz, fields={"point_source_id": np.zeros(len(xyz), np.uint16)},
-                         crs=target_crs), output, overwrite=settings().overwrite)
+        write(
+            PointCloud(
+                xyz=xyz, fields={"point_source_id": np.zeros(len(xyz), np.uint16)}, crs=target_crs
+            ),
+            output,
+            overwrite=settings().overwrite,
+        )
     elif suffix in VECTOR_SUFFIXES:
-        write_points(PointSet(ids=ids, xyz=xyz, crs=target_crs), output, overwrite=settings().overwrite)
+        write_points(
+            PointSet(ids=ids, xyz=xyz, crs=target_crs), output, overwrite=settings().overwrite
+        )
     else:
         raise WriteError(f"cannot write {suffix!r}: use .csv, .gpkg, .geojson, .las or .laz")
     echo(f"{len(xyz):,} observations converted -> {output}")
-    finish("polar", inputs={"observations": observations},
-           parameters={"station": [x0, y0, z0], "orientation": orientation,
-                       "instrument_height": instrument_height, "angle_unit": angle_unit, "crs": crs},
-           results={"n_points": len(xyz), "output": output})
+    finish(
+        "polar",
+        inputs={"observations": observations},
+        parameters={
+            "station": [x0, y0, z0],
+            "orientation": orientation,
+            "instrument_height": instrument_height,
+            "angle_unit": angle_unit,
+            "crs": crs,
+        },
+        results={"n_points": len(xyz), "output": output},
+    )

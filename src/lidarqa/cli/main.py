@@ -98,11 +98,19 @@ def _show_versions(ctx: click.Context, param: click.Parameter, value: bool) -> N
     ctx.exit()
 
 
-@click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"],
-                                             "max_content_width": 100})
+@click.group(
+    cls=LazyGroup,
+    context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
+)
 @click.version_option(__version__, "--version", prog_name="lidarqa")
-@click.option("--show-versions", is_flag=True, expose_value=False, is_eager=True,
-              callback=_show_versions, help="Show versions of lidarqa and its dependencies.")
+@click.option(
+    "--show-versions",
+    is_flag=True,
+    expose_value=False,
+    is_eager=True,
+    callback=_show_versions,
+    help="Show versions of lidarqa and its dependencies.",
+)
 @click.option("-q", "--quiet", is_flag=True, help="No progress display.")
 @click.option("-v", "--verbose", count=True, help="Show tracebacks on errors.")
 @click.pass_context

@@ -86,7 +86,6 @@ def read(path: str | os.PathLike, *, z_to_metres: bool = False) -> PointCloud:
     return cloud
 
 
-
 def write(cloud: PointCloud, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
     """Write a cloud; the format follows the extension (``.las``, ``.laz``, ``.csv``)."""
     suffix = Path(path).suffix.lower()

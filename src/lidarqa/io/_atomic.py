@@ -8,9 +8,25 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-from ..errors import OutputExistsError, WriteError
+from ..errors import OutputExistsError, ReadError, WriteError
 
-__all__ = ["atomic_path", "check_output", "check_distinct"]
+__all__ = ["atomic_path", "check_input", "check_output", "check_distinct"]
+
+
+def check_input(path: str | os.PathLike, *, error: type[ReadError] = ReadError) -> Path:
+    """Return `path` as a Path after checking it is an existing, non-empty file.
+
+    Raises `error` (a :class:`ReadError` subclass) naming the problem: missing,
+    a directory, or 0 bytes.
+    """
+    p = Path(path)
+    if not p.exists():
+        raise error(f"input {p} does not exist")
+    if p.is_dir():
+        raise error(f"input {p} is a directory, not a file")
+    if p.stat().st_size == 0:
+        raise error(f"input {p} is empty (0 bytes)")
+    return p
 
 
 def check_output(path: str | os.PathLike, *, overwrite: bool = False) -> Path:
@@ -23,7 +39,9 @@ def check_output(path: str | os.PathLike, *, overwrite: bool = False) -> Path:
     if p.is_dir():
         raise WriteError(f"output {p} is a directory")
     if p.exists() and not overwrite:
-        raise OutputExistsError(f"output {p} exists; pass --overwrite (overwrite=True) to replace it")
+        raise OutputExistsError(
+            f"output {p} exists; pass --overwrite (overwrite=True) to replace it"
+        )
     if not p.parent.exists():
         raise WriteError(f"output folder {p.parent} does not exist")
     return p

@@ -8,8 +8,16 @@ import numpy as np
 
 from ..errors import CRSMismatchError
 
-__all__ = ["crs_epsg", "crs_name", "vertical_unit", "z_to_metres_factor", "heights_to_metres", "reproject",
-           "ensure_same_crs", "parse_crs"]
+__all__ = [
+    "crs_epsg",
+    "crs_name",
+    "vertical_unit",
+    "z_to_metres_factor",
+    "heights_to_metres",
+    "reproject",
+    "ensure_same_crs",
+    "parse_crs",
+]
 
 
 def parse_crs(value: Any) -> Any:
@@ -80,8 +88,9 @@ def heights_to_metres(xyz: np.ndarray, crs: Any) -> np.ndarray:
     return out
 
 
-def ensure_same_crs(a: Any, b: Any, *, what: tuple[str, str] = ("test", "reference"),
-                    allow_missing: bool = True) -> None:
+def ensure_same_crs(
+    a: Any, b: Any, *, what: tuple[str, str] = ("test", "reference"), allow_missing: bool = True
+) -> None:
     """Raise :class:`CRSMismatchError` if two datasets declare different CRSs.
 
     A dataset without a CRS is accepted when `allow_missing` (the user vouches
@@ -119,5 +128,7 @@ def reproject(xyz: np.ndarray, source: Any, target: Any) -> np.ndarray:
     x, y, z = t.transform(xyz[:, 0], xyz[:, 1], xyz[:, 2])
     out = np.column_stack([x, y, z])
     if not np.isfinite(out).all():
-        raise CRSMismatchError("reprojection produced non-finite coordinates (outside the CRS area?)")
+        raise CRSMismatchError(
+            "reprojection produced non-finite coordinates (outside the CRS area?)"
+        )
     return out

@@ -88,8 +88,13 @@ def _finish(acc: _Accumulator, crs: Any, dims: list[str], header: dict) -> Cloud
     if acc.n == 0:
         bounds = dict.fromkeys(("min_x", "min_y", "min_z", "max_x", "max_y", "max_z"), None)
     else:
-        bounds = dict(zip(("min_x", "min_y", "min_z", "max_x", "max_y", "max_z"),
-                          [float(v) for v in (*acc.mins, *acc.maxs)], strict=True))
+        bounds = dict(
+            zip(
+                ("min_x", "min_y", "min_z", "max_x", "max_y", "max_z"),
+                [float(v) for v in (*acc.mins, *acc.maxs)],
+                strict=True,
+            )
+        )
     area = float(len(acc.cells)) * acc.cell**2 if acc.cells else 0.0
     returns: dict[str, Any] = {"present": acc.rn_present}
     if acc.rn_present:
@@ -122,8 +127,11 @@ def describe_cloud(cloud: Any) -> CloudInfo:
     cells of twice the mean point spacing (at least 1 m), which is robust to
     irregular footprints, unlike points / bounding box.
     """
-    acc = _Accumulator(_density_cell(cloud.xyz.min(axis=0), cloud.xyz.max(axis=0), len(cloud))
-                       if len(cloud) else 1.0)
+    acc = _Accumulator(
+        _density_cell(cloud.xyz.min(axis=0), cloud.xyz.max(axis=0), len(cloud))
+        if len(cloud)
+        else 1.0
+    )
     acc.add(cloud)
     return _finish(acc, cloud.crs, ["X", "Y", "Z", *cloud.fields], {})
 

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InvalidPointsError, LasReadError, WriteError
-from ._atomic import atomic_path, check_output
+from ._atomic import atomic_path, check_input, check_output
 from .pointcloud import PointCloud
 
 __all__ = ["LasSource", "LasReader", "read_las", "write_las", "open_las", "las_header_summary"]
@@ -30,12 +30,21 @@ class LasSource:
     evlrs: Any
     point_format_id: int
     version: str
-    raw_header: bytes = b""  # the file's first 227 bytes: restored verbatim when points are unchanged
+    raw_header: bytes = (
+        b""  # the file's first 227 bytes: restored verbatim when points are unchanged
+    )
     is_subset: bool = False
 
     def subset(self, idx: Any) -> LasSource:
-        return LasSource(self.header, self.records[idx], self.evlrs, self.point_format_id,
-                         self.version, self.raw_header, True)
+        return LasSource(
+            self.header,
+            self.records[idx],
+            self.evlrs,
+            self.point_format_id,
+            self.version,
+            self.raw_header,
+            True,
+        )
 
     @property
     def scales(self) -> np.ndarray:
@@ -53,15 +62,7 @@ def _laspy():
 
 
 def _check_input(path: str | os.PathLike) -> Path:
-    p = Path(path)
-    if not p.exists():
-        raise LasReadError(f"input {p} does not exist")
-    if p.is_dir():
-        raise LasReadError(f"input {p} is a directory, not a point cloud file")
-    size = p.stat().st_size
-    if size == 0:
-        raise LasReadError(f"input {p} is empty (0 bytes)")
-    return p
+    return check_input(path, error=LasReadError)
 
 
 def _check_record_count(p: Path, header: Any) -> None:
@@ -104,8 +105,14 @@ _RESTORE_RANGES = ((90, 94), (179, 227))
 _HEADER_FIXED_END = 227
 
 
-def _cloud_from_points(points: Any, header: Any, evlrs: Any, path: Path,
-                       raw_header: bytes = b"", is_subset: bool = False) -> PointCloud:
+def _cloud_from_points(
+    points: Any,
+    header: Any,
+    evlrs: Any,
+    path: Path,
+    raw_header: bytes = b"",
+    is_subset: bool = False,
+) -> PointCloud:
     names = [n for n in points.point_format.dimension_names if n not in _XYZ]
     xyz = np.empty((len(points), 3), dtype=np.float64)
     xyz[:, 0] = points.x
@@ -149,7 +156,9 @@ def read_las(path: str | os.PathLike) -> PointCloud:
             f"input {p}: header declares {las.header.point_count} points but "
             f"{len(las.points)} could be read"
         )
-    return _cloud_from_points(las.points, las.header, getattr(las, "evlrs", None), p, _raw_header(p))
+    return _cloud_from_points(
+        las.points, las.header, getattr(las, "evlrs", None), p, _raw_header(p)
+    )
 
 
 def _reason(exc: BaseException) -> str:
@@ -206,7 +215,8 @@ class LasReader:
             raise LasReadError(f"cannot read {self.path}: {_reason(exc)}") from exc
         if seen != self.n_points:
             raise LasReadError(
-                f"input {self.path}: header declares {self.n_points} points but {seen} could be read"
+                f"input {self.path}: header declares {self.n_points} points "
+                f"but {seen} could be read"
             )
 
     def close(self) -> None:
@@ -237,7 +247,7 @@ def _new_las(cloud: PointCloud) -> Any:
     for name, values in cloud.fields.items():
         if name not in std:
             dt = np.asarray(values).dtype
-            if dt == bool:
+            if dt == np.bool_:
                 dt = np.dtype(np.uint8)
             extra.append(laspy.ExtraBytesParams(name=name, type=dt))
     if extra:
@@ -270,7 +280,9 @@ def _las_from_source(cloud: PointCloud) -> Any:
         try:
             las.x, las.y, las.z = cloud.x, cloud.y, cloud.z
         except Exception as exc:
-            raise WriteError(f"coordinates do not fit the file's scale/offset: {_reason(exc)}") from exc
+            raise WriteError(
+                f"coordinates do not fit the file's scale/offset: {_reason(exc)}"
+            ) from exc
     dims = set(las.point_format.dimension_names)
     for name, values in cloud.fields.items():
         if name not in dims:
@@ -329,7 +341,11 @@ def write_las(
 
 def las_header_summary(cloud_or_reader: Any) -> dict[str, Any]:
     """Version, point format, scales, offsets and software of a LAS source."""
-    header = cloud_or_reader.source.header if hasattr(cloud_or_reader, "source") else cloud_or_reader.header
+    header = (
+        cloud_or_reader.source.header
+        if hasattr(cloud_or_reader, "source")
+        else cloud_or_reader.header
+    )
     return {
         "version": str(header.version),
         "point_format": int(header.point_format.id),

@@ -12,18 +12,30 @@ from .pointcloud import PointCloud
 __all__ = ["read_ply"]
 
 _TYPES = {
-    "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",
-    "short": "i2", "int16": "i2", "ushort": "u2", "uint16": "u2",
-    "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
-    "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
+    "char": "i1",
+    "int8": "i1",
+    "uchar": "u1",
+    "uint8": "u1",
+    "short": "i2",
+    "int16": "i2",
+    "ushort": "u2",
+    "uint16": "u2",
+    "int": "i4",
+    "int32": "i4",
+    "uint": "u4",
+    "uint32": "u4",
+    "float": "f4",
+    "float32": "f4",
+    "double": "f8",
+    "float64": "f8",
 }
 
 
 def read_ply(path: str | os.PathLike) -> PointCloud:
     """Read the ``vertex`` element of a PLY file; x, y, z plus scalar properties as fields."""
-    from .text import _open_checked
+    from ._atomic import check_input
 
-    p = _open_checked(path)
+    p = check_input(path)
     with p.open("rb") as fh:
         if fh.readline().strip() != b"ply":
             raise ReadError(f"input {p} is not a PLY file (no 'ply' magic)")
@@ -65,7 +77,9 @@ def read_ply(path: str | os.PathLike) -> PointCloud:
             cols = {name: data[:, i] for i, name in enumerate(names)}
         elif fmt in ("binary_little_endian", "binary_big_endian"):
             end = "<" if fmt == "binary_little_endian" else ">"
-            dtype = np.dtype([(name, end + t) for name, t in zip(names, (t for _, t in props), strict=True)])
+            dtype = np.dtype(
+                [(name, end + t) for name, t in zip(names, (t for _, t in props), strict=True)]
+            )
             buf = fh.read(dtype.itemsize * n)
             if len(buf) != dtype.itemsize * n:
                 raise ReadError(f"input {p}: truncated PLY (expected {n} vertices)")

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
@@ -28,7 +27,7 @@ _ANGLE = {"deg": np.pi / 180.0, "gon": np.pi / 200.0, "rad": 1.0}
 
 @dataclass(frozen=True)
 class Station:
-    """Instrument set-up: position (m), orientation (angle unit of the call) and instrument height (m)."""
+    """Instrument set-up: position (m), orientation (angle unit) and instrument height (m)."""
 
     x: float = 0.0
     y: float = 0.0
@@ -116,9 +115,10 @@ def read_polar_csv(
     ``hz``), and either an elevation (``elevation``, ``beta``, ``vertical_angle``)
     or a zenith angle (``zenith``, ``zenith_angle``, ``v``). An ``id`` column is kept.
     """
-    from .vector import _check_file, _read_csv_table
+    from ._atomic import check_input
+    from .vector import _read_csv_table
 
-    p = _check_file(path)
+    p = check_input(path)
     table = _read_csv_table(p)
 
     def pick(cands: tuple[str, ...]) -> str | None:
@@ -127,7 +127,8 @@ def read_polar_csv(
     d, az, el, zen = pick(_DIST), pick(_AZ), pick(_EL), pick(_ZEN)
     if d is None or az is None or (el is None and zen is None):
         raise ReadError(
-            f"input {p} needs distance, azimuth and elevation (or zenith) columns; has: {', '.join(table)}"
+            f"input {p} needs distance, azimuth and elevation (or zenith) columns; "
+            f"has: {', '.join(table)}"
         )
     cols = []
     for name in (d, az, el or zen):
@@ -135,9 +136,8 @@ def read_polar_csv(
         if col.dtype == object:
             raise ReadError(f"input {p}: column {name!r} is not numeric")
         cols.append(col.astype(np.float64))
-    xyz = polar_to_cartesian(*cols, station=station, angle_unit=angle_unit,
-                             vertical_kind="elevation" if el else "zenith")
+    xyz = polar_to_cartesian(
+        *cols, station=station, angle_unit=angle_unit, vertical_kind="elevation" if el else "zenith"
+    )
     ids = table["id"] if "id" in table else np.arange(len(xyz))
     return np.asarray(ids), xyz
-
-

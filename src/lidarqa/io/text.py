@@ -9,21 +9,10 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InvalidPointsError, ReadError
-from ._atomic import atomic_path
+from ._atomic import atomic_path, check_input
 from .pointcloud import PointCloud
 
 __all__ = ["read_text", "write_text", "sniff_header"]
-
-
-def _open_checked(path: str | os.PathLike) -> Path:
-    p = Path(path)
-    if not p.exists():
-        raise ReadError(f"input {p} does not exist")
-    if p.is_dir():
-        raise ReadError(f"input {p} is a directory, not a file")
-    if p.stat().st_size == 0:
-        raise ReadError(f"input {p} is empty (0 bytes)")
-    return p
 
 
 def _is_number(token: str) -> bool:
@@ -40,7 +29,7 @@ def sniff_header(path: str | os.PathLike) -> tuple[list[str] | None, str | None]
     Returns ``(None, delimiter)`` when the first line is all numbers (no header).
     A delimiter of None means runs of white space.
     """
-    p = _open_checked(path)
+    p = check_input(path)
     with p.open("r", encoding="utf-8-sig", errors="replace") as fh:
         first = ""
         for line in fh:
@@ -75,14 +64,24 @@ def read_text(path: str | os.PathLike) -> PointCloud:
     InvalidPointsError
         NaN or infinite coordinates.
     """
-    p = _open_checked(path)
+    p = check_input(path)
     names, delim = sniff_header(p)
     skip = 0 if names is None else 1
     try:
-        data = np.loadtxt(p, delimiter=delim, skiprows=skip, comments="#", ndmin=2, dtype=np.float64,
-                          encoding="utf-8-sig", quotechar='"')
+        data = np.loadtxt(
+            p,
+            delimiter=delim,
+            skiprows=skip,
+            comments="#",
+            ndmin=2,
+            dtype=np.float64,
+            encoding="utf-8-sig",
+            quotechar='"',
+        )
     except ValueError as exc:
-        raise ReadError(f"cannot read {p} as a numeric table: {str(exc).splitlines()[0][:160]}") from exc
+        raise ReadError(
+            f"cannot read {p} as a numeric table: {str(exc).splitlines()[0][:160]}"
+        ) from exc
     if names is None:
         if data.shape[1] < 3:
             raise ReadError(f"input {p} needs at least 3 columns (x, y, z), found {data.shape[1]}")
@@ -101,7 +100,12 @@ def read_text(path: str | os.PathLike) -> PointCloud:
         raise InvalidPointsError(f"input {p} has {bad} row(s) with NaN or infinite coordinates")
     fields = {}
     for name, col in cols.items():
-        if np.all(np.isfinite(col)) and np.all(col == np.round(col)) and col.size and np.abs(col).max() < 2**31:
+        if (
+            np.all(np.isfinite(col))
+            and np.all(col == np.round(col))
+            and col.size
+            and np.abs(col).max() < 2**31
+        ):
             fields[name] = col.astype(np.int64)
         else:
             fields[name] = col
@@ -115,6 +119,10 @@ def write_text(cloud: PointCloud, path: str | os.PathLike, *, overwrite: bool = 
     with atomic_path(path, overwrite=overwrite) as tmp:
         with tmp.open("w", encoding="utf-8", newline="") as fh:
             fh.write(",".join(names) + "\n")
-            table = np.column_stack([c.astype(np.float64) for c in cols]) if len(cloud) else np.empty((0, len(cols)))
+            table = (
+                np.column_stack([c.astype(np.float64) for c in cols])
+                if len(cloud)
+                else np.empty((0, len(cols)))
+            )
             np.savetxt(fh, table, delimiter=",", fmt="%.17g")
     return Path(path)

@@ -19,10 +19,17 @@ from typing import Any
 import numpy as np
 
 from ..errors import InvalidPointsError, ReadError, WriteError
-from ._atomic import atomic_path
+from ._atomic import atomic_path, check_input
 
-__all__ = ["Segments", "PointSet", "read_segments", "write_segments", "read_points", "write_points",
-           "VECTOR_SUFFIXES"]
+__all__ = [
+    "Segments",
+    "PointSet",
+    "read_segments",
+    "write_segments",
+    "read_points",
+    "write_points",
+    "VECTOR_SUFFIXES",
+]
 
 VECTOR_SUFFIXES = {".csv", ".gpkg", ".geojson", ".json"}
 
@@ -56,7 +63,9 @@ class Segments:
             raise InvalidPointsError("segments: ids, start and end must have the same length")
         for k, v in self.attributes.items():
             if len(v) != n:
-                raise InvalidPointsError(f"segments: attribute {k!r} has {len(v)} values for {n} segments")
+                raise InvalidPointsError(
+                    f"segments: attribute {k!r} has {len(v)} values for {n} segments"
+                )
 
     def __len__(self) -> int:
         return len(self.start)
@@ -71,8 +80,13 @@ class Segments:
         return np.stack([self.start, self.end], axis=1)
 
     def subset(self, index: Any) -> Segments:
-        return Segments(self.ids[index], self.start[index], self.end[index],
-                        {k: np.asarray(v)[index] for k, v in self.attributes.items()}, self.crs)
+        return Segments(
+            self.ids[index],
+            self.start[index],
+            self.end[index],
+            {k: np.asarray(v)[index] for k, v in self.attributes.items()},
+            self.crs,
+        )
 
 
 @dataclass(eq=False)
@@ -92,28 +106,23 @@ class PointSet:
             raise InvalidPointsError("points: ids and xyz must have the same length")
         for k, v in self.attributes.items():
             if len(v) != n:
-                raise InvalidPointsError(f"points: attribute {k!r} has {len(v)} values for {n} points")
+                raise InvalidPointsError(
+                    f"points: attribute {k!r} has {len(v)} values for {n} points"
+                )
 
     def __len__(self) -> int:
         return len(self.xyz)
 
     def subset(self, index: Any) -> PointSet:
-        return PointSet(self.ids[index], self.xyz[index],
-                        {k: np.asarray(v)[index] for k, v in self.attributes.items()}, self.crs)
+        return PointSet(
+            self.ids[index],
+            self.xyz[index],
+            {k: np.asarray(v)[index] for k, v in self.attributes.items()},
+            self.crs,
+        )
 
 
 # --------------------------------------------------------------------- helpers
-
-
-def _check_file(path: str | os.PathLike) -> Path:
-    p = Path(path)
-    if not p.exists():
-        raise ReadError(f"input {p} does not exist")
-    if p.is_dir():
-        raise ReadError(f"input {p} is a directory, not a file")
-    if p.stat().st_size == 0:
-        raise ReadError(f"input {p} is empty (0 bytes)")
-    return p
 
 
 def _suffix(path: str | os.PathLike) -> str:
@@ -128,7 +137,12 @@ def _convert_column(values: list[str]) -> np.ndarray:
         arr = np.array([float(v) if v.strip() != "" else np.nan for v in values], dtype=np.float64)
     except ValueError:
         return np.array(values, dtype=object)
-    if arr.size and np.all(np.isfinite(arr)) and np.all(arr == np.round(arr)) and np.abs(arr).max() < 2**53:
+    if (
+        arr.size
+        and np.all(np.isfinite(arr))
+        and np.all(arr == np.round(arr))
+        and np.abs(arr).max() < 2**53
+    ):
         return arr.astype(np.int64)
     return arr
 
@@ -138,7 +152,9 @@ def _read_csv_table(p: Path) -> dict[str, np.ndarray]:
         sample = fh.read(4096)
         fh.seek(0)
         delim = ";" if sample.count(";") > sample.count(",") else ","
-        rows = [r for r in csv.reader(fh, delimiter=delim) if r and not r[0].lstrip().startswith("#")]
+        rows = [
+            r for r in csv.reader(fh, delimiter=delim) if r and not r[0].lstrip().startswith("#")
+        ]
     if not rows:
         raise ReadError(f"input {p} has no rows")
     header = [h.strip().lower() for h in rows[0]]
@@ -175,6 +191,17 @@ def _check_unique(ids: np.ndarray, p: Path) -> None:
         raise ReadError(f"input {p}: duplicate id(s) {', '.join(u[c > 1][:5])}")
 
 
+def _read_ogr(p: Path) -> tuple[Any, list[str], np.ndarray, list]:
+    """CRS, lower-cased field names, shapely geometries and field arrays of a vector file."""
+    pyogrio, shapely = _gis()
+    try:
+        meta, _, wkb, field_data = pyogrio.raw.read(str(p))
+    except Exception as exc:
+        raise ReadError(f"cannot read {p}: {exc}") from exc
+    names = [n.lower() for n in meta["fields"]]
+    return _crs_from_meta(meta), names, shapely.from_wkb(wkb), field_data
+
+
 def _gis():
     from .._validate import require
 
@@ -191,7 +218,7 @@ def read_segments(path: str | os.PathLike) -> Segments:
     ``<id>.<k>``). Raises :class:`ReadError` for a missing/empty file, missing
     columns or 2D geometry, and :class:`InvalidPointsError` for NaN coordinates.
     """
-    p = _check_file(path)
+    p = check_input(path)
     suffix = _suffix(p)
     crs = None
     if suffix == ".csv":
@@ -200,23 +227,20 @@ def read_segments(path: str | os.PathLike) -> Segments:
         start = np.column_stack([_floats(table, c, p) for c in ("x1", "y1", "z1")])
         end = np.column_stack([_floats(table, c, p) for c in ("x2", "y2", "z2")])
         ids = _ids(table, len(start))
-        attrs = {k: v for k, v in table.items() if k not in {"id", "x1", "y1", "z1", "x2", "y2", "z2"}}
+        attrs = {
+            k: v for k, v in table.items() if k not in {"id", "x1", "y1", "z1", "x2", "y2", "z2"}
+        }
     else:
-        pyogrio, shapely = _gis()
-        try:
-            meta, _, geoms, field_data = pyogrio.raw.read(str(p))
-        except Exception as exc:
-            raise ReadError(f"cannot read {p}: {exc}") from exc
-        crs = _crs_from_meta(meta)
-        names = [n.lower() for n in meta["fields"]]
-        geoms = shapely.from_wkb(geoms)
+        crs, names, geoms, field_data = _read_ogr(p)
         starts, ends, ids_l, rows = [], [], [], []
         base_ids = field_data[names.index("id")] if "id" in names else np.arange(len(geoms))
         for i, g in enumerate(geoms):
             if g is None or g.is_empty:
                 continue
             if not g.has_z:
-                raise ReadError(f"input {p}: feature {base_ids[i]} has no z (LineString Z expected)")
+                raise ReadError(
+                    f"input {p}: feature {base_ids[i]} has no z (LineString Z expected)"
+                )
             parts = list(getattr(g, "geoms", [g]))
             k = 0
             for part in parts:
@@ -239,13 +263,16 @@ def read_segments(path: str | os.PathLike) -> Segments:
     return Segments(ids=ids, start=start, end=end, attributes=attrs, crs=crs)
 
 
-def write_segments(segments: Segments, path: str | os.PathLike, *, overwrite: bool = False,
-                   layer: str = "segments") -> Path:
+def write_segments(
+    segments: Segments, path: str | os.PathLike, *, overwrite: bool = False, layer: str = "segments"
+) -> Path:
     """Write segments as CSV, GeoPackage or GeoJSON (LineString Z), atomically."""
     suffix = Path(path).suffix.lower()
     if suffix not in VECTOR_SUFFIXES:
         raise WriteError(f"cannot write segments as {suffix!r}: use .csv, .gpkg or .geojson")
-    if len(segments) and not (np.isfinite(segments.start).all() and np.isfinite(segments.end).all()):
+    if len(segments) and not (
+        np.isfinite(segments.start).all() and np.isfinite(segments.end).all()
+    ):
         raise WriteError("refusing to write segments with NaN coordinates")
     if suffix == ".csv":
         cols = {"id": segments.ids}
@@ -257,8 +284,15 @@ def write_segments(segments: Segments, path: str | os.PathLike, *, overwrite: bo
         return _write_csv(cols, path, overwrite=overwrite)
     _, shapely = _gis()
     geoms = shapely.linestrings(segments.endpoints) if len(segments) else np.empty(0, dtype=object)
-    return _write_ogr(geoms, {"id": segments.ids, **segments.attributes}, segments.crs, path,
-                      overwrite=overwrite, layer=layer, geometry_type="LineString Z")
+    return _write_ogr(
+        geoms,
+        {"id": segments.ids, **segments.attributes},
+        segments.crs,
+        path,
+        overwrite=overwrite,
+        layer=layer,
+        geometry_type="LineString Z",
+    )
 
 
 # ----------------------------------------------------------------------- points
@@ -269,7 +303,7 @@ def read_points(path: str | os.PathLike, *, require_z: bool = True) -> PointSet:
 
     With ``require_z=False`` a missing z column / 2D geometry gives z = NaN.
     """
-    p = _check_file(path)
+    p = check_input(path)
     suffix = _suffix(p)
     crs = None
     if suffix == ".csv":
@@ -281,19 +315,12 @@ def read_points(path: str | os.PathLike, *, require_z: bool = True) -> PointSet:
         ids = _ids(table, len(xyz))
         attrs = {k: v for k, v in table.items() if k not in {"id", "x", "y", "z"}}
     else:
-        pyogrio, shapely = _gis()
-        try:
-            meta, _, geoms, field_data = pyogrio.raw.read(str(p))
-        except Exception as exc:
-            raise ReadError(f"cannot read {p}: {exc}") from exc
-        crs = _crs_from_meta(meta)
-        names = [n.lower() for n in meta["fields"]]
-        geoms = shapely.from_wkb(geoms)
+        crs, names, geoms, field_data = _read_ogr(p)
         if len(geoms) and not all(g is not None and g.geom_type == "Point" for g in geoms):
             raise ReadError(f"input {p}: expected Point features")
         if require_z and len(geoms) and not all(g.has_z for g in geoms):
             raise ReadError(f"input {p}: points have no z (Point Z expected)")
-        xyz = shapely.get_coordinates(geoms, include_z=True) if len(geoms) else np.empty((0, 3))
+        xyz = _gis()[1].get_coordinates(geoms, include_z=True) if len(geoms) else np.empty((0, 3))
         ids = field_data[names.index("id")] if "id" in names else np.arange(len(xyz))
         attrs = {n: np.asarray(field_data[j]) for j, n in enumerate(names) if n != "id"}
     finite = np.isfinite(xyz[:, :2]).all() and (not require_z or np.isfinite(xyz[:, 2]).all())
@@ -303,20 +330,33 @@ def read_points(path: str | os.PathLike, *, require_z: bool = True) -> PointSet:
     return PointSet(ids=np.asarray(ids), xyz=xyz, attributes=attrs, crs=crs)
 
 
-def write_points(points: PointSet, path: str | os.PathLike, *, overwrite: bool = False,
-                 layer: str = "points") -> Path:
+def write_points(
+    points: PointSet, path: str | os.PathLike, *, overwrite: bool = False, layer: str = "points"
+) -> Path:
     """Write a point list as CSV, GeoPackage or GeoJSON (Point Z), atomically."""
     suffix = Path(path).suffix.lower()
     if suffix not in VECTOR_SUFFIXES:
         raise WriteError(f"cannot write points as {suffix!r}: use .csv, .gpkg or .geojson")
     if suffix == ".csv":
-        cols = {"id": points.ids, "x": points.xyz[:, 0], "y": points.xyz[:, 1], "z": points.xyz[:, 2]}
+        cols = {
+            "id": points.ids,
+            "x": points.xyz[:, 0],
+            "y": points.xyz[:, 1],
+            "z": points.xyz[:, 2],
+        }
         cols.update(points.attributes)
         return _write_csv(cols, path, overwrite=overwrite)
     _, shapely = _gis()
     geoms = shapely.points(points.xyz) if len(points) else np.empty(0, dtype=object)
-    return _write_ogr(geoms, {"id": points.ids, **points.attributes}, points.crs, path,
-                      overwrite=overwrite, layer=layer, geometry_type="Point Z")
+    return _write_ogr(
+        geoms,
+        {"id": points.ids, **points.attributes},
+        points.crs,
+        path,
+        overwrite=overwrite,
+        layer=layer,
+        geometry_type="Point Z",
+    )
 
 
 # ------------------------------------------------------------------- writers
@@ -342,8 +382,16 @@ def _write_csv(cols: dict[str, Any], path: str | os.PathLike, *, overwrite: bool
     return Path(path)
 
 
-def _write_ogr(geoms: Any, fields: dict[str, Any], crs: Any, path: str | os.PathLike, *,
-               overwrite: bool, layer: str, geometry_type: str) -> Path:
+def _write_ogr(
+    geoms: Any,
+    fields: dict[str, Any],
+    crs: Any,
+    path: str | os.PathLike,
+    *,
+    overwrite: bool,
+    layer: str,
+    geometry_type: str,
+) -> Path:
     pyogrio, shapely = _gis()
     suffix = Path(path).suffix.lower()
     driver = "GPKG" if suffix == ".gpkg" else "GeoJSON"
@@ -365,9 +413,17 @@ def _write_ogr(geoms: Any, fields: dict[str, Any], crs: Any, path: str | os.Path
         try:
             with warnings.catch_warnings():
                 warnings.filterwarnings("ignore", message=".*'crs' was not provided.*")
-                pyogrio.raw.write(str(target), wkb, geometry_type=geometry_type, field_data=arrays,
-                                  fields=names, crs=crs_wkt, driver=driver, layer=layer,
-                                  encoding="UTF-8")
+                pyogrio.raw.write(
+                    str(target),
+                    wkb,
+                    geometry_type=geometry_type,
+                    field_data=arrays,
+                    fields=names,
+                    crs=crs_wkt,
+                    driver=driver,
+                    layer=layer,
+                    encoding="UTF-8",
+                )
             os.replace(target, tmp)
         finally:
             if target.exists():
