@@ -77,8 +77,39 @@ class PTDResult:
         }
 
 
+class TINParameters:
+    """Validation and conversion shared by the TIN-densification filters (PTD, SegmentPTD).
+
+    A field-less mixin for frozen dataclasses that define ``cell_size``,
+    ``max_terrain_angle``, ``iter_angle``, ``iter_distance``, ``min_edge_length``,
+    ``mirror``, ``edge_mode`` and ``mirror_max_distance``.
+    """
+
+    def _check_tin_parameters(self) -> None:
+        check_positive(self.cell_size, "cell_size")
+        check_range(self.max_terrain_angle, "max_terrain_angle", 0.0, 90.0, lo_open=True)
+        check_range(self.iter_angle, "iter_angle", 0.0, 90.0, lo_open=True, hi_open=True)
+        check_positive(self.iter_distance, "iter_distance")
+        check_positive(self.min_edge_length, "min_edge_length", allow_zero=True)
+        check_choice(self.edge_mode, ("freeze", "reduce"), "edge_mode")
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)  # type: ignore[call-overload]
+
+    def criteria(self) -> Criteria:
+        return Criteria(
+            iter_angle=math.radians(self.iter_angle),
+            iter_distance=float(self.iter_distance),
+            max_terrain_angle=math.radians(self.max_terrain_angle),
+            min_edge_length=float(self.min_edge_length),
+            mirror=bool(self.mirror),
+            edge_mode=self.edge_mode,
+            mirror_max_distance=float(self.mirror_max_distance),
+        )
+
+
 @dataclass(frozen=True)
-class PTD:
+class PTD(TINParameters):
     """Progressive TIN densification ground filter (Axelsson 2000).
 
     Parameters
@@ -147,12 +178,7 @@ class PTD:
     seed_support_ratio: float = 0.25
 
     def __post_init__(self) -> None:
-        check_positive(self.cell_size, "cell_size")
-        check_range(self.max_terrain_angle, "max_terrain_angle", 0.0, 90.0, lo_open=True)
-        check_range(self.iter_angle, "iter_angle", 0.0, 90.0, lo_open=True, hi_open=True)
-        check_positive(self.iter_distance, "iter_distance")
-        check_positive(self.min_edge_length, "min_edge_length", allow_zero=True)
-        check_choice(self.edge_mode, ("freeze", "reduce"), "edge_mode")
+        self._check_tin_parameters()
         check_positive(self.min_gain_frac, "min_gain_frac", allow_zero=True)
         check_positive(self.low_outlier_distance, "low_outlier_distance", allow_zero=True)
         check_positive(self.low_outlier_radius, "low_outlier_radius")
@@ -160,20 +186,6 @@ class PTD:
             from ..errors import OptionError
 
             raise OptionError(f"max_iter must be an integer >= 1, got {self.max_iter!r}")
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
-
-    def criteria(self) -> Criteria:
-        return Criteria(
-            iter_angle=math.radians(self.iter_angle),
-            iter_distance=float(self.iter_distance),
-            max_terrain_angle=math.radians(self.max_terrain_angle),
-            min_edge_length=float(self.min_edge_length),
-            mirror=bool(self.mirror),
-            edge_mode=self.edge_mode,
-            mirror_max_distance=float(self.mirror_max_distance),
-        )
 
     def run(self, points: Any, *, candidates: Any = None) -> PTDResult:
         """Run the filter and return the full :class:`PTDResult`.

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -21,9 +21,9 @@ from numba import njit
 
 from .._validate import as_points, check_choice, check_positive, check_range
 from ..errors import DegenerateGeometryWarning, InvalidPointsError, OptionError
-from ._tin import TIN, Criteria
+from ._tin import TIN
 from .features import detect_object_segments, segment_features
-from .ptd import DensifyState, densify, final_pass, initial_seeds, prepare
+from .ptd import DensifyState, TINParameters, densify, final_pass, initial_seeds, prepare
 
 __all__ = ["SegmentPTD", "SegmentPTDResult", "segment_ptd", "default_grow_radius"]
 
@@ -103,7 +103,7 @@ def default_grow_radius(points: np.ndarray, *, factor: float = 2.5, floor: float
 
 
 @dataclass(frozen=True)
-class SegmentPTD:
+class SegmentPTD(TINParameters):
     """Segment-based PTD ground filter.
 
     Parameters
@@ -230,12 +230,7 @@ class SegmentPTD:
     below_distance: float = 0.0
 
     def __post_init__(self) -> None:
-        check_positive(self.cell_size, "cell_size")
-        check_range(self.max_terrain_angle, "max_terrain_angle", 0.0, 90.0, lo_open=True)
-        check_range(self.iter_angle, "iter_angle", 0.0, 90.0, lo_open=True, hi_open=True)
-        check_positive(self.iter_distance, "iter_distance")
-        check_positive(self.min_edge_length, "min_edge_length", allow_zero=True)
-        check_choice(self.edge_mode, ("freeze", "reduce"), "edge_mode")
+        self._check_tin_parameters()
         check_choice(self.unsegmented, ("point_ptd", "drop"), "unsegmented")
         check_range(self.accept_ratio, "accept_ratio", 0.0, 1.0)
         check_range(self.reject_ratio, "reject_ratio", 0.0, 1.0)
@@ -269,20 +264,6 @@ class SegmentPTD:
             v = getattr(self, name)
             if int(v) != v or v < 1:
                 raise OptionError(f"{name} must be an integer >= 1, got {v!r}")
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
-
-    def criteria(self) -> Criteria:
-        return Criteria(
-            iter_angle=math.radians(self.iter_angle),
-            iter_distance=float(self.iter_distance),
-            max_terrain_angle=math.radians(self.max_terrain_angle),
-            min_edge_length=float(self.min_edge_length),
-            mirror=bool(self.mirror),
-            edge_mode=self.edge_mode,
-            mirror_max_distance=float(self.mirror_max_distance),
-        )
 
     def segment(self, points: Any, *, candidates: Any = None) -> tuple[np.ndarray, float]:
         """Surface-growing labels of the candidate points (others -1) and the radius used."""
