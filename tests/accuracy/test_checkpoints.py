@@ -74,7 +74,8 @@ def test_nssda_formulas():
     assert "1.7308" in a.formula and not a.warnings
     # within 5 %: "RMSE_x ≈ RMSE_y", the NSSDA's 1.7308·RMSE_r
     near = nssda_accuracy(0.031, 0.030, np.nan, n_check=25)
-    assert "1.7308" in near.formula and near.accuracy_r == pytest.approx(1.7308 * np.hypot(0.031, 0.03))
+    assert "1.7308" in near.formula
+    assert near.accuracy_r == pytest.approx(1.7308 * np.hypot(0.031, 0.03))
     # 0.6 <= ratio < 0.95: the NSSDA approximation 2.4477·½(x+y), no warning
     b = nssda_accuracy(0.05, 0.03, np.nan, n_check=25)
     assert b.ratio == pytest.approx(0.6) and "2.4477" in b.formula and not b.warnings

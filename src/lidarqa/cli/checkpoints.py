@@ -327,16 +327,19 @@ def _summary(r: dict, vertical: bool) -> None:
     else:
         v = r["vertical"]
         echo(
-            f"ground points   {v['n_ground']:,}   max edge {fmt_number(v['max_edge'], 2)} m   flags "
+            f"ground points   {v['n_ground']:,}   "
+            f"max edge {fmt_number(v['max_edge'], 2)} m   flags "
             + ", ".join(f"{k}: {n}" for k, n in v["flags"].items() if n)
         )
         echo(
-            f"dz  mean {fmt_number(r['mean_z'], 4)}  std {fmt_number(r['std_z'], 4)}  RMSE {fmt_number(r['rmse_z'], 4)}  "
+            f"dz  mean {fmt_number(r['mean_z'], 4)}  std {fmt_number(r['std_z'], 4)}  "
+            f"RMSE {fmt_number(r['rmse_z'], 4)}  "
             f"max|dz| {fmt_number(r['max_abs_z'], 4)} m"
         )
     a = r["asprs2023"]
     echo(
-        f"ASPRS Ed. 2     RMSE_H {fmt_number(a['rmse_h'], 4)}  RMSE_V {fmt_number(a['rmse_v'], 4)}  "
+        f"ASPRS Ed. 2     RMSE_H {fmt_number(a['rmse_h'], 4)}  "
+        f"RMSE_V {fmt_number(a['rmse_v'], 4)}  "
         f"RMSE_3D {fmt_number(a['rmse_3d'], 4)} m"
     )
     n = r["nssda"]

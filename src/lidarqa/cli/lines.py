@@ -177,12 +177,14 @@ def lines(
     echo(f"model  {model}: q = {r.q} segments")
     echo(f"{'':22}{'test→model':>12}{'model→test':>14}")
     echo(
-        f"{'threshold (m)':22}{fmt_number(r.threshold_tm, 3):>12}{fmt_number(r.threshold_mt, 3):>14}"
+        f"{'threshold (m)':22}{fmt_number(r.threshold_tm, 3):>12}"
+        f"{fmt_number(r.threshold_mt, 3):>14}"
         f"   ({how(r.auto_tm)} / {how(r.auto_mt)})"
     )
     echo(f"{'pairs':22}{r.n_pairs_tm:>12}{r.n_pairs_mt:>14}")
     echo(
-        f"{'OLHD (m)':22}{fmt_number(r.olhd_tm, 3) + star_tm:>12}{fmt_number(r.olhd_mt, 3) + star_mt:>14}"
+        f"{'OLHD (m)':22}{fmt_number(r.olhd_tm, 3) + star_tm:>12}"
+        f"{fmt_number(r.olhd_mt, 3) + star_mt:>14}"
     )
     if r.ground_truth is not None:
         g = r.ground_truth
@@ -371,7 +373,8 @@ def repeatability(
         fallback |= bool(f1 or f2)
         echo(
             f"{name:<{width}}{row['p']:>6}{row['q']:>6}{row['n_pairs_tm']:>11}{row['n_pairs_mt']:>11}"
-            f"{fmt_number(row['threshold_tm'], 3) + f1:>9}{fmt_number(row['threshold_mt'], 3) + f2:>9}"
+            f"{fmt_number(row['threshold_tm'], 3) + f1:>9}"
+            f"{fmt_number(row['threshold_mt'], 3) + f2:>9}"
             f"{fmt_number(o1, 3) + s1:>11}{fmt_number(o2, 3) + s2:>11}"
         )
     echo(
