@@ -105,19 +105,30 @@ def test_to_dict_keys():
 # ------------------------------------------------------------------- Monte Carlo
 
 
-def _monte_carlo(method, lin, t0, n_trials=1000, noise=0.01, seed=1234):
+def _monte_carlo(method, lin, t0, n_trials=1000, noise=0.01, seed=1234, antithetic=False):
+    """Estimate ``method`` on ``n_trials`` noisy copies of one exact point set.
+
+    With ``antithetic=True`` every noise draw is used twice, with both signs
+    (antithetic variates): the first-order effect of the noise cancels in the
+    mean of each pair, so the mean over all estimates differs from the truth only
+    by the estimator's own (second-order) bias. Returns ``2 * n_trials`` rows then,
+    pairs adjacent.
+    """
     rng = np.random.default_rng(seed)
     src = rng.uniform(-50, 50, (8, 3)) + np.array([500000.0, 5400000.0, 300.0])
     tgt = t0 + src @ lin.T
     truth = estimate_transform(src, tgt, method=method)
     names = truth.param_names
     tv = np.array([truth.params[k] for k in names])
-    est = np.empty((n_trials, len(names)))
-    sig = np.empty((n_trials, len(names)))
+    signs = (1.0, -1.0) if antithetic else (1.0,)
+    est = np.empty((n_trials * len(signs), len(names)))
+    sig = np.empty_like(est)
     for i in range(n_trials):
-        f = estimate_transform(src, tgt + rng.normal(0.0, noise, tgt.shape), method=method)
-        est[i] = [f.params[k] for k in names]
-        sig[i] = [f.sigmas[k] for k in names]
+        eps = rng.normal(0.0, noise, tgt.shape)
+        for j, sign in enumerate(signs):
+            f = estimate_transform(src, tgt + sign * eps, method=method)
+            est[i * len(signs) + j] = [f.params[k] for k in names]
+            sig[i * len(signs) + j] = [f.sigmas[k] for k in names]
     return names, tv, est, sig
 
 
@@ -137,18 +148,23 @@ MC_CASES = {
 
 @pytest.mark.parametrize("method", list(MC_CASES))
 def test_monte_carlo_unbiased_and_sigmas(method):
-    """1000 noisy trials: estimates centred on the truth, reported sigmas = empirical spread."""
+    """1000 antithetic pairs of noisy trials: estimates centred on the truth, sigmas honest.
+
+    The issue's criterion, per parameter: the mean of the estimates lies within
+    2 standard errors (empirical spread / sqrt(number of estimates)) of the truth.
+    Antithetic pairs make this a test of bias alone: a plain Monte Carlo mean
+    also moves by chance and, with 5-7 parameters, misses 2 SE in about a quarter
+    of the runs (that design is checked over many seeds in
+    test_monte_carlo_bias_calibration).
+    """
     lin, t0 = MC_CASES[method]
-    names, truth, est, sig = _monte_carlo(method, lin, t0)
+    names, truth, est, sig = _monte_carlo(method, lin, t0, antithetic=True)
     n = len(est)
     spread = est.std(axis=0, ddof=1)
     if method.startswith("helmert"):
         assert truth[5] == pytest.approx(35.0, abs=1e-9)  # noiseless data give the truth back
-    # mean of the estimates within a few standard errors of the truth (2 SE per parameter is
-    # checked over many runs in test_monte_carlo_bias_calibration: with 5-7 parameters one
-    # run alone exceeds 2 SE by chance about a quarter of the time)
     z = (est.mean(axis=0) - truth) / (spread / np.sqrt(n))
-    assert np.all(np.abs(z) < 3.0), dict(zip(names, z, strict=True))
+    assert np.all(np.abs(z) < 2.0), dict(zip(names, z, strict=True))
     # the reported sigma (RMS over trials) matches the empirical spread within 10 %
     reported = np.sqrt(np.mean(sig**2, axis=0))
     ratio = reported / spread
