@@ -6,6 +6,7 @@ Coordinates are expected to be already shifted near the origin.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -112,50 +113,41 @@ class TIN:
     def _setup(
         self, vxyz: np.ndarray, vsrc: np.ndarray, simp: np.ndarray, nb: np.ndarray | None
     ) -> None:
-        self.vxyz = vxyz
+        self.vxyz = np.ascontiguousarray(vxyz, dtype=np.float64)
         self.vsrc = vsrc
         self.real_pos = np.flatnonzero(vsrc >= 0)
         self.real_idx = vsrc[self.real_pos]
         self.n_real = self.real_idx.size
-        xy = vxyz[:, :2]
-        a, b, c = xy[simp[:, 0]], xy[simp[:, 1]], xy[simp[:, 2]]
-        cw = (
-            (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
-        ) < 0
-        if cw.any():  # make every triangle counter-clockwise (swap vertices 1 and 2)
-            simp[cw] = simp[cw][:, [0, 2, 1]]
-            if nb is not None:
-                nb[cw] = nb[cw][:, [0, 2, 1]]
-        if nb is None:
-            nb = _neighbors(simp, vxyz.shape[0])
-        self.simplices = np.ascontiguousarray(simp)
-        self.neighbors = np.ascontiguousarray(nb)
-        t = vxyz[self.simplices]  # (K, 3, 3)
-        e = np.stack(
-            [t[:, 1, :2] - t[:, 0, :2], t[:, 2, :2] - t[:, 1, :2], t[:, 0, :2] - t[:, 2, :2]], 1
+        simp = np.ascontiguousarray(simp, dtype=np.int64)
+        have_nb = nb is not None
+        nb = (
+            np.ascontiguousarray(nb, dtype=np.int64)
+            if have_nb
+            else np.empty(simp.shape, dtype=np.int64)
         )
-        self.edge_max = np.sqrt((e**2).sum(axis=2)).max(axis=1)
-        n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
-        norm = np.linalg.norm(n, axis=1)
-        norm[norm == 0] = 1.0
-        n = n / norm[:, None]
-        n *= np.where(n[:, 2] < 0, -1.0, 1.0)[:, None]
-        self.normal = n
-        self.slope = np.arccos(np.clip(np.abs(n[:, 2]), 0.0, 1.0))
+        # every triangle made counter-clockwise; adjacency, longest XY edge, upward
+        # unit normal and slope of each facet, in one pass
+        self.edge_max, self.normal, self.slope = _setup_kernel(self.vxyz, simp, nb, have_nb)
+        self.simplices = simp
+        self.neighbors = nb
 
-    def locate(self, xy: np.ndarray) -> np.ndarray:
-        """Triangle index of each XY point, -1 outside the TIN."""
+    def locate(self, xy: np.ndarray, *, presorted: bool = False) -> np.ndarray:
+        """Triangle index of each XY point, -1 outside the TIN.
+
+        The points are walked to in spatial (Morton) order, each walk starting
+        from the previous hit; ``presorted=True`` says `xy` is in that order already.
+        """
         if xy.shape[0] == 0:
             return np.zeros(0, dtype=np.int64)
-        order = spatial_order(xy)
-        vxy = np.ascontiguousarray(self.vxyz[:, :2])
-        out = np.empty(xy.shape[0], dtype=np.int64)
-        lost = _walk_all(np.ascontiguousarray(xy[order]), vxy, self.simplices, self.neighbors, out)
+        order = None if presorted else spatial_order(xy)
+        q = np.ascontiguousarray(xy if order is None else xy[order], dtype=np.float64)
+        out = _locate_kernel(
+            q, np.ascontiguousarray(self.vxyz[:, :2]), self.simplices, self.neighbors
+        )
+        if order is None:
+            return out
         res = np.empty_like(out)
         res[order] = out
-        if lost:  # walk did not converge (degenerate geometry): exact fallback
-            bad = np.flatnonzero(res == -2)
-            res[bad] = _brute_locate(xy[bad], vxy, self.simplices)
         return res
 
     def is_real(self, v: np.ndarray) -> np.ndarray:
@@ -167,33 +159,6 @@ class TIN:
         pos = np.full(self.vxyz.shape[0], -1, dtype=np.int64)
         pos[self.real_pos] = np.arange(self.n_real)
         return pos[self.simplices[keep]]
-
-
-def _neighbors(simp: np.ndarray, nv: int) -> np.ndarray:
-    """Triangle adjacency: ``nb[k, i]`` is the triangle across the side opposite vertex i."""
-    k = simp.shape[0]
-    a = simp[:, [1, 2, 0]].astype(np.int64)
-    b = simp[:, [2, 0, 1]].astype(np.int64)
-    key = (a * nv + b).ravel()
-    rkey = (b * nv + a).ravel()
-    order = np.argsort(key, kind="stable")
-    sk = key[order]
-    pos = np.minimum(np.searchsorted(sk, rkey), sk.size - 1)
-    found = sk[pos] == rkey
-    return np.where(found, order[pos] // 3, -1).reshape(k, 3)
-
-
-def _brute_locate(pts: np.ndarray, vxy: np.ndarray, simp: np.ndarray) -> np.ndarray:
-    out = np.full(pts.shape[0], -1, dtype=np.int64)
-    a, b, c = vxy[simp[:, 0]], vxy[simp[:, 1]], vxy[simp[:, 2]]
-    for m, (px, py) in enumerate(pts):
-        o1 = (b[:, 0] - a[:, 0]) * (py - a[:, 1]) - (b[:, 1] - a[:, 1]) * (px - a[:, 0])
-        o2 = (c[:, 0] - b[:, 0]) * (py - b[:, 1]) - (c[:, 1] - b[:, 1]) * (px - b[:, 0])
-        o3 = (a[:, 0] - c[:, 0]) * (py - c[:, 1]) - (a[:, 1] - c[:, 1]) * (px - c[:, 0])
-        hit = np.flatnonzero((o1 >= 0) & (o2 >= 0) & (o3 >= 0))
-        if hit.size:
-            out[m] = hit[0]
-    return out
 
 
 class IncrementalTIN:
@@ -211,6 +176,7 @@ class IncrementalTIN:
         self.dt = startinpy.DT()
         self.dt.snap_tolerance = 1e-7
         self.src: list[np.ndarray] = []
+        self.pts: list[np.ndarray] = []  # inserted coordinates, in startinpy's vertex order
         self.n = 0
         self._insert(
             np.asarray(virtual, dtype=np.float64), np.full(len(virtual), -1, dtype=np.int64)
@@ -220,9 +186,11 @@ class IncrementalTIN:
     def _insert(self, pts: np.ndarray, src: np.ndarray) -> None:
         if pts.shape[0] == 0:
             return
-        self.dt.insert(np.ascontiguousarray(pts))
+        pts = np.ascontiguousarray(pts, dtype=np.float64)
+        self.dt.insert(pts)
         self.n += pts.shape[0]
         self.src.append(src)
+        self.pts.append(pts)
         if self.dt.number_of_vertices() != self.n:
             raise _MergedVertices
 
@@ -235,9 +203,10 @@ class IncrementalTIN:
         self._insert(p[order], idx[order])
 
     def snapshot(self) -> TIN:
-        vxyz = np.asarray(self.dt.points)[1:]
+        # vertex i of startinpy is the i-th inserted point (0 is its infinite vertex);
+        # no vertex was merged (checked on insertion), so the coordinates are ours
         simp = np.asarray(self.dt.triangles, dtype=np.int64) - 1
-        return TIN.from_triangles(vxyz, np.concatenate(self.src), simp)
+        return TIN.from_triangles(np.concatenate(self.pts), np.concatenate(self.src), simp)
 
 
 class _MergedVertices(Exception):
@@ -277,39 +246,6 @@ def mirror_point(p: np.ndarray, v: np.ndarray) -> np.ndarray:
     return 2.0 * np.asarray(v, dtype=np.float64) - np.asarray(p, dtype=np.float64)
 
 
-def _facet_measures(
-    p: np.ndarray, t: np.ndarray, normal: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Distance to the facet plane and largest vertex angle beta (rad), vectorised.
-
-    `p` (M, 3), `t` (M, 3, 3) triangle vertices, `normal` (M, 3) unit normals.
-    """
-    dist = np.abs(((p - t[:, 0]) * normal).sum(axis=1))
-    pv = np.sqrt(((p[:, None, :] - t) ** 2).sum(axis=2))  # (M, 3)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        s = np.where(pv > EPS, dist[:, None] / pv, 1.0)
-    beta = np.arcsin(np.clip(s, 0.0, 1.0)).max(axis=1)
-    return dist, beta
-
-
-def _subfacet_slope_ok(p: np.ndarray, t: np.ndarray, max_angle: float) -> np.ndarray:
-    """All three sub-facets (P,A,B), (P,B,C), (P,C,A) no steeper than `max_angle`.
-
-    Sub-facets with XY area < EPS (P on an edge) are ignored.
-    """
-    ok = np.ones(p.shape[0], dtype=bool)
-    cos_max = np.cos(max_angle)
-    for i, j in ((0, 1), (1, 2), (2, 0)):
-        n = np.cross(t[:, i] - p, t[:, j] - p)
-        nz = np.abs(n[:, 2])
-        nn = np.linalg.norm(n, axis=1)
-        area_xy = 0.5 * nz
-        with np.errstate(divide="ignore", invalid="ignore"):
-            cosv = np.where(nn > 0, nz / nn, 1.0)
-        ok &= (area_xy < EPS) | (cosv >= cos_max - 1e-12)
-    return ok
-
-
 @dataclass
 class PointTest:
     """Per-candidate outcome of one test sweep against a TIN."""
@@ -327,92 +263,46 @@ class PointTest:
 
 
 def judge_points(
-    tin: TIN, p: np.ndarray, crit: Criteria, *, check_frozen: bool = True
+    tin: TIN,
+    p: np.ndarray,
+    crit: Criteria,
+    *,
+    check_frozen: bool = True,
+    presorted: bool = False,
 ) -> PointTest:
-    """Run the §1.1 step 5b–f tests for candidate points `p` (M, 3) against `tin`."""
+    """Run the §1.1 step 5b–f tests for candidate points `p` (M, 3) against `tin`.
+
+    One compiled pass per point: locate its facet (walk), XY-duplicate test,
+    frozen-triangle test, distance and iteration angle, sub-facet slopes, and
+    mirroring through the nearest real vertex (the mirrored point is walked to
+    from the point's own facet). ``presorted=True``: `p` is in
+    :func:`spatial_order` already (saves a sort per call in the densification).
+    """
     m = p.shape[0]
-    tri = tin.locate(p[:, :2])
-    inside = tri >= 0
-    passed = np.zeros(m, dtype=bool)
-    mirrored = np.zeros(m, dtype=bool)
-    score = np.full(m, np.inf)
-    beta_out = np.full(m, np.inf)
-    dup = np.zeros(m, dtype=bool)
-    dup_ok = np.zeros(m, dtype=bool)
-    frozen = np.zeros(m, dtype=bool)
-    frozen_ok = np.zeros(m, dtype=bool)
-    dist_out = np.full(m, np.inf)
-    if not inside.any():
-        return PointTest(
-            tri, passed, score, beta_out, dup_ok, dup, frozen, frozen_ok, mirrored, dist_out
-        )
-    ii = np.flatnonzero(inside)
-    tt = tri[ii]
-    pp = p[ii]
-    verts = tin.simplices[tt]  # (M', 3)
-    t = tin.vxyz[verts]  # (M', 3, 3)
-    theta = np.full(ii.size, crit.iter_angle)
-    if check_frozen and crit.min_edge_length > 0:
-        emax = tin.edge_max[tt]
-        small = emax < crit.min_edge_length
-        if crit.edge_mode == "freeze":
-            frozen[ii] = small
-        else:  # "reduce"
-            theta = np.where(small, crit.iter_angle * (emax / crit.min_edge_length) ** 2, theta)
-    # XY duplicates of a vertex
-    dxy = np.sqrt(((pp[:, None, :2] - t[:, :, :2]) ** 2).sum(axis=2))  # (M', 3)
-    jmin = np.argmin(dxy, axis=1)
-    is_dup = dxy[np.arange(ii.size), jmin] < EPS
-    dz = np.abs(pp[:, 2] - t[np.arange(ii.size), jmin, 2])
-    dup[ii] = is_dup
-    dup_ok[ii] = is_dup & (dz <= crit.iter_distance + 1e-12)
-    live = ~is_dup & ~frozen[ii]
-    normal = tin.normal[tt]
-    dist, beta = _facet_measures(pp, t, normal)
-    dist_out[ii] = dist
-    frozen_ok[ii] = frozen[ii] & ~is_dup & (dist <= crit.iter_distance + 1e-12)
-    ok = live & (dist <= crit.iter_distance + 1e-12) & (beta <= theta + 1e-12)
-    if ok.any():
-        ok[ok] = _subfacet_slope_ok(pp[ok], t[ok], crit.max_terrain_angle)
-    sc = np.where(ok, dist, np.inf)
-    bt = np.where(ok, beta, np.inf)
-    mir = np.zeros(ii.size, dtype=bool)
-    if crit.mirror:
-        todo = np.flatnonzero(live & ~ok)
-        if todo.size:
-            tv = t[todo]
-            d3 = np.sqrt(((pp[todo, None, :] - tv) ** 2).sum(axis=2))
-            real = tin.is_real(verts[todo])
-            d3 = np.where(real, d3, np.inf)
-            # ties: lower vertex index
-            key = np.where(real, verts[todo], np.iinfo(np.int64).max)
-            dmin = d3.min(axis=1)
-            tie = d3 == dmin[:, None]
-            keyt = np.where(tie, key, np.iinfo(np.int64).max)
-            best = np.argmin(keyt, axis=1)
-            has_real = np.isfinite(dmin)
-            vstar = tv[np.arange(todo.size), best]
-            hd = np.sqrt(((vstar[:, :2] - pp[todo, :2]) ** 2).sum(axis=1))
-            has_real &= hd <= crit.mirror_max_distance
-            pm = 2.0 * vstar - pp[todo]
-            tri2 = tin.locate(pm[:, :2])
-            good = has_real & (tri2 >= 0)
-            if good.any():
-                g = np.flatnonzero(good)
-                t2 = tin.vxyz[tin.simplices[tri2[g]]]
-                d2, b2 = _facet_measures(pm[g], t2, tin.normal[tri2[g]])
-                okm = (d2 <= crit.iter_distance + 1e-12) & (b2 <= theta[todo[g]] + 1e-12)
-                sel = todo[g[okm]]
-                mir[sel] = True
-                sc[sel] = d2[okm]
-                bt[sel] = b2[okm]
-    passed[ii] = ok | mir
-    mirrored[ii] = mir & ~ok
-    score[ii] = sc
-    beta_out[ii] = bt
-    return PointTest(
-        tri, passed, score, beta_out, dup_ok, dup, frozen, frozen_ok, mirrored, dist_out
+    order = None if presorted or m < 2 else spatial_order(p[:, :2])
+    q = np.ascontiguousarray(p if order is None else p[order], dtype=np.float64)
+    out = _judge_kernel(
+        q,
+        tin.vxyz,
+        np.ascontiguousarray(tin.vsrc, dtype=np.int64),
+        tin.simplices,
+        tin.neighbors,
+        tin.edge_max,
+        tin.normal,
+        float(crit.iter_angle),
+        float(crit.iter_distance),
+        float(crit.max_terrain_angle),
+        float(crit.min_edge_length),
+        crit.edge_mode == "freeze",
+        bool(check_frozen),
+        bool(crit.mirror),
+        float(crit.mirror_max_distance),
     )
+    if order is not None:
+        inv = np.empty_like(order)
+        inv[order] = np.arange(m)
+        out = tuple(a[inv] for a in out)
+    return PointTest(*out)
 
 
 def spatial_order(xy: np.ndarray) -> np.ndarray:
@@ -436,48 +326,273 @@ def _interleave(v: np.ndarray) -> np.ndarray:
     return v
 
 
+# ---------------------------------------------------------------- compiled kernels
+
+
 @njit(cache=True)
-def _walk_all(pts, vxy, simp, nb, out):  # pragma: no cover - numba
-    """Visibility walk for each point (in the given order), starting from the last hit."""
+def _setup_kernel(vxyz, simp, nb, have_nb):  # pragma: no cover - numba
+    """Orient triangles CCW (in place), fill adjacency ``nb`` unless given, facet geometry.
+
+    ``nb[k, i]`` is the triangle across the side opposite vertex i (-1 on the hull),
+    found through the triangles incident to each vertex (no global sort).
+    Returns (longest XY edge, upward unit normal, slope in rad) per triangle.
+    """
     k = simp.shape[0]
-    start = 0
-    lost = 0
-    max_steps = 4 * k + 16
-    for m in range(pts.shape[0]):
-        px = pts[m, 0]
-        py = pts[m, 1]
-        t = start
-        found = -2
-        r = 0
-        for _ in range(max_steps):
-            moved = False
-            for jj in range(3):
-                i = (jj + r) % 3
+    nv = vxyz.shape[0]
+    for t in range(k):
+        a, b, c = simp[t, 0], simp[t, 1], simp[t, 2]
+        o = (vxyz[b, 0] - vxyz[a, 0]) * (vxyz[c, 1] - vxyz[a, 1]) - (vxyz[b, 1] - vxyz[a, 1]) * (
+            vxyz[c, 0] - vxyz[a, 0]
+        )
+        if o < 0.0:
+            simp[t, 1], simp[t, 2] = c, b
+            if have_nb:
+                nb[t, 1], nb[t, 2] = nb[t, 2], nb[t, 1]
+    if not have_nb:
+        start = np.zeros(nv + 1, np.int64)
+        for t in range(k):
+            for i in range(3):
+                start[simp[t, i] + 1] += 1
+        for v in range(nv):
+            start[v + 1] += start[v]
+        fill = start[:-1].copy()
+        inc = np.empty(3 * k, np.int64)
+        for t in range(k):
+            for i in range(3):
+                v = simp[t, i]
+                inc[fill[v]] = t
+                fill[v] += 1
+        for t in range(k):
+            for i in range(3):
                 a = simp[t, (i + 1) % 3]
                 b = simp[t, (i + 2) % 3]
-                o = (vxy[b, 0] - vxy[a, 0]) * (py - vxy[a, 1]) - (vxy[b, 1] - vxy[a, 1]) * (
-                    px - vxy[a, 0]
-                )
-                if o < 0.0:
-                    nt = nb[t, i]
-                    if nt < 0:
-                        found = -1
-                    else:
-                        t = nt
-                        moved = True
+                found = -1
+                # the neighbour holds the same side in the opposite direction (b -> a)
+                for q in range(start[b], start[b + 1]):
+                    u = inc[q]
+                    if u == t:
+                        continue
+                    for j in range(3):
+                        if simp[u, (j + 1) % 3] == b and simp[u, (j + 2) % 3] == a:
+                            found = u
+                            break
+                    if found >= 0:
+                        break
+                nb[t, i] = found
+    edge_max = np.empty(k)
+    normal = np.empty((k, 3))
+    slope = np.empty(k)
+    for t in range(k):
+        i0, i1, i2 = simp[t, 0], simp[t, 1], simp[t, 2]
+        x0, y0, z0 = vxyz[i0, 0], vxyz[i0, 1], vxyz[i0, 2]
+        ux, uy, uz = vxyz[i1, 0] - x0, vxyz[i1, 1] - y0, vxyz[i1, 2] - z0
+        wx, wy, wz = vxyz[i2, 0] - x0, vxyz[i2, 1] - y0, vxyz[i2, 2] - z0
+        e0 = ux * ux + uy * uy
+        e1 = (wx - ux) ** 2 + (wy - uy) ** 2
+        e2 = wx * wx + wy * wy
+        edge_max[t] = math.sqrt(max(e0, e1, e2))
+        nx = uy * wz - uz * wy
+        ny = uz * wx - ux * wz
+        nz = ux * wy - uy * wx
+        norm = math.sqrt(nx * nx + ny * ny + nz * nz)
+        if norm == 0.0:
+            norm = 1.0
+        if nz < 0.0:
+            norm = -norm
+        normal[t, 0] = nx / norm
+        normal[t, 1] = ny / norm
+        normal[t, 2] = nz / norm
+        slope[t] = math.acos(min(abs(normal[t, 2]), 1.0))
+    return edge_max, normal, slope
+
+
+@njit(cache=True)
+def _orient(vxy, a, b, px, py):  # pragma: no cover - numba
+    return (vxy[b, 0] - vxy[a, 0]) * (py - vxy[a, 1]) - (vxy[b, 1] - vxy[a, 1]) * (px - vxy[a, 0])
+
+
+@njit(cache=True)
+def _locate_one(px, py, start, vxy, simp, nb):  # pragma: no cover - numba
+    """Visibility walk from triangle `start`; -1 outside the TIN.
+
+    A walk that does not converge (degenerate geometry) falls back to testing
+    every triangle.
+    """
+    t = start
+    r = 0
+    for _ in range(4 * simp.shape[0] + 16):
+        moved = False
+        for jj in range(3):
+            i = (jj + r) % 3
+            if _orient(vxy, simp[t, (i + 1) % 3], simp[t, (i + 2) % 3], px, py) < 0.0:
+                nt = nb[t, i]
+                if nt < 0:
+                    return -1
+                t = nt
+                moved = True
+                break
+        if not moved:
+            return t
+        r += 1
+    for u in range(simp.shape[0]):  # pragma: no cover - lost walk
+        if (
+            _orient(vxy, simp[u, 0], simp[u, 1], px, py) >= 0.0
+            and _orient(vxy, simp[u, 1], simp[u, 2], px, py) >= 0.0
+            and _orient(vxy, simp[u, 2], simp[u, 0], px, py) >= 0.0
+        ):
+            return u
+    return -1
+
+
+@njit(cache=True)
+def _locate_kernel(pts, vxy, simp, nb):  # pragma: no cover - numba
+    """Triangle of each point, walking from the previous hit (pass points spatially sorted)."""
+    out = np.empty(pts.shape[0], np.int64)
+    start = 0
+    for m in range(pts.shape[0]):
+        t = _locate_one(pts[m, 0], pts[m, 1], start, vxy, simp, nb)
+        out[m] = t
+        if t >= 0:
+            start = t
+    return out
+
+
+@njit(cache=True)
+def _facet_test(px, py, pz, vxyz, simp, normal, t):  # pragma: no cover - numba
+    """Distance of P to the plane of facet t and the largest vertex angle beta (rad)."""
+    i0 = simp[t, 0]
+    dist = abs(
+        (px - vxyz[i0, 0]) * normal[t, 0]
+        + (py - vxyz[i0, 1]) * normal[t, 1]
+        + (pz - vxyz[i0, 2]) * normal[t, 2]
+    )
+    beta = 0.0
+    for j in range(3):
+        v = simp[t, j]
+        pv = math.sqrt((px - vxyz[v, 0]) ** 2 + (py - vxyz[v, 1]) ** 2 + (pz - vxyz[v, 2]) ** 2)
+        s = dist / pv if pv > EPS else 1.0
+        beta = max(beta, math.asin(min(max(s, 0.0), 1.0)))
+    return dist, beta
+
+
+@njit(cache=True)
+def _judge_kernel(
+    p,
+    vxyz,
+    vsrc,
+    simp,
+    nb,
+    edge_max,
+    normal,
+    iter_angle,
+    iter_dist,
+    max_angle,
+    min_edge,
+    freeze,
+    check_frozen,
+    mirror,
+    mirror_max,
+):  # pragma: no cover - numba
+    """The §1.1 step 5b-f tests of each point against the TIN (see judge_points)."""
+    m = p.shape[0]
+    tri = np.full(m, -1, np.int64)
+    passed = np.zeros(m, np.bool_)
+    score = np.full(m, np.inf)
+    beta_out = np.full(m, np.inf)
+    dup_ok = np.zeros(m, np.bool_)
+    dup = np.zeros(m, np.bool_)
+    frozen = np.zeros(m, np.bool_)
+    frozen_ok = np.zeros(m, np.bool_)
+    mirrored = np.zeros(m, np.bool_)
+    dist_out = np.full(m, np.inf)
+    vxy = vxyz[:, :2]
+    d_tol = iter_dist + 1e-12
+    cos_max = math.cos(max_angle) - 1e-12
+    start = 0
+    for i in range(m):
+        px, py, pz = p[i, 0], p[i, 1], p[i, 2]
+        t = _locate_one(px, py, start, vxy, simp, nb)
+        tri[i] = t
+        if t < 0:
+            continue
+        start = t
+        theta = iter_angle
+        is_frozen = False
+        if check_frozen and min_edge > 0.0 and edge_max[t] < min_edge:
+            if freeze:
+                is_frozen = True
+            else:  # "reduce"
+                theta = iter_angle * (edge_max[t] / min_edge) ** 2
+        frozen[i] = is_frozen
+        # XY duplicate of a vertex (the nearest one in XY, first on ties)
+        jmin = 0
+        dmin = np.inf
+        for j in range(3):
+            v = simp[t, j]
+            dxy = math.sqrt((px - vxyz[v, 0]) ** 2 + (py - vxyz[v, 1]) ** 2)
+            if dxy < dmin:
+                dmin = dxy
+                jmin = j
+        is_dup = dmin < EPS
+        dup[i] = is_dup
+        dup_ok[i] = is_dup and abs(pz - vxyz[simp[t, jmin], 2]) <= d_tol
+        dist, beta = _facet_test(px, py, pz, vxyz, simp, normal, t)
+        dist_out[i] = dist
+        frozen_ok[i] = is_frozen and not is_dup and dist <= d_tol
+        if is_dup or is_frozen:
+            continue
+        ok = dist <= d_tol and beta <= theta + 1e-12
+        if ok:
+            # sub-facets (P,A,B), (P,B,C), (P,C,A) no steeper than max_angle;
+            # those with XY area < EPS (P on an edge) are ignored
+            for j in range(3):
+                a = simp[t, j]
+                b = simp[t, (j + 1) % 3]
+                ax, ay, az = vxyz[a, 0] - px, vxyz[a, 1] - py, vxyz[a, 2] - pz
+                bx, by, bz = vxyz[b, 0] - px, vxyz[b, 1] - py, vxyz[b, 2] - pz
+                nx = ay * bz - az * by
+                ny = az * bx - ax * bz
+                nz = abs(ax * by - ay * bx)
+                nn = math.sqrt(nx * nx + ny * ny + nz * nz)
+                cosv = nz / nn if nn > 0.0 else 1.0
+                if not (0.5 * nz < EPS or cosv >= cos_max):
+                    ok = False
                     break
-            if found == -1:
-                break
-            if not moved:
-                found = t
-                break
-            r += 1
-        if found == -2:
-            lost += 1
-        out[m] = found
-        if found >= 0:
-            start = found
-    return lost
+        if ok:
+            passed[i] = True
+            score[i] = dist
+            beta_out[i] = beta
+            continue
+        if not mirror:
+            continue
+        # mirror through the nearest real vertex (3D; ties: lower vertex number)
+        best = -1
+        dbest = np.inf
+        for j in range(3):
+            v = simp[t, j]
+            if vsrc[v] < 0:
+                continue
+            d3 = math.sqrt((px - vxyz[v, 0]) ** 2 + (py - vxyz[v, 1]) ** 2 + (pz - vxyz[v, 2]) ** 2)
+            if d3 < dbest or (d3 == dbest and v < best):
+                dbest = d3
+                best = v
+        if best < 0:
+            continue
+        if math.sqrt((vxyz[best, 0] - px) ** 2 + (vxyz[best, 1] - py) ** 2) > mirror_max:
+            continue
+        mx = 2.0 * vxyz[best, 0] - px
+        my = 2.0 * vxyz[best, 1] - py
+        mz = 2.0 * vxyz[best, 2] - pz
+        t2 = _locate_one(mx, my, t, vxy, simp, nb)
+        if t2 < 0:
+            continue
+        d2, b2 = _facet_test(mx, my, mz, vxyz, simp, normal, t2)
+        if d2 <= d_tol and b2 <= theta + 1e-12:
+            passed[i] = True
+            mirrored[i] = True
+            score[i] = d2
+            beta_out[i] = b2
+    return tri, passed, score, beta_out, dup_ok, dup, frozen, frozen_ok, mirrored, dist_out
 
 
 def supported_lowest_per_cell(

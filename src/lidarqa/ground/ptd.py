@@ -26,6 +26,7 @@ from ._tin import (
     judge_points,
     mirror_point,
     screen_seeds,
+    spatial_order,
     supported_lowest_per_cell,
     virtual_hull,
 )
@@ -310,15 +311,19 @@ def densify(
     def current() -> TIN:
         return inc.snapshot() if inc is not None else TIN(xyz, np.flatnonzero(st.in_tin), virtual)
 
+    # candidates in spatial order once: each sweep walks the TIN along this order
+    todo = np.flatnonzero(st.open_)
+    todo = todo[spatial_order(xyz[todo, :2])]
     for k in range(1, int(max_iter) + 1):
         st.n_iter = k
         tin = current()
-        oi = np.flatnonzero(st.open_)
+        todo = todo[st.open_[todo]]
+        oi = todo
         if oi.size == 0:
             st.added.append(0)
             st.stop = "no_gain"
             return tin
-        res = judge_points(tin, xyz[oi], crit)
+        res = judge_points(tin, xyz[oi], crit, presorted=True)
         # XY duplicates of vertices: ground or not, never inserted, decided once
         st.ground[oi[res.duplicate_ok]] = True
         st.open_[oi[res.duplicate]] = False
