@@ -239,3 +239,42 @@ def test_judge_kernel_matches_numpy_reference(seed, edge_mode):
     perm = rng.permutation(len(q))
     again = judge_points(tin, q[perm], crit)
     np.testing.assert_array_equal(again.passed, got.passed[perm])
+
+
+def test_best_per_triangle_matches_lexsort():
+    from lidarqa.ground._tin import best_per_triangle
+
+    rng = np.random.default_rng(5)
+    m = 5000
+    tri = rng.integers(0, 300, m)
+    # coarse values so that every tie-break level is reached
+    score = rng.integers(0, 3, m) / 10
+    beta = rng.integers(0, 2, m) / 10
+    p = rng.integers(0, 2, (m, 3)).astype(float)
+    idx = rng.permutation(m) * 7
+    got = best_per_triangle(tri, score, beta, p, idx)
+    order = np.lexsort((idx, p[:, 2], p[:, 1], p[:, 0], beta, score, tri))
+    first = np.ones(m, dtype=bool)
+    first[1:] = tri[order][1:] != tri[order][:-1]
+    np.testing.assert_array_equal(got, order[first])
+    perm = rng.permutation(m)
+    again = best_per_triangle(tri[perm], score[perm], beta[perm], p[perm], idx[perm])
+    np.testing.assert_array_equal(perm[again], got)
+
+
+def test_point_on_an_edge_gets_one_triangle_whatever_the_walk():
+    from lidarqa.ground._tin import _locate_one
+
+    # a quantised grid: many candidate points lie exactly on TIN edges
+    g = _grid(12, 12)
+    pts = np.column_stack([g, 0.1 * g[:, 0]])
+    virt = virtual_hull(pts, np.arange(len(pts)), 5.0, pts.min(0), pts.max(0))
+    tin = TIN(pts, np.arange(len(pts)), virt)
+    vxy = np.ascontiguousarray(tin.vxyz[:, :2])
+    q = np.array([[3.5, 3.0], [3.0, 7.5], [5.5, 5.5], [0.5, 0.0]])  # on edges, diagonals, hull
+    for x, y in q:
+        hits = {
+            _locate_one(x, y, s, vxy, tin.simplices, tin.neighbors, tin.n_virtual)
+            for s in range(len(tin.simplices))
+        }
+        assert len(hits) == 1 and min(hits) >= 0

@@ -130,6 +130,7 @@ class TIN:
         self.edge_max, self.normal, self.slope = _setup_kernel(self.vxyz, simp, nb, have_nb)
         self.simplices = simp
         self.neighbors = nb
+        self.n_virtual = (vsrc[simp] < 0).sum(axis=1).astype(np.int64)
 
     def locate(self, xy: np.ndarray, *, presorted: bool = False) -> np.ndarray:
         """Triangle index of each XY point, -1 outside the TIN.
@@ -142,7 +143,11 @@ class TIN:
         order = None if presorted else spatial_order(xy)
         q = np.ascontiguousarray(xy if order is None else xy[order], dtype=np.float64)
         out = _locate_kernel(
-            q, np.ascontiguousarray(self.vxyz[:, :2]), self.simplices, self.neighbors
+            q,
+            np.ascontiguousarray(self.vxyz[:, :2]),
+            self.simplices,
+            self.neighbors,
+            self.n_virtual,
         )
         if order is None:
             return out
@@ -287,6 +292,7 @@ def judge_points(
         np.ascontiguousarray(tin.vsrc, dtype=np.int64),
         tin.simplices,
         tin.neighbors,
+        tin.n_virtual,
         tin.edge_max,
         tin.normal,
         float(crit.iter_angle),
@@ -303,6 +309,60 @@ def judge_points(
         inv[order] = np.arange(m)
         out = tuple(a[inv] for a in out)
     return PointTest(*out)
+
+
+def best_per_triangle(
+    tri: np.ndarray, score: np.ndarray, beta: np.ndarray, p: np.ndarray, idx: np.ndarray
+) -> np.ndarray:
+    """Position of the best point of each triangle, in ascending triangle order.
+
+    Best = smallest `score`, then `beta`, then x, y, z of `p`, then `idx`: a strict
+    total order, so the winners do not depend on the order of the input.
+    """
+    if tri.size == 0:
+        return np.zeros(0, dtype=np.int64)
+    return _best_per_group(
+        np.ascontiguousarray(tri, dtype=np.int64),
+        int(tri.max()) + 1,
+        np.ascontiguousarray(score, dtype=np.float64),
+        np.ascontiguousarray(beta, dtype=np.float64),
+        np.ascontiguousarray(p, dtype=np.float64),
+        np.ascontiguousarray(idx, dtype=np.int64),
+    )
+
+
+@njit(cache=True)
+def _best_per_group(grp, n_grp, score, beta, p, idx):  # pragma: no cover - numba
+    best = np.full(n_grp, -1, np.int64)
+    for j in range(grp.size):
+        g = grp[j]
+        b = best[g]
+        if b < 0:
+            best[g] = j
+            continue
+        # lexicographic (score, beta, x, y, z, idx)
+        better = False
+        if score[j] != score[b]:
+            better = score[j] < score[b]
+        elif beta[j] != beta[b]:
+            better = beta[j] < beta[b]
+        elif p[j, 0] != p[b, 0]:
+            better = p[j, 0] < p[b, 0]
+        elif p[j, 1] != p[b, 1]:
+            better = p[j, 1] < p[b, 1]
+        elif p[j, 2] != p[b, 2]:
+            better = p[j, 2] < p[b, 2]
+        else:
+            better = idx[j] < idx[b]
+        if better:
+            best[g] = j
+    out = np.empty(grp.size, np.int64)
+    n = 0
+    for g in range(n_grp):
+        if best[g] >= 0:
+            out[n] = best[g]
+            n += 1
+    return out[:n]
 
 
 def spatial_order(xy: np.ndarray) -> np.ndarray:
@@ -349,6 +409,7 @@ def _setup_kernel(vxyz, simp, nb, have_nb):  # pragma: no cover - numba
             if have_nb:
                 nb[t, 1], nb[t, 2] = nb[t, 2], nb[t, 1]
     if not have_nb:
+        # incidence lists: for each vertex, 3*triangle + position of the vertex in it
         start = np.zeros(nv + 1, np.int64)
         for t in range(k):
             for i in range(3):
@@ -360,25 +421,24 @@ def _setup_kernel(vxyz, simp, nb, have_nb):  # pragma: no cover - numba
         for t in range(k):
             for i in range(3):
                 v = simp[t, i]
-                inc[fill[v]] = t
+                inc[fill[v]] = 3 * t + i
                 fill[v] += 1
+        nb[:, :] = -2  # not yet known
         for t in range(k):
             for i in range(3):
+                if nb[t, i] != -2:
+                    continue
                 a = simp[t, (i + 1) % 3]
                 b = simp[t, (i + 2) % 3]
-                found = -1
-                # the neighbour holds the same side in the opposite direction (b -> a)
+                nb[t, i] = -1
+                # the neighbour holds the same side in the opposite direction: b, then a
                 for q in range(start[b], start[b + 1]):
-                    u = inc[q]
-                    if u == t:
-                        continue
-                    for j in range(3):
-                        if simp[u, (j + 1) % 3] == b and simp[u, (j + 2) % 3] == a:
-                            found = u
-                            break
-                    if found >= 0:
+                    u = inc[q] // 3
+                    pos = inc[q] - 3 * u
+                    if simp[u, (pos + 1) % 3] == a and u != t:
+                        nb[t, i] = u
+                        nb[u, (pos + 2) % 3] = t
                         break
-                nb[t, i] = found
     edge_max = np.empty(k)
     normal = np.empty((k, 3))
     slope = np.empty(k)
@@ -412,10 +472,12 @@ def _orient(vxy, a, b, px, py):  # pragma: no cover - numba
 
 
 @njit(cache=True)
-def _locate_one(px, py, start, vxy, simp, nb):  # pragma: no cover - numba
+def _locate_one(px, py, start, vxy, simp, nb, n_virtual):  # pragma: no cover - numba
     """Visibility walk from triangle `start`; -1 outside the TIN.
 
-    A walk that does not converge (degenerate geometry) falls back to testing
+    A point on an edge gets the one of its two triangles with fewer virtual
+    vertices, then the lower-numbered one, so the answer does not depend on
+    `start`. A walk that does not converge (degenerate geometry) falls back to testing
     every triangle.
     """
     t = start
@@ -432,7 +494,21 @@ def _locate_one(px, py, start, vxy, simp, nb):  # pragma: no cover - numba
                 moved = True
                 break
         if not moved:
-            return t
+            # on an edge (common with cm-quantised coordinates) the point is in both
+            # triangles: take the one with fewer virtual vertices (real facets are the
+            # better evidence), then the lower-numbered one, whatever the walk came from
+            best = t
+            for i in range(3):
+                nt = nb[t, i]
+                if nt < 0:
+                    continue
+                if _orient(vxy, simp[t, (i + 1) % 3], simp[t, (i + 2) % 3], px, py) != 0.0:
+                    continue
+                if n_virtual[nt] < n_virtual[best] or (
+                    n_virtual[nt] == n_virtual[best] and nt < best
+                ):
+                    best = nt
+            return best
         r += 1
     for u in range(simp.shape[0]):  # pragma: no cover - lost walk
         if (
@@ -445,12 +521,12 @@ def _locate_one(px, py, start, vxy, simp, nb):  # pragma: no cover - numba
 
 
 @njit(cache=True)
-def _locate_kernel(pts, vxy, simp, nb):  # pragma: no cover - numba
+def _locate_kernel(pts, vxy, simp, nb, n_virtual):  # pragma: no cover - numba
     """Triangle of each point, walking from the previous hit (pass points spatially sorted)."""
     out = np.empty(pts.shape[0], np.int64)
     start = 0
     for m in range(pts.shape[0]):
-        t = _locate_one(pts[m, 0], pts[m, 1], start, vxy, simp, nb)
+        t = _locate_one(pts[m, 0], pts[m, 1], start, vxy, simp, nb, n_virtual)
         out[m] = t
         if t >= 0:
             start = t
@@ -482,6 +558,7 @@ def _judge_kernel(
     vsrc,
     simp,
     nb,
+    n_virtual,
     edge_max,
     normal,
     iter_angle,
@@ -511,7 +588,7 @@ def _judge_kernel(
     start = 0
     for i in range(m):
         px, py, pz = p[i, 0], p[i, 1], p[i, 2]
-        t = _locate_one(px, py, start, vxy, simp, nb)
+        t = _locate_one(px, py, start, vxy, simp, nb, n_virtual)
         tri[i] = t
         if t < 0:
             continue
@@ -583,7 +660,7 @@ def _judge_kernel(
         mx = 2.0 * vxyz[best, 0] - px
         my = 2.0 * vxyz[best, 1] - py
         mz = 2.0 * vxyz[best, 2] - pz
-        t2 = _locate_one(mx, my, t, vxy, simp, nb)
+        t2 = _locate_one(mx, my, t, vxy, simp, nb, n_virtual)
         if t2 < 0:
             continue
         d2, b2 = _facet_test(mx, my, mz, vxyz, simp, normal, t2)

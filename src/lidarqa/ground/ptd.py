@@ -22,6 +22,7 @@ from ._tin import (
     Criteria,
     IncrementalTIN,
     _MergedVertices,
+    best_per_triangle,
     distance_to_tin,
     judge_points,
     mirror_point,
@@ -337,13 +338,7 @@ def densify(
             st.added.append(0)
             st.stop = "no_gain"
             return tin
-        tri = res.tri[pi]
-        pc = xyz[oi[pi]]
-        order = np.lexsort((oi[pi], pc[:, 2], pc[:, 1], pc[:, 0], res.beta[pi], res.score[pi], tri))
-        t_sorted = tri[order]
-        first = np.ones(order.size, dtype=bool)
-        first[1:] = t_sorted[1:] != t_sorted[:-1]
-        keep = pi[order[first]]
+        keep = pi[best_per_triangle(res.tri[pi], res.score[pi], res.beta[pi], xyz[oi[pi]], oi[pi])]
         new = oi[keep]
         st.n_mirror += int(res.mirrored[keep].sum())
         st.ground[new] = True

@@ -199,7 +199,6 @@ class SegmentPTD(TINParameters):
     reject_ratio: float = 0.5
     seed_segments: bool = True
     min_tested: int = 3
-    adjacency_radius: float | None = None
     unsegmented: str = "point_ptd"
     orientation_thr: float = 45.0
     scatter_thr: float = 0.2
@@ -487,7 +486,9 @@ def _border_tests(
         return conn, raised
     tree = cKDTree(xyz[pool, :2])
     k = min(_BORDER_K, pool.size)
-    d, j = tree.query(xyz[src, :2], k=k, distance_upper_bound=float(par.raised_radius))
+    d, j = tree.query(
+        xyz[src, :2], k=k, distance_upper_bound=float(par.raised_radius), workers=-1
+    )
     d = d.reshape(src.size, k)
     j = j.reshape(src.size, k)
     ok = np.isfinite(d)
