@@ -9,6 +9,8 @@ cloth_resolution (0.5 m on the dense synthetic scene, 1.0 m on the sparse ISPRS 
 which at 0.5 m runs for many minutes) and no slope post-processing.
 
     python benchmarks/ground_speed.py [--methods segment-ptd,ptd,csf] [--only 2m|fsite5]
+
+A method may name a preset: ``segment-ptd@als`` runs ``--preset als``.
 """
 
 from __future__ import annotations
@@ -49,7 +51,8 @@ def one(method: str, src: str, out: str, cloth: float = 0.5) -> dict:
     else:
         from lidarqa.ground import classify_ground
 
-        ground = classify_ground(cloud, method=method).ground_mask
+        name, _, preset = method.partition("@")
+        ground = classify_ground(cloud, method=name, preset=preset or "mls").ground_mask
     t2 = time.perf_counter()
     from lidarqa.ground import relabel_classification
 
@@ -100,7 +103,7 @@ def main() -> None:
         datasets.append(("synthetic 2 M", syn, 0.5))
     methods = a.methods.split(",")
     print(
-        f"{'dataset':<22}{'method':<13}{'points':>10}{'read s':>8}{'filter s':>10}{'write s':>9}"
+        f"{'dataset':<22}{'method':<16}{'points':>10}{'read s':>8}{'filter s':>10}{'write s':>9}"
         f"{'total s':>9}{'peak MB':>9}{'ground':>10}"
     )
     for name, src, cloth in datasets:
@@ -114,12 +117,12 @@ def main() -> None:
                 env=os.environ.copy(),
             )
             if p.returncode != 0:
-                print(f"{name:<22}{m:<13} FAILED: {p.stderr.strip().splitlines()[-1:]}")
+                print(f"{name:<22}{m:<16} FAILED: {p.stderr.strip().splitlines()[-1:]}")
                 continue
             r = json.loads(p.stdout.strip().splitlines()[-1])
             res[m] = r
             print(
-                f"{name:<22}{m:<13}{r['n']:>10,}{r['read_s']:>8.1f}{r['filter_s']:>10.1f}"
+                f"{name:<22}{m:<16}{r['n']:>10,}{r['read_s']:>8.1f}{r['filter_s']:>10.1f}"
                 f"{r['write_s']:>9.1f}{r['total_s']:>9.1f}{r['peak_rss_mb']:>9.0f}{r['n_ground']:>10,}"
             )
         if "csf" in res:

@@ -1,7 +1,8 @@
 """Real ISPRS filter-test samples (Sithole & Vosselman 2004), scored with the ALS preset.
 
-Bounds are the totals measured with ``benchmarks/ground_isprs.py`` (see the values
-in the comments) plus a margin; they guard against regressions, they are not goals.
+Per-sample bounds are the totals measured with ``benchmarks/ground_isprs.py`` plus a
+margin (regression guards); the 15-sample means must reproduce the measured values and
+meet issue #3's goals.
 """
 
 from __future__ import annotations
@@ -22,7 +23,8 @@ MEASURED_BUNDLED = {
     ("ptd", "samp24"): 8.22,
 }
 MEASURED_MEAN = {"segment-ptd": 4.44, "ptd": 5.90}
-MEAN_MARGIN = {"segment-ptd": 0.25, "ptd": 0.5}
+# issue #3: mean total error with one parameter set, segment-PTD <= 4.5 %, PTD <= 6 %
+GOAL_MEAN = {"segment-ptd": 4.5, "ptd": 6.0}
 
 
 def _filter(method):
@@ -60,7 +62,10 @@ def test_all_fifteen_samples(shared_data, method):
         e = filter_errors(cloud.classification == 2, filt.ground_mask(cloud.xyz))
         assert e.kappa > 0.3, s
         totals.append(100 * e.total)
-    assert np.mean(totals) <= MEASURED_MEAN[method] + MEAN_MARGIN[method]
+    # the filters are deterministic: the measured means are reproduced to the
+    # rounding, and they meet the issue's goal (the thin margin is the result's)
+    assert np.mean(totals) == pytest.approx(MEASURED_MEAN[method], abs=0.005)
+    assert np.mean(totals) <= GOAL_MEAN[method]
 
 
 @pytest.mark.parametrize(("method", "bound"), [("segment-ptd", 0.015), ("ptd", 0.02)])
