@@ -10,7 +10,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
+from numba import get_num_threads, njit, prange
 from scipy.spatial import Delaunay, QhullError
 
 EPS = 1e-9
@@ -303,6 +303,7 @@ def judge_points(
         bool(check_frozen),
         bool(crit.mirror),
         float(crit.mirror_max_distance),
+        max(1, min(4 * get_num_threads(), m // 2048)),
     )
     if order is not None:
         inv = np.empty_like(order)
@@ -551,7 +552,7 @@ def _facet_test(px, py, pz, vxyz, simp, normal, t):  # pragma: no cover - numba
     return dist, beta
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def _judge_kernel(
     p,
     vxyz,
@@ -569,6 +570,7 @@ def _judge_kernel(
     check_frozen,
     mirror,
     mirror_max,
+    n_chunks,
 ):  # pragma: no cover - numba
     """The §1.1 step 5b-f tests of each point against the TIN (see judge_points)."""
     m = p.shape[0]
@@ -585,90 +587,95 @@ def _judge_kernel(
     vxy = vxyz[:, :2]
     d_tol = iter_dist + 1e-12
     cos_max = math.cos(max_angle) - 1e-12
-    start = 0
-    for i in range(m):
-        px, py, pz = p[i, 0], p[i, 1], p[i, 2]
-        t = _locate_one(px, py, start, vxy, simp, nb, n_virtual)
-        tri[i] = t
-        if t < 0:
-            continue
-        start = t
-        theta = iter_angle
-        is_frozen = False
-        if check_frozen and min_edge > 0.0 and edge_max[t] < min_edge:
-            if freeze:
-                is_frozen = True
-            else:  # "reduce"
-                theta = iter_angle * (edge_max[t] / min_edge) ** 2
-        frozen[i] = is_frozen
-        # XY duplicate of a vertex (the nearest one in XY, first on ties)
-        jmin = 0
-        dmin = np.inf
-        for j in range(3):
-            v = simp[t, j]
-            dxy = math.sqrt((px - vxyz[v, 0]) ** 2 + (py - vxyz[v, 1]) ** 2)
-            if dxy < dmin:
-                dmin = dxy
-                jmin = j
-        is_dup = dmin < EPS
-        dup[i] = is_dup
-        dup_ok[i] = is_dup and abs(pz - vxyz[simp[t, jmin], 2]) <= d_tol
-        dist, beta = _facet_test(px, py, pz, vxyz, simp, normal, t)
-        dist_out[i] = dist
-        frozen_ok[i] = is_frozen and not is_dup and dist <= d_tol
-        if is_dup or is_frozen:
-            continue
-        ok = dist <= d_tol and beta <= theta + 1e-12
-        if ok:
-            # sub-facets (P,A,B), (P,B,C), (P,C,A) no steeper than max_angle;
-            # those with XY area < EPS (P on an edge) are ignored
-            for j in range(3):
-                a = simp[t, j]
-                b = simp[t, (j + 1) % 3]
-                ax, ay, az = vxyz[a, 0] - px, vxyz[a, 1] - py, vxyz[a, 2] - pz
-                bx, by, bz = vxyz[b, 0] - px, vxyz[b, 1] - py, vxyz[b, 2] - pz
-                nx = ay * bz - az * by
-                ny = az * bx - ax * bz
-                nz = abs(ax * by - ay * bx)
-                nn = math.sqrt(nx * nx + ny * ny + nz * nz)
-                cosv = nz / nn if nn > 0.0 else 1.0
-                if not (0.5 * nz < EPS or cosv >= cos_max):
-                    ok = False
-                    break
-        if ok:
-            passed[i] = True
-            score[i] = dist
-            beta_out[i] = beta
-            continue
-        if not mirror:
-            continue
-        # mirror through the nearest real vertex (3D; ties: lower vertex number)
-        best = -1
-        dbest = np.inf
-        for j in range(3):
-            v = simp[t, j]
-            if vsrc[v] < 0:
+    # contiguous chunks of the (spatially sorted) points, one walk per chunk; a point's
+    # triangle does not depend on where its walk starts, so neither do the results
+    for c in prange(n_chunks):
+        start = 0
+        for i in range(c * m // n_chunks, (c + 1) * m // n_chunks):
+            px, py, pz = p[i, 0], p[i, 1], p[i, 2]
+            t = _locate_one(px, py, start, vxy, simp, nb, n_virtual)
+            tri[i] = t
+            if t < 0:
                 continue
-            d3 = math.sqrt((px - vxyz[v, 0]) ** 2 + (py - vxyz[v, 1]) ** 2 + (pz - vxyz[v, 2]) ** 2)
-            if d3 < dbest or (d3 == dbest and v < best):
-                dbest = d3
-                best = v
-        if best < 0:
-            continue
-        if math.sqrt((vxyz[best, 0] - px) ** 2 + (vxyz[best, 1] - py) ** 2) > mirror_max:
-            continue
-        mx = 2.0 * vxyz[best, 0] - px
-        my = 2.0 * vxyz[best, 1] - py
-        mz = 2.0 * vxyz[best, 2] - pz
-        t2 = _locate_one(mx, my, t, vxy, simp, nb, n_virtual)
-        if t2 < 0:
-            continue
-        d2, b2 = _facet_test(mx, my, mz, vxyz, simp, normal, t2)
-        if d2 <= d_tol and b2 <= theta + 1e-12:
-            passed[i] = True
-            mirrored[i] = True
-            score[i] = d2
-            beta_out[i] = b2
+            start = t
+            theta = iter_angle
+            is_frozen = False
+            if check_frozen and min_edge > 0.0 and edge_max[t] < min_edge:
+                if freeze:
+                    is_frozen = True
+                else:  # "reduce"
+                    theta = iter_angle * (edge_max[t] / min_edge) ** 2
+            frozen[i] = is_frozen
+            # XY duplicate of a vertex (the nearest one in XY, first on ties)
+            jmin = 0
+            dmin = np.inf
+            for j in range(3):
+                v = simp[t, j]
+                dxy = math.sqrt((px - vxyz[v, 0]) ** 2 + (py - vxyz[v, 1]) ** 2)
+                if dxy < dmin:
+                    dmin = dxy
+                    jmin = j
+            is_dup = dmin < EPS
+            dup[i] = is_dup
+            dup_ok[i] = is_dup and abs(pz - vxyz[simp[t, jmin], 2]) <= d_tol
+            dist, beta = _facet_test(px, py, pz, vxyz, simp, normal, t)
+            dist_out[i] = dist
+            frozen_ok[i] = is_frozen and not is_dup and dist <= d_tol
+            if is_dup or is_frozen:
+                continue
+            ok = dist <= d_tol and beta <= theta + 1e-12
+            if ok:
+                # sub-facets (P,A,B), (P,B,C), (P,C,A) no steeper than max_angle;
+                # those with XY area < EPS (P on an edge) are ignored
+                for j in range(3):
+                    a = simp[t, j]
+                    b = simp[t, (j + 1) % 3]
+                    ax, ay, az = vxyz[a, 0] - px, vxyz[a, 1] - py, vxyz[a, 2] - pz
+                    bx, by, bz = vxyz[b, 0] - px, vxyz[b, 1] - py, vxyz[b, 2] - pz
+                    nx = ay * bz - az * by
+                    ny = az * bx - ax * bz
+                    nz = abs(ax * by - ay * bx)
+                    nn = math.sqrt(nx * nx + ny * ny + nz * nz)
+                    cosv = nz / nn if nn > 0.0 else 1.0
+                    if not (0.5 * nz < EPS or cosv >= cos_max):
+                        ok = False
+                        break
+            if ok:
+                passed[i] = True
+                score[i] = dist
+                beta_out[i] = beta
+                continue
+            if not mirror:
+                continue
+            # mirror through the nearest real vertex (3D; ties: lower vertex number)
+            best = -1
+            dbest = np.inf
+            for j in range(3):
+                v = simp[t, j]
+                if vsrc[v] < 0:
+                    continue
+                d3 = math.sqrt(
+                    (px - vxyz[v, 0]) ** 2 + (py - vxyz[v, 1]) ** 2 + (pz - vxyz[v, 2]) ** 2
+                )
+                if d3 < dbest or (d3 == dbest and v < best):
+                    dbest = d3
+                    best = v
+            if best < 0:
+                continue
+            if math.sqrt((vxyz[best, 0] - px) ** 2 + (vxyz[best, 1] - py) ** 2) > mirror_max:
+                continue
+            mx = 2.0 * vxyz[best, 0] - px
+            my = 2.0 * vxyz[best, 1] - py
+            mz = 2.0 * vxyz[best, 2] - pz
+            t2 = _locate_one(mx, my, t, vxy, simp, nb, n_virtual)
+            if t2 < 0:
+                continue
+            d2, b2 = _facet_test(mx, my, mz, vxyz, simp, normal, t2)
+            if d2 <= d_tol and b2 <= theta + 1e-12:
+                passed[i] = True
+                mirrored[i] = True
+                score[i] = d2
+                beta_out[i] = b2
     return tri, passed, score, beta_out, dup_ok, dup, frozen, frozen_ok, mirrored, dist_out
 
 
