@@ -302,36 +302,20 @@ def selection_label(cloud: str, classes: Any, source_id: Any) -> str:
     return ", ".join(parts)
 
 
-def _vector_name(base: str, fmt: str) -> str:
-    return f"{base}.{fmt}"
-
-
-def _write_points_safe(
-    ctx: RunContext, item: AnalysisItem, pointset: Any, base: str, fmt: str, notes: list[str]
+def _write_vector_safe(
+    ctx: RunContext, item: AnalysisItem, obj: Any, base: str, fmt: str, notes: list[str]
 ) -> None:
-    """Write a PointSet in the requested format (CSV when the GIS libraries are missing)."""
+    """Write a PointSet or Segments in the requested format (CSV when the GIS libraries
+    are missing)."""
     from ..errors import MissingDependencyError
-    from ..io.vector import write_points
+    from ..io.vector import PointSet, write_points, write_segments
 
+    write = write_points if isinstance(obj, PointSet) else write_segments
     try:
-        write_points(pointset, ctx.output_path(item, _vector_name(base, fmt)), overwrite=True)
+        write(obj, ctx.output_path(item, f"{base}.{fmt}"), overwrite=True)
     except MissingDependencyError:
         ctx.outputs[item.id].pop()
-        write_points(pointset, ctx.output_path(item, _vector_name(base, "csv")), overwrite=True)
-        notes.append(f"{base}: written as CSV ({fmt} needs the 'vector' extra)")
-
-
-def _write_segments_safe(
-    ctx: RunContext, item: AnalysisItem, segments: Any, base: str, fmt: str, notes: list[str]
-) -> None:
-    from ..errors import MissingDependencyError
-    from ..io.vector import write_segments
-
-    try:
-        write_segments(segments, ctx.output_path(item, _vector_name(base, fmt)), overwrite=True)
-    except MissingDependencyError:
-        ctx.outputs[item.id].pop()
-        write_segments(segments, ctx.output_path(item, _vector_name(base, "csv")), overwrite=True)
+        write(obj, ctx.output_path(item, f"{base}.csv"), overwrite=True)
         notes.append(f"{base}: written as CSV ({fmt} needs the 'vector' extra)")
 
 
@@ -523,7 +507,7 @@ def run_lines(ctx: RunContext, item: AnalysisItem) -> SectionResult:
     fmt = opts["format"]
     for side, seg, src in (("test", test, opts["test"]), ("model", model, opts["model"])):
         if "cloud" in src:
-            _write_segments_safe(ctx, item, seg, f"edges_{side}", fmt, notes)
+            _write_vector_safe(ctx, item, seg, f"edges_{side}", fmt, notes)
     ti, mi, d = m.pairs_tm()
     best = np.full(p, np.nan)
     best_model = np.full(p, -1, dtype=np.int64)
@@ -542,7 +526,7 @@ def run_lines(ctx: RunContext, item: AnalysisItem) -> SectionResult:
         "distance": best,
     }
     matched_test = Segments(test.ids, test.start, test.end, attrs, test.crs)
-    _write_segments_safe(ctx, item, matched_test, "matched_test", fmt, notes)
+    _write_vector_safe(ctx, item, matched_test, "matched_test", fmt, notes)
     comp = m.pair_components
     for base, mask, dcol in (
         ("pairs_tm", m.match_tm, comp[:, 3]),
@@ -565,9 +549,9 @@ def run_lines(ctx: RunContext, item: AnalysisItem) -> SectionResult:
             },
             test.crs,
         )
-        _write_segments_safe(ctx, item, pairs, base, fmt, notes)
+        _write_vector_safe(ctx, item, pairs, base, fmt, notes)
         if fmt != "csv":
-            _write_segments_safe(ctx, item, pairs, base, "csv", notes)
+            _write_vector_safe(ctx, item, pairs, base, "csv", notes)
 
     figures: list[Figure] = []
     with ctx.step("Plotting line matching"):
@@ -720,7 +704,7 @@ def run_edges(ctx: RunContext, item: AnalysisItem) -> SectionResult:
                 )
         base = "edges" if sid is None else f"edges_{sid}"
         if len(seg):
-            _write_segments_safe(ctx, item, seg, base, opts["format"], notes)
+            _write_vector_safe(ctx, item, seg, base, opts["format"], notes)
         groups.append((seg.start, seg.end, "all" if sid is None else f"strip {sid}"))
         rows.append(
             [
@@ -839,7 +823,7 @@ def run_checkpoints(ctx: RunContext, item: AnalysisItem) -> SectionResult:
         )
         if len(idx) < c["n"]:
             notes.append(f"only {len(idx)} of the {c['n']} requested check points could be sampled")
-        _write_points_safe(ctx, item, check, "check_points", opts["format"], notes)
+        _write_vector_safe(ctx, item, check, "check_points", opts["format"], notes)
     if opts["vertical"]:
         tested = ctx.select(opts["measured"], None, opts["source_ids"])
         measured_label = selection_label(opts["measured"], None, opts["source_ids"])
@@ -867,9 +851,9 @@ def run_checkpoints(ctx: RunContext, item: AnalysisItem) -> SectionResult:
             "(transformed) measured − check."
         )
     res = rep.to_dict()
-    _write_points_safe(ctx, item, rep.residual_points(), "residuals", opts["format"], notes)
+    _write_vector_safe(ctx, item, rep.residual_points(), "residuals", opts["format"], notes)
     if opts["format"] != "csv":
-        _write_points_safe(ctx, item, rep.residual_points(), "residuals", "csv", notes)
+        _write_vector_safe(ctx, item, rep.residual_points(), "residuals", "csv", notes)
     notes.extend(str(w) for w in res.get("warnings", []))
     figures = []
     with ctx.step("Plotting residuals"):
@@ -1064,7 +1048,7 @@ def run_heights(ctx: RunContext, item: AnalysisItem) -> SectionResult:
         },
     )
     mp_ok = mp_set.subset(~mpts.failed) if mpts.failed.any() else mp_set
-    _write_points_safe(ctx, item, mp_ok, "map_points", opts["format"], notes)
+    _write_vector_safe(ctx, item, mp_ok, "map_points", opts["format"], notes)
     ref_set = PointSet(
         ids=np.arange(len(ref_xyz)),
         xyz=ref_xyz,
@@ -1078,7 +1062,7 @@ def run_heights(ctx: RunContext, item: AnalysisItem) -> SectionResult:
             "inside": rep.inside,
         },
     )
-    _write_points_safe(ctx, item, ref_set, "reference_points", opts["format"], notes)
+    _write_vector_safe(ctx, item, ref_set, "reference_points", opts["format"], notes)
     if mpts.failed.any():
         notes.append(
             f"{int(mpts.failed.sum())} map point(s) could not be fitted (too few laser points)"

@@ -20,8 +20,37 @@ from ..io.vector import PointSet, Segments
 __all__ = ["EdgeScore", "CornerScore", "score_edges", "score_corners"]
 
 
+class _Counts:
+    """Counts shared by the score results (``true_index`` and ``matched`` arrays)."""
+
+    true_index: np.ndarray
+    matched: np.ndarray
+    n_found: int
+
+    @property
+    def n_true(self) -> int:
+        return int(len(self.true_index))
+
+    @property
+    def n_matched(self) -> int:
+        return int((self.matched >= 0).sum())
+
+    @property
+    def recall(self) -> float:
+        """Share of scored true items that were found (NaN when none were scored)."""
+        return self.n_matched / self.n_true if self.n_true else float("nan")
+
+    def _counts(self) -> dict[str, Any]:
+        return {
+            "n_true": self.n_true,
+            "n_found": int(self.n_found),
+            "n_matched": self.n_matched,
+            "recall": float(self.recall),
+        }
+
+
 @dataclass(frozen=True, eq=False)
-class EdgeScore:
+class EdgeScore(_Counts):
     """Result of :func:`score_edges`.
 
     Attributes
@@ -44,26 +73,10 @@ class EdgeScore:
     overlap: np.ndarray
     n_found: int
 
-    @property
-    def n_true(self) -> int:
-        return int(len(self.true_index))
-
-    @property
-    def n_matched(self) -> int:
-        return int((self.matched >= 0).sum())
-
-    @property
-    def recall(self) -> float:
-        """Share of scored true edges that were found (NaN when none were scored)."""
-        return self.n_matched / self.n_true if self.n_true else float("nan")
-
     def to_dict(self) -> dict[str, Any]:
         ok = self.matched >= 0
         return {
-            "n_true": self.n_true,
-            "n_found": int(self.n_found),
-            "n_matched": self.n_matched,
-            "recall": float(self.recall),
+            **self._counts(),
             "rms_mean": float(np.mean(self.rms[ok])) if ok.any() else None,
             "rms_max": float(np.max(self.rms[ok])) if ok.any() else None,
             "overlap_mean": float(np.mean(self.overlap[ok])) if ok.any() else None,
@@ -71,7 +84,7 @@ class EdgeScore:
 
 
 @dataclass(frozen=True, eq=False)
-class CornerScore:
+class CornerScore(_Counts):
     """Result of :func:`score_corners` (same layout as :class:`EdgeScore`)."""
 
     true_index: np.ndarray
@@ -79,25 +92,10 @@ class CornerScore:
     distance: np.ndarray
     n_found: int
 
-    @property
-    def n_true(self) -> int:
-        return int(len(self.true_index))
-
-    @property
-    def n_matched(self) -> int:
-        return int((self.matched >= 0).sum())
-
-    @property
-    def recall(self) -> float:
-        return self.n_matched / self.n_true if self.n_true else float("nan")
-
     def to_dict(self) -> dict[str, Any]:
         ok = self.matched >= 0
         return {
-            "n_true": self.n_true,
-            "n_found": int(self.n_found),
-            "n_matched": self.n_matched,
-            "recall": float(self.recall),
+            **self._counts(),
             "distance_mean": float(np.mean(self.distance[ok])) if ok.any() else None,
             "distance_max": float(np.max(self.distance[ok])) if ok.any() else None,
         }
