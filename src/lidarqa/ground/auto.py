@@ -210,6 +210,8 @@ def measure_cloud(points: Any, *, fields: dict | None = None) -> CloudMeasures:
     tol = _RAISED + (0.5 * _OPEN_WINDOW * math.tan(math.radians(slope_med))
                      if math.isfinite(slope_med) else 0.0)
     raised = np.nan_to_num(zmin - opened, nan=-1.0) > tol
+    # empty cells (no point) next to a raised cell belong to it: holes would shrink it
+    raised |= np.isnan(zmin) & ndimage.binary_dilation(raised, np.ones((3, 3), bool))
     diam = area_obj = 0.0
     if raised.any():
         lab, nlab = ndimage.label(raised)
