@@ -123,8 +123,19 @@ def test_cli_prints_and_records_measured_figures(tmp_path):
     write(PointCloud(_flat(1.0, size=80.0) + [500000.0, 5400000.0, 100.0]), src)
     js = tmp_path / "out.json"
     res = CliRunner().invoke(
-        cli, ["ground", str(src), "-o", str(tmp_path / "out.laz"), "--method", "ptd",
-              "--iter-distance", "0.6", "--json", str(js)]
+        cli,
+        [
+            "ground",
+            str(src),
+            "-o",
+            str(tmp_path / "out.laz"),
+            "--method",
+            "ptd",
+            "--iter-distance",
+            "0.6",
+            "--json",
+            str(js),
+        ],
     )
     assert res.exit_code == 0, res.output
     assert "pts/m2" in res.output and "als-sparse" in res.output

@@ -104,8 +104,10 @@ class CloudMeasures:
     largest_object_area: float
 
     def to_dict(self) -> dict[str, Any]:
-        return {k: (None if isinstance(v, float) and not math.isfinite(v) else v)
-                for k, v in asdict(self).items()}
+        return {
+            k: (None if isinstance(v, float) and not math.isfinite(v) else v)
+            for k, v in asdict(self).items()
+        }
 
 
 def _grid_density(xy: np.ndarray) -> tuple[float, float]:
@@ -207,8 +209,9 @@ def measure_cloud(points: Any, *, fields: dict | None = None) -> CloudMeasures:
             slope_p90 = float(np.percentile(s, 90))
     # raised regions: above the opened surface by more than _RAISED plus what the
     # opening loses on a slope across half the window
-    tol = _RAISED + (0.5 * _OPEN_WINDOW * math.tan(math.radians(slope_med))
-                     if math.isfinite(slope_med) else 0.0)
+    tol = _RAISED + (
+        0.5 * _OPEN_WINDOW * math.tan(math.radians(slope_med)) if math.isfinite(slope_med) else 0.0
+    )
     raised = np.nan_to_num(zmin - opened, nan=-1.0) > tol
     # empty cells (no point) next to a raised cell belong to it: holes would shrink it
     raised |= np.isnan(zmin) & ndimage.binary_dilation(raised, np.ones((3, 3), bool))
