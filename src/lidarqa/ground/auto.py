@@ -110,28 +110,30 @@ class CloudMeasures:
         }
 
 
-def _grid_density(xy: np.ndarray) -> tuple[float, float]:
-    """(density per m², occupied area m²) from a grid of about 50 points per cell."""
-    n = xy.shape[0]
-    lo = xy.min(axis=0)
-    span = np.maximum(xy.max(axis=0) - lo, 1e-9)
-    cell = math.sqrt(50.0 * float(span[0] * span[1]) / n)
+def _grid_density(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    """(density per m², occupied area m²) from a grid of about 50 points per cell.
+
+    `x`, `y` are contiguous and start at 0.
+    """
+    n = x.size
+    span = max(float(x.max()), 1e-9) * max(float(y.max()), 1e-9)
+    cell = math.sqrt(50.0 * span / n)
     if not cell > 0:
         return math.nan, 0.0
-    ij = np.floor((xy - lo) / cell).astype(np.int64)
-    key = ij[:, 0] * (int(ij[:, 1].max()) + 1) + ij[:, 1]
-    counts = np.bincount(key)
+    i = (x / cell).astype(np.int64)
+    j = (y / cell).astype(np.int64)
+    counts = np.bincount(i * (int(j.max()) + 1) + j)
     counts = counts[counts > 0]
     return float(np.median(counts)) / (cell * cell), float(counts.size * cell * cell)
 
 
-def _min_raster(xyz: np.ndarray, cell: float) -> np.ndarray:
-    """Lowest z per XY cell (nan where empty)."""
-    lo = xyz[:, :2].min(axis=0)
-    ij = np.floor((xyz[:, :2] - lo) / cell).astype(np.int64)
-    shape = (int(ij[:, 0].max()) + 1, int(ij[:, 1].max()) + 1)
+def _min_raster(x: np.ndarray, y: np.ndarray, z: np.ndarray, cell: float) -> np.ndarray:
+    """Lowest z per XY cell (nan where empty); `x`, `y` start at 0."""
+    i = (x / cell).astype(np.int64)
+    j = (y / cell).astype(np.int64)
+    shape = (int(i.max()) + 1, int(j.max()) + 1)
     flat = np.full(shape[0] * shape[1], np.inf)
-    np.minimum.at(flat, ij[:, 0] * shape[1] + ij[:, 1], xyz[:, 2])
+    np.minimum.at(flat, i * shape[1] + j, z)
     flat[~np.isfinite(flat)] = np.nan
     return flat.reshape(shape)
 
@@ -171,8 +173,12 @@ def measure_cloud(points: Any, *, fields: dict | None = None) -> CloudMeasures:
     nan = math.nan
     if n < 10:
         return CloudMeasures(n, nan, nan, 0.0, False, nan, nan, "als", nan, nan, 0.0, 0.0)
-    xyz = xyz - xyz.min(axis=0)
-    density, area = _grid_density(xyz[:, :2])
+    x = np.ascontiguousarray(xyz[:, 0])
+    y = np.ascontiguousarray(xyz[:, 1])
+    z = np.ascontiguousarray(xyz[:, 2])
+    x = x - x.min()  # new arrays: the input is never modified
+    y = y - y.min()
+    density, area = _grid_density(x, y)
     spacing = 1.0 / math.sqrt(density) if density > 0 else nan
     nr = fields.get("number_of_returns")
     rn = fields.get("return_number")
@@ -193,7 +199,7 @@ def measure_cloud(points: Any, *, fields: dict | None = None) -> CloudMeasures:
         sensor = "mls" if density > MLS_DENSITY else "als"
     # terrain slopes and object footprints from the lowest-point raster
     cell = max(1.0, 2.0 * spacing) if math.isfinite(spacing) else 1.0
-    zmin = _min_raster(xyz, cell)
+    zmin = _min_raster(x, y, z, cell)
     size = max(3, int(round(_OPEN_WINDOW / cell)) | 1)
     opened = _open(zmin, size)
     scell = max(5.0, 3.0 * cell)
