@@ -144,3 +144,24 @@ def test_cli_prints_and_records_measured_figures(tmp_path):
     assert doc["parameter_sources"]["iter_distance"] == "given" and doc["iter_distance"] == 0.6
     assert doc["parameter_sources"]["iter_angle"] == "measured"
     assert doc["measured"]["density"] == pytest.approx(1.0, rel=0.15)
+
+
+def test_default_is_independent_of_thread_count():
+    """The parallel kernels (TIN setup, judging) give the same ground with 1 or 2 threads."""
+    import numba
+
+    from lidarqa.testing import make_scene
+
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("numba limited to one thread (NUMBA_NUM_THREADS)")
+    sc = make_scene(seed=3, size=(60.0, 60.0), density=5.0)
+    before = numba.get_num_threads()
+    try:
+        masks = []
+        for t in (1, 2):
+            numba.set_num_threads(t)
+            masks.append(classify_ground(sc.points).ground_mask)
+    finally:
+        numba.set_num_threads(before)
+    assert masks[0].any() and not masks[0].all()
+    np.testing.assert_array_equal(masks[0], masks[1])
