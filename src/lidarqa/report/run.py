@@ -26,7 +26,8 @@ from typing import Any
 
 from .._version import __version__
 from ..errors import LidarQAError, OutputExistsError, WriteError
-from .config import ANALYSIS_TARGETS, AnalysisItem, AssessmentConfig, load_config
+from . import _registry
+from .config import AnalysisItem, AssessmentConfig, load_config
 from .html import Report, Section, SummaryRow, fmt, render_html
 
 __all__ = [
@@ -125,7 +126,7 @@ def _verdict(item: AnalysisItem, results: dict[str, Any]) -> tuple[str, str, lis
     """pass / fail / n/a against the configured targets, a text and the per-target records."""
     if not item.targets:
         return "n/a", "", []
-    specs = {t.metric: t for t in ANALYSIS_TARGETS[item.kind].values()}
+    specs = {t.metric: t for t in _registry.specs()[item.kind].targets.values()}
     records = []
     texts = []
     ok_all = True
@@ -166,7 +167,7 @@ def _verdict(item: AnalysisItem, results: dict[str, Any]) -> tuple[str, str, lis
 
 def _input_records(config: AssessmentConfig, progress: _Progress) -> dict[str, dict[str, Any]]:
     from ..io.crs import crs_epsg, crs_name
-    from .analyses import sha256_file
+    from ._context import sha256_file
 
     out = {}
     with progress("Hashing inputs"):
@@ -185,7 +186,7 @@ def _input_records(config: AssessmentConfig, progress: _Progress) -> dict[str, d
 
 
 def _resolved_params(item: AnalysisItem) -> dict[str, Any]:
-    from .analyses import library_params
+    from ._registry import library_params
 
     try:
         defaults = library_params(item.kind, item.options)
@@ -232,7 +233,10 @@ def run_assessment(
     leaving `out_dir` as it was.
     """
     from .. import show_versions
-    from .analyses import ANALYSES, RunContext
+    from ._context import RunContext
+    from ._registry import ANALYSES, specs
+
+    specs()  # load the analysis modules
 
     if not isinstance(config, AssessmentConfig):
         config = load_config(config)
@@ -306,7 +310,7 @@ def run_assessment(
             attribution = DEMO_TILE_ATTRIBUTION
         config_record: dict[str, Any] = {"content": config.raw}
         if config.path is not None:
-            from .analyses import sha256_file
+            from ._context import sha256_file
 
             config_record.update(path=str(config.path), sha256=sha256_file(config.path))
         doc = {
@@ -374,7 +378,7 @@ def run_assessment(
             ),
         )
         with progress("Writing the report"):
-            from ..cli._common import to_jsonable
+            from .._json import to_jsonable
 
             (work / REPORT_JSON).write_text(
                 json.dumps(to_jsonable(doc), indent=2, allow_nan=False) + "\n", encoding="utf-8"
