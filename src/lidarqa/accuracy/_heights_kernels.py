@@ -1,4 +1,4 @@
-"""Vectorised kernels behind :mod:`lidarqa.accuracy.heights` (ALGORITHMS.md §6).
+"""Vectorised kernels behind :mod:`lidarqa.accuracy.heights` (:ref:`alg-heights`).
 
 Internals: inputs are trusted (validated in ``heights.py``). No Python loop per
 map point or reference point: one cKDTree k-NN query, one ball query, stacked

@@ -4,8 +4,8 @@ Measured points (building corners from :func:`lidarqa.geometry.corners.extract_c
 targets picked in a cloud, ...) are matched with surveyed check points, optionally
 transformed onto them by least squares from a set of *control* points
 (:mod:`lidarqa.accuracy.transforms`), and the residuals of the remaining *check*
-points are summarised per axis (mean = bias, standard deviation, RMSE, max |residual|),
-horizontally (RMSE_H) and in 3D (RMSE_3D, the P-RMSE of Fang & Huang, ALGORITHMS.md §5.3).
+points are summarised per axis (mean = bias, standard deviation, RMSE, max ``|residual|``),
+horizontally (RMSE_H) and in 3D (RMSE_3D, the P-RMSE of Fang & Huang, :ref:`alg-rmse`).
 
 Residuals are always *measured (after transformation) minus check*: a positive dz
 means the data lie above the check point.
@@ -132,7 +132,7 @@ class ResidualStats:
 
 
 def residual_statistics(residuals: Any, *, ddof: int = 0) -> ResidualStats:
-    """Mean, standard deviation, RMSE and max |residual| per axis, RMSE_H and RMSE_3D.
+    """Mean, standard deviation, RMSE and max ``|residual|`` per axis, RMSE_H and RMSE_3D.
 
     Parameters
     ----------
@@ -140,7 +140,7 @@ def residual_statistics(residuals: Any, *, ddof: int = 0) -> ResidualStats:
         Residuals dx, dy, dz (m). A column that is entirely NaN (e.g. no
         horizontal residuals in a vertical-only check) gives NaN statistics.
     ddof : int, default 0
-        RMSE divisor is n - ddof (ALGORITHMS.md §5.3: n by default).
+        RMSE divisor is n - ddof (:ref:`alg-rmse`: n by default).
 
     Returns
     -------

@@ -1,6 +1,6 @@
 """Height quality by error propagation, TIN precision and w-tests (Oude Elberink & Vosselman).
 
-ALGORITHMS.md §6. Map points (x, y) get a height from a least-squares plane
+:ref:`alg-heights`. Map points (x, y) get a height from a least-squares plane
 ``z = −x·p1 − y·p2 + p3`` fitted, in coordinates centred on the laser points,
 to the laser points within a search radius that grows until enough points are
 found. Their predicted precision is
@@ -275,7 +275,7 @@ def fit_plane_height(
         Use the paper's eq. 8 (Δx²σ²_p1 + Δy²σ²_p2 + σ²_p3), which omits the
         p1–p2 covariance, instead of the full form aᵀQa.
     posterior : bool, default False
-        Use σ̂² = rᵀr/(n−3) instead of `sigma_point`².
+        Use σ̂² = rᵀr/(n−3) instead of `sigma_point` squared.
 
     Returns
     -------

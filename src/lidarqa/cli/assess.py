@@ -73,7 +73,7 @@ def assess(config: str, out: str) -> None:
     The config names the inputs, the analyses (info, ground, edges, lines,
     checkpoints, heights) and their parameters (same names as the commands'
     options). It is validated completely before any work starts. A minimal
-    config (see lidarqa/data/demo.toml for every analysis):
+    config:
 
     \b
         [inputs.clouds]
@@ -81,6 +81,10 @@ def assess(config: str, out: str) -> None:
         [ground]
         cloud = "tile"
         target_total = 0.05
+
+    Every key is listed in the documentation (Reference > Assessment config).
+    `lidarqa demo` runs a config that uses every analysis; its report shows
+    that config.
     """
     _run(config, out, "assess")
 
@@ -98,7 +102,7 @@ def assess(config: str, out: str) -> None:
 def demo(out: str) -> None:
     """Assess the bundled IGN LiDAR HD tile (IGN – LiDAR HD, Licence Ouverte 2.0).
 
-    Runs the bundled config (lidarqa/data/demo.toml): ground filtering scored
+    Runs a bundled config (shown in the report): ground filtering scored
     against IGN's classes, building edges per flight strip and their
     repeatability, height quality against held-apart ground points, and a
     vertical check against points of the other strip.

@@ -1,4 +1,4 @@
-"""Edges as intersections of adjacent planes, bounded by their support (ALGORITHMS.md §4.2)."""
+"""Edges as intersections of adjacent planes, bounded by their support (:ref:`alg-edges`)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Surface-growing segmentation and plane segmentation (ALGORITHMS.md §1.2).
+"""Surface-growing segmentation and plane segmentation (:ref:`alg-segmentation`).
 
 :func:`surface_growing` labels points into smooth planar segments (seed surfaces
 grown by proximity and distance to the segment plane). :func:`segment_planes`

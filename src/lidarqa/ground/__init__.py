@@ -1,6 +1,6 @@
 """Ground filtering: point-based and segment-based progressive TIN densification.
 
-- :class:`PTD` — Axelsson's progressive TIN densification (ALGORITHMS.md §1.1);
+- :class:`PTD` — Axelsson's progressive TIN densification (:ref:`alg-ptd`);
 - :class:`SegmentPTD` — Lin & Zhang's segment-based PTD (§1.3–1.4);
 - :func:`filter_errors` — ISPRS type I / type II / total error and Cohen's kappa (§2);
 - :func:`classify_ground` — the library function behind ``lidarqa ground``: return
@@ -16,8 +16,6 @@ Examples
 >>> bool(PTD(cell_size=20).ground_mask(pts).all())
 True
 """
-
-from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass, field

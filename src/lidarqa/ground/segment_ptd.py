@@ -1,4 +1,4 @@
-"""Segment-based progressive TIN densification (Lin & Zhang 2014/2015), ALGORITHMS.md §1.4.
+"""Segment-based progressive TIN densification (Lin & Zhang 2014/2015), :ref:`alg-segment-ptd`.
 
 The cloud is segmented into planar surfaces (surface growing, §1.2), object
 segments (façades, vegetation) are removed by orientation and scatterness

@@ -25,8 +25,6 @@ the truth; :func:`sample_checkpoints` gives true ground check points;
 (3, True)
 """
 
-from __future__ import annotations
-
 from . import cases
 from ._shapes import TerrainModel
 from .scenes import (
