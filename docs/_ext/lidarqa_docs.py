@@ -219,7 +219,8 @@ class CliReference(SphinxDirective):
                 continue
             sub = click.Context(cmd, info_name=name, parent=ctx)
             title = f"lidarqa {name}"
-            lines += [f".. _cli-{name}:", "", title, "-" * len(title), "", ".. code-block:: text", ""]
+            lines += [f".. _cli-{name}:", "", title, "-" * len(title), ""]
+            lines += [".. code-block:: text", ""]
             lines += ["   " + s for s in cmd.get_help(sub).splitlines()]
             lines += [""]
         return _parse_rst(self, lines)

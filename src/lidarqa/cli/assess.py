@@ -30,6 +30,8 @@ def _run(
             r.verdict, ""
         )
         echo(f"  {r.analysis:<{width}}  {verdict:<5}  {r.headline}")
+        for caveat in r.caveats:  # what qualifies the verdict goes right under it
+            echo(f"  {'':<{width}}  {'':<5}  warning: {caveat}")
     echo(f"Report: {run.html_path}")
     echo(f"JSON:   {run.json_path}")
     doc = run.document

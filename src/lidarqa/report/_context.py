@@ -45,6 +45,9 @@ class SectionResult:
     notes: list[str] = field(default_factory=list)
     paragraphs: list[str] = field(default_factory=list)
     parameters: dict[str, Any] = field(default_factory=dict)
+    #: warnings that qualify the verdict (e.g. too few check points for a standard); the report
+    #: shows them beside the verdict and report.json lists them under ``warnings``
+    caveats: list[str] = field(default_factory=list)
 
 
 

@@ -36,11 +36,15 @@ __all__ = [
     "check_out_dir",
     "demo_config_path",
     "assess",
+    "SCHEMA_VERSION",
     "REPORT_HTML",
     "REPORT_JSON",
     "OUTPUTS_DIR",
 ]
 
+#: version of the report.json layout (docs: Reference, report.json): MINOR for new keys, MAJOR
+#: for removed or renamed keys or changed units
+SCHEMA_VERSION = "1.0"
 REPORT_HTML = "report.html"
 REPORT_JSON = "report.json"
 OUTPUTS_DIR = "outputs"
@@ -257,6 +261,7 @@ def run_assessment(
         errors: dict[str, str] = {}
         tracebacks: dict[str, str] = {}
         verdicts: dict[str, Any] = {}
+        caveats: dict[str, list[str]] = {}
         timings: dict[str, float] = {}
         for item in config.analyses:
             ta = time.perf_counter()
@@ -277,6 +282,7 @@ def run_assessment(
                 results[item.id] = None
                 summary.append(SummaryRow(item.title, item.id, "failed: " + message, "error", ""))
                 verdicts[item.id] = {"verdict": "error", "targets": []}
+                section.verdict = "error"
             else:
                 params = {**params, **res.parameters}
                 results[item.id] = res.results
@@ -287,7 +293,15 @@ def run_assessment(
                 section.notes = res.notes
                 section.outputs = ctx.outputs.get(item.id, [])
                 verdict, detail, records = _verdict(item, res.results)
-                summary.append(SummaryRow(item.title, item.id, res.headline, verdict, detail))
+                section.verdict = verdict
+                section.caveats = list(res.caveats)
+                if res.caveats:
+                    caveats[item.id] = list(res.caveats)
+                summary.append(
+                    SummaryRow(
+                        item.title, item.id, res.headline, verdict, detail, tuple(res.caveats)
+                    )
+                )
                 verdicts[item.id] = {"verdict": verdict, "targets": records}
             timings[item.id] = round(time.perf_counter() - ta, 3)
             parameters[item.id] = {
@@ -314,6 +328,7 @@ def run_assessment(
 
             config_record.update(path=str(config.path), sha256=sha256_file(config.path))
         doc = {
+            "schema_version": SCHEMA_VERSION,
             "lidarqa_version": __version__,
             "command": command,
             "title": config.title,
@@ -325,6 +340,7 @@ def run_assessment(
             "parameters": parameters,
             "results": results,
             "verdicts": verdicts,
+            "warnings": caveats,
             "errors": errors,
             "skipped": [{"kind": k, "title": t, "reason": r} for k, t, r in config.skipped],
             "outputs": {k: v for k, v in ctx.outputs.items()},
@@ -373,6 +389,7 @@ def run_assessment(
             ],
             versions=versions,
             attribution=attribution,
+            section_titles={item.id: item.title for item in config.analyses},
             config_text=(
                 config.path.read_text(encoding="utf-8") if config.path is not None else None
             ),

@@ -20,6 +20,7 @@ from .._context import (
 from .._registry import ResolveContext, register
 from .._schema import FORMAT_KEY, AnalysisItem, Key, Target, check_table, need_input, targets
 from ..html import Figure, Table
+from ..labels import labelled_rows
 
 
 def _checkpoint_params(options: dict) -> dict[str, Any]:
@@ -58,6 +59,12 @@ def sample_check_points(
     _, first = np.unique(cell, axis=0, return_index=True)
     first = np.sort(first)  # keep the random order among cells
     return np.sort(cand[first[:n]])
+
+
+def _is_sample_size(warning: str) -> bool:
+    """A warning that the standards' minimum number of check points is not met."""
+    w = warning.lower()
+    return "check point" in w and ("only" in w or "at least" in w)
 
 
 KEYS = {
@@ -207,7 +214,9 @@ def run_checkpoints(ctx: RunContext, item: AnalysisItem) -> SectionResult:
     write_vector(ctx, item, rep.residual_points(), "residuals", opts["format"], notes)
     if opts["format"] != "csv":
         write_vector(ctx, item, rep.residual_points(), "residuals", "csv", notes)
-    notes.extend(str(w) for w in res.get("warnings", []))
+    # Sample-size warnings qualify the verdict: the report shows them beside it.
+    caveats = [str(w) for w in res.get("warnings", []) if _is_sample_size(str(w))]
+    notes.extend(str(w) for w in res.get("warnings", []) if not _is_sample_size(str(w)))
     figures = []
     with ctx.step("Plotting residuals"):
         figures.append(
@@ -238,15 +247,23 @@ def run_checkpoints(ctx: RunContext, item: AnalysisItem) -> SectionResult:
             + (f", {res['n_control']} control points" if res.get("n_control") else ""),
         ),
     ]
-    acc_rows = [["RMSE horizontal", res.get("rmse_h")], ["RMSE 3D", res.get("rmse_3d")]]
-    for k, v in (res.get("nssda") or {}).items():
-        if k != "warnings":
-            acc_rows.append([f"NSSDA {k}", v])
-    for k, v in (res.get("asprs2023") or {}).items():
-        if k != "warnings":
-            acc_rows.append([f"ASPRS 2023 {k}", v])
-    acc_rows = [r for r in acc_rows if r[1] is not None and r[1] == r[1]]  # drop undefined (NaN)
-    tables.append(Table("Accuracy figures", ["figure", "value"], acc_rows))
+    figures_json = {
+        "rmse_h": res.get("rmse_h"),
+        "rmse_3d": res.get("rmse_3d"),
+        "nssda": {k: v for k, v in (res.get("nssda") or {}).items() if k != "warnings"},
+        "asprs2023": {k: v for k, v in (res.get("asprs2023") or {}).items() if k != "warnings"},
+    }
+    acc_rows = [
+        r for r in labelled_rows(figures_json, none="") if r[1] != "" and r[1] == r[1]
+    ]  # undefined (None, NaN) figures are left out
+    tables.append(
+        Table(
+            "Accuracy figures",
+            ["figure", "value", "key in report.json"],
+            acc_rows,
+            code_columns=(2,),
+        )
+    )
     tr = res.get("transform") or {}
     if tr.get("name") not in (None, "none"):
         tables.append(
@@ -299,4 +316,5 @@ def run_checkpoints(ctx: RunContext, item: AnalysisItem) -> SectionResult:
         tables=tables,
         notes=notes,
         paragraphs=paragraphs,
+        caveats=caveats,
     )

@@ -19,6 +19,7 @@ from .._context import (
 from .._registry import CLOUD_KEY, ResolveContext, register
 from .._schema import FORMAT_KEY, AnalysisItem, Key, Target, check_table, need_input, targets
 from ..html import Figure, Table
+from ..labels import labelled_rows
 
 
 def _heights_params(options: dict) -> dict[str, Any]:
@@ -257,10 +258,19 @@ def run_heights(ctx: RunContext, item: AnalysisItem) -> SectionResult:
         ),
         Table(
             "Comparison with the reference",
-            ["quantity", "value"],
-            [[k, v] for k, v in c.items() if not isinstance(v, list | dict)],
+            ["quantity", "value", "key in report.json"],
+            labelled_rows(
+                {k: v for k, v in c.items() if not isinstance(v, list | dict)},
+                prefix="comparison",
+            ),
+            code_columns=(2,),
         ),
-        Table("w-tests", ["quantity", "value"], [[k, v] for k, v in w.items()]),
+        Table(
+            "w-tests",
+            ["quantity", "value", "key in report.json"],
+            labelled_rows(dict(w), prefix="w"),
+            code_columns=(2,),
+        ),
     ]
     wv = np.asarray(rep.w_values, dtype=float)
     order = np.argsort(-np.nan_to_num(np.abs(wv), nan=-1.0), kind="stable")[:10]
