@@ -90,7 +90,7 @@ def corner_from_planes(
     min_angle: float = 10.0,
     normal_uncertainty: bool = True,
 ) -> Corner:
-    """Intersect three planes: solve ``N x = rho`` with conditioning checks (§4.3).
+    """Intersect three planes: solve ``N x = rho`` with conditioning checks (:ref:`alg-corners`).
 
     Parameters
     ----------

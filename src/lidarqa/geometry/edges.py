@@ -101,7 +101,7 @@ def plane_pair_segment(
     min_support: int = 5,
     return_reason: bool = False,
 ) -> PlanePairSegment | None | tuple[PlanePairSegment | None, str]:
-    """Intersect two planes and bound the line by their supporting points (§4.2).
+    """Intersect two planes and bound the line by their supporting points (:ref:`alg-edges`).
 
     Parameters
     ----------

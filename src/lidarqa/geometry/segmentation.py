@@ -106,7 +106,7 @@ def surface_growing(
     seed_method : {"pca", "hough", "ransac"}, default "pca"
         How the seed plane is found in the neighbourhood: one total-least-squares
         fit plus one refit on its inliers ("pca", fastest), a 3D Hough transform
-        over normal directions and ρ bins ("hough", §1.2), or 200 three-point
+        over normal directions and ρ bins ("hough", :ref:`alg-segmentation`), or 200 three-point
         RANSAC hypotheses ("ransac", randomised by `seed` and the trial point).
     seed : int, default 0
         Random seed for ``seed_method="ransac"``.

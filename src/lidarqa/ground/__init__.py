@@ -1,8 +1,8 @@
 """Ground filtering: point-based and segment-based progressive TIN densification.
 
 - :class:`PTD` — Axelsson's progressive TIN densification (:ref:`alg-ptd`);
-- :class:`SegmentPTD` — Lin & Zhang's segment-based PTD (§1.3–1.4);
-- :func:`filter_errors` — ISPRS type I / type II / total error and Cohen's kappa (§2);
+- :class:`SegmentPTD` — Lin & Zhang's segment-based PTD (:ref:`alg-segment-ptd`);
+- :func:`filter_errors` — ISPRS type I / type II / total error and Cohen's kappa (:ref:`alg-isprs`);
 - :func:`classify_ground` — the library function behind ``lidarqa ground``: return
   handling, noise exclusion, filtering and (optionally) evaluation on a
   :class:`~lidarqa.io.PointCloud`.

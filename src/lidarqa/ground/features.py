@@ -117,7 +117,7 @@ def segment_features(
     return_number: Any = None,
     number_of_returns: Any = None,
 ) -> SegmentFeatures:
-    """Orientation and scatterness of every segment (§1.3).
+    """Orientation and scatterness of every segment (:ref:`alg-features`).
 
     Parameters
     ----------
@@ -196,7 +196,9 @@ def detect_object_segments(
     min_facade_points: int = 0,
     echo_ratio_thr: float | None = None,
 ) -> np.ndarray:
-    """Object flag per segment (§1.3): façade (orientation > o) or vegetation (scatterness > s).
+    """Object flag per segment: façade (orientation > o) or vegetation (scatterness > s).
+
+    Method: :ref:`alg-features`.
 
     Parameters
     ----------

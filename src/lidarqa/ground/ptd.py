@@ -298,7 +298,7 @@ def densify(
     max_iter: int,
     min_gain_frac: float = 0.0,
 ) -> TIN:
-    """Point-wise progressive densification (§1.1 step 5) of `st`; returns the final TIN.
+    """Point-wise progressive densification (:ref:`alg-ptd`) of `st`; returns the final TIN.
 
     The TIN grows by insertion (startinpy) instead of being rebuilt each iteration;
     if startinpy merges two vertices (closer than 1e-7 m) it falls back to rebuilding.
