@@ -65,12 +65,12 @@ def _key_rows(keys: dict[str, Any]) -> list[list[str]]:
             default = "–"
         else:
             default = f"``{_toml(key.default)}``"
-        text = key.help or ""
+        text = _esc(key.help or "")
         if key.choices:
             text = (text + "; " if text else "") + "one of " + ", ".join(
                 f"``{_toml(c)}``" for c in key.choices
             )
-        rows.append([f"``{name}``", _esc(kind), default, _esc(text) or "–"])
+        rows.append([f"``{name}``", _esc(kind), default, text or "–"])
     return rows
 
 
@@ -94,19 +94,39 @@ def _table(rows: list[list[str]], header: list[str]) -> list[str]:
     return out
 
 
-def _library_rows(kind: str, options: dict) -> list[list[str]]:
+def _library_rows(kind: str, keys: dict[str, Any]) -> list[list[str]]:
+    """Library parameters of an analysis, over every variant of its choice/bool keys."""
     from lidarqa.report._registry import library_params
+    from lidarqa.report.labels import label_text, lookup
 
-    try:
-        params = library_params(kind, options)
-    except Exception:  # an optional part missing in this installation
-        return []
-    ann = getattr(params, "annotations", {})
-    rows = []
-    for name, default in params.items():
-        d = "–" if default is None else f"``{_toml(default)}``"
-        rows.append([f"``{name}``", _esc(ann.get(name, type(default).__name__)), d])
-    return rows
+    variants: list[tuple[str, dict]] = [("", {})]
+    for name, key in keys.items():
+        values = key.choices or ((True, False) if key.type == "bool" else ())
+        variants += [(f"{name} = {_toml(v)}", {name: v}) for v in values if v != key.default]
+    seen: dict[str, list[str]] = {}
+    order: list[str] = []
+    for when, options in variants:
+        try:
+            params = library_params(kind, options)
+        except Exception:  # an optional part missing in this installation
+            continue
+        ann = getattr(params, "annotations", {})
+        for name, default in params.items():
+            if name in seen:
+                continue
+            d = "–" if default is None else f"``{_toml(default)}``"
+            lab = lookup(name)
+            if lab is None:
+                meaning = "–"
+            elif lab.scale == 100.0:  # the config holds the fraction the report shows in %
+                meaning = _esc(f"{lab.text} (fraction, 0.5 = 50 %)")
+            else:
+                meaning = _esc(label_text(name))
+            if when:
+                meaning += f" (with ``{when}``)"
+            seen[name] = [f"``{name}``", _esc(ann.get(name, type(default).__name__)), d, meaning]
+            order.append(name)
+    return [seen[n] for n in order]
 
 
 class ConfigReference(SphinxDirective):
@@ -163,14 +183,14 @@ class ConfigReference(SphinxDirective):
                     rows.append([f"``{key}``", _esc(t.label), unit, cmp])
                 lines += ["Pass/fail targets (the verdict is *pass* when every target holds):", ""]
                 lines += _table(rows, ["key", "metric", "unit", "passes when the value is"])
-            rows = _library_rows(kind, {})
+            rows = _library_rows(kind, spec.keys)
             if rows:
                 lines += [
                     "Library parameters (same names and defaults as the Python function and"
                     " the command's options):",
                     "",
                 ]
-                lines += _table(rows, ["key", "type", "default"])
+                lines += _table(rows, ["key", "type", "default", "meaning (unit)"])
         return _parse_rst(self, lines)
 
 
@@ -229,6 +249,9 @@ class CliReference(SphinxDirective):
 # ------------------------------------------------------------ executed code
 
 
+_SCRATCH: list[str] = []  # scratch folders of this build, removed when it finishes
+
+
 class RunCode(SphinxDirective):
     """Run the content as Python at build time; show code, output and figures."""
 
@@ -241,6 +264,7 @@ class RunCode(SphinxDirective):
         state = store.get(env.docname)
         if state is None:
             workdir = tempfile.mkdtemp(prefix="lidarqa-docs-")
+            _SCRATCH.append(workdir)
             state = {"ns": {"__name__": "__main__"}, "dir": workdir}
             store[env.docname] = state
         code = "\n".join(self.content)
@@ -285,7 +309,16 @@ class RunCode(SphinxDirective):
         return result
 
 
+def _cleanup(app: Any, exception: Any) -> None:
+    """Remove the scratch folders the executed snippets wrote into."""
+    import shutil
+
+    while _SCRATCH:
+        shutil.rmtree(_SCRATCH.pop(), ignore_errors=True)
+
+
 def setup(app: Any) -> dict[str, Any]:
+    app.connect("build-finished", _cleanup)
     app.add_directive("lidarqa-config-reference", ConfigReference)
     app.add_directive("lidarqa-cli-reference", CliReference)
     app.add_directive("lidarqa-run", RunCode)
