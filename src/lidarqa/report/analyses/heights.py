@@ -282,7 +282,7 @@ def run_heights(ctx: RunContext, item: AnalysisItem) -> SectionResult:
                 ["reference point", "x", "y", "Δh (m)", "σ_Δh (m)", "w", "outlier"],
                 [
                     [
-                        int(i),
+                        str(int(i)),  # an index, not a quantity: no thousands separator
                         f"{ref_xyz[i, 0]:.2f}",
                         f"{ref_xyz[i, 1]:.2f}",
                         float(rep.dh[i]),
