@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import html
 import json
 import re
 from pathlib import Path
@@ -83,3 +84,18 @@ def test_report_json_is_versioned_and_documented(demo_doc) -> None:
     documented = set(re.findall(r"^\| `([a-z_0-9]+)` \|", doc, re.M))
     undocumented = set(demo_doc) - documented
     assert not undocumented, f"report.json keys missing from the schema page: {undocumented}"
+
+
+def test_target_lines_use_the_headline_digits(demo_doc, demo_run) -> None:
+    # the summary's target column showed "total error 0.8382 %" beside a headline of "0.84 %"
+    page = (demo_run["out"] / "report.html").read_text(encoding="utf-8")
+    checked = 0
+    for sid, v in demo_doc["verdicts"].items():
+        for rec in v["targets"]:
+            row = re.search(rf'<tr><td class="name"><a href="#{sid}">.*?</tr>', page, re.S).group(0)
+            pct = sid == "ground" and rec["metric"] in ("total", "type_i", "type_ii")
+            shown = f"{rec['value'] * 100:.2f} %" if pct else f"{rec['value']:.3f} m"
+            target_cell = html.unescape(re.findall(r"<td[^>]*>(.*?)</td>", row, re.S)[-1])
+            assert f"{shown} ≤" in target_cell, f"{sid}: {target_cell!r} should show {shown!r}"
+            checked += 1
+    assert checked >= 3

@@ -171,9 +171,12 @@ pre { background: var(--head); padding: .6rem; overflow-x: auto; white-space: pr
 footer { margin-top: 2.5rem; color: var(--muted); font-size: .85rem; }
 #summary-bar { position: sticky; top: 0; z-index: 10; background: var(--bg);
                border-bottom: 1px solid var(--line); padding: .35rem 0; margin: 0 0 .5rem;
-               display: flex; gap: .9rem; overflow-x: auto; white-space: nowrap;
+               display: flex; flex-wrap: wrap; gap: .2rem .9rem; white-space: nowrap;
                font-size: .85rem; }
-#summary-bar a { color: var(--fg); text-decoration: none; }
+#summary-bar a { color: var(--fg); text-decoration: none; display: inline-flex;
+                 align-items: center; gap: .25rem; }
+#summary-bar .bar-name { display: inline-block; max-width: 10rem; overflow: hidden;
+                         text-overflow: ellipsis; vertical-align: middle; }
 #summary-bar .bar-title { font-weight: 600; color: var(--muted); }
 section { scroll-margin-top: 3rem; }
 details > summary { cursor: pointer; list-style-position: outside; }
@@ -188,7 +191,8 @@ details.params > summary { font-weight: 600; }
 td.verdict-cell { white-space: normal; min-width: 7rem; }
 @media (max-width: 40rem) { body { font-size: 14px; padding: 0 .6rem 2rem; }
   h1 { font-size: 1.25rem; }
-  th, td { padding: .3rem .45rem; } }
+  th, td { padding: .3rem .45rem; }
+  #summary-bar { flex-wrap: nowrap; overflow-x: auto; } }
 @media print { .table-wrap { overflow: visible; } #summary-bar { position: static; } }
 """
 
@@ -302,7 +306,8 @@ def render_html(report: Report) -> str:
     for row in report.summary:
         mark = ' <span title="see the warnings beside the verdict">⚠</span>' if row.caveats else ""
         bar.append(
-            f'<a href="#{_e(row.anchor)}">{_e(row.analysis)} {_verdict(row.verdict)}{mark}</a>'
+            f'<a href="#{_e(row.anchor)}" title="{_e(row.analysis)}">'
+            f'<span class="bar-name">{_e(row.analysis)}</span> {_verdict(row.verdict)}{mark}</a>'
         )
     bar.append("</nav>")
     parts.append("".join(bar))

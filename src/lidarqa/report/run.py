@@ -126,6 +126,17 @@ def _lookup(results: dict[str, Any], path: tuple[str, ...]) -> Any:
     return v
 
 
+def _measured(value: float | None, unit: str) -> str:
+    """A measured value with the digits the section headlines use: mm for metres, 0.01 for %."""
+    if value is None or value != value:
+        return "–"
+    if unit == "%":
+        return f"{value:.2f}"
+    if unit == "" and float(value).is_integer():
+        return f"{int(value)}"  # counts (edges found)
+    return f"{value:.3f}"  # metres to the mm; κ to three decimals
+
+
 def _verdict(item: AnalysisItem, results: dict[str, Any]) -> tuple[str, str, list[dict[str, Any]]]:
     """pass / fail / n/a against the configured targets, a text and the per-target records."""
     if not item.targets:
@@ -154,7 +165,7 @@ def _verdict(item: AnalysisItem, results: dict[str, Any]) -> tuple[str, str, lis
         unit = f" {t.unit}" if t.unit else ""
         shown = None if value_f is None else value_f * t.scale
         texts.append(
-            f"{t.label} {fmt(shown)}{unit} {op} {fmt(target * t.scale)}{unit}: "
+            f"{t.label} {_measured(shown, t.unit)}{unit} {op} {fmt(target * t.scale)}{unit}: "
             f"{'pass' if ok else 'FAIL'}"
         )
         records.append(

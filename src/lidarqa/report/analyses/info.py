@@ -97,8 +97,8 @@ def run_info(ctx: RunContext, item: AnalysisItem) -> SectionResult:
         tables.append(
             Table(
                 "Flight strips",
-                ["point_source_id", "points"],
-                [[int(k), v] for k, v in info["point_source_ids"].items()],
+                ["flight strip (point source ID)", "points"],
+                [[str(int(k)), v] for k, v in info["point_source_ids"].items()],
             )
         )
     dens = info["density_per_m2"]
