@@ -178,7 +178,7 @@ footer { margin-top: 2.5rem; color: var(--muted); font-size: .85rem; }
 #summary-bar .bar-name { display: inline-block; max-width: 10rem; overflow: hidden;
                          text-overflow: ellipsis; vertical-align: middle; }
 #summary-bar .bar-title { font-weight: 600; color: var(--muted); }
-section { scroll-margin-top: 3rem; }
+section { scroll-margin-top: 6rem; }  /* below a summary bar of up to three lines */
 details > summary { cursor: pointer; list-style-position: outside; }
 details > summary h2 { display: inline; border: 0; margin: 0; padding: 0; }
 details.section { border-top: 1px solid var(--line); margin-top: 1.6rem; padding-top: .6rem; }
