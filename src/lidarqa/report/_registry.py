@@ -9,13 +9,14 @@ An analysis module registers itself in one call::
         targets=targets(Target("rmsdz", ("max_rmsdz",), "max", "worst pair RMSDz", "m")),
         title="Flight strips",
         resolve=None,                # optional: check nested tables / cross references
+        order=70,                    # place among the report's sections (built-ins 10..60)
     )
     def run_swaths(ctx, item) -> SectionResult: ...
 
-and is imported by :mod:`lidarqa.report.analyses` (one line). The config
-validator (:mod:`lidarqa.report.config`), the run (:mod:`lidarqa.report.run`)
-and the generated config reference read everything else from here, so adding
-an analysis touches one file plus that import line.
+in a module of :mod:`lidarqa.report.analyses`, which imports every module of
+its package. The config validator (:mod:`lidarqa.report.config`), the run
+(:mod:`lidarqa.report.run`) and the generated config reference read everything
+else from here, so adding an analysis touches one file.
 """
 
 from __future__ import annotations
@@ -66,6 +67,7 @@ class AnalysisSpec:
     title: str | Callable[[dict], str] = ""
     resolve: Callable[[dict, ResolveContext], None] | None = None
     doc: str = ""
+    order: int = 100
 
     def default_title(self, options: dict) -> str:
         t = self.title(options) if callable(self.title) else self.title
@@ -92,6 +94,7 @@ def register(
     targets: dict[str, Target] | None = None,
     title: str | Callable[[dict], str] = "",
     resolve: Callable[[dict, ResolveContext], None] | None = None,
+    order: int = 100,
 ) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
     """Register the section function of an analysis kind with its config schema.
 
@@ -112,6 +115,9 @@ def register(
     resolve : callable, optional
         ``resolve(options, ctx)``: check nested tables and cross references,
         normalising ``options`` in place; raise ``ConfigError``.
+    order : int, optional
+        Place of the kind among the report's sections and in the config
+        reference (ascending; the built-in kinds use 10 to 60, ties by name).
     """
 
     def deco(func: Callable[..., Any]) -> Callable[..., Any]:
@@ -124,8 +130,13 @@ def register(
             title=title,
             resolve=resolve,
             doc=(func.__doc__ or "").strip().split("\n")[0],
+            order=order,
         )
         _SPECS[kind] = spec
+        # keep the registry in report order, whatever order the modules were imported in
+        ordered = sorted(_SPECS.values(), key=lambda sp: (sp.order, sp.kind))
+        _SPECS.clear()
+        _SPECS.update((sp.kind, sp) for sp in ordered)
         ANALYSES[kind] = func
         _PARAMS[kind] = spec.params
         ANALYSIS_KEYS[kind] = spec.keys

@@ -12,13 +12,14 @@ which library keyword arguments an analysis accepts (by introspecting the
 library function), so the config uses the same names as the API and the CLI.
 
 Adding an analysis: write ``report/analyses/<kind>.py`` (see ``info.py`` for
-the smallest one) and add its name to :data:`BUILTIN`, whose order is the
-order of the report's sections.
+the smallest one). Every module of this package is imported here, and the
+``order`` given to ``register`` places it among the report's sections.
 """
 
 from __future__ import annotations
 
 import importlib
+import pkgutil
 
 from .._context import (
     ParamDefaults,
@@ -31,8 +32,11 @@ from .._context import (
 )
 from .._registry import _PARAMS, ANALYSES, library_params, register
 
-#: the built-in analysis modules, in report order (importing one registers it)
-BUILTIN = ("info", "ground", "edges", "lines", "checkpoints", "heights")
+#: the analysis modules of this package (importing one registers it); modules
+#: whose name starts with "_" are helpers and are not imported here
+BUILTIN = tuple(
+    sorted(m.name for m in pkgutil.iter_modules(__path__) if not m.name.startswith("_"))
+)
 for _name in BUILTIN:
     importlib.import_module(f"{__name__}.{_name}")
 

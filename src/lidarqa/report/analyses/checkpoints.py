@@ -140,6 +140,7 @@ def _title(opts: dict) -> str:
     targets=TARGETS,
     title=_title,
     resolve=_resolve,
+    order=50,
 )
 def run_checkpoints(ctx: RunContext, item: AnalysisItem) -> SectionResult:
     """Check points: residuals, RMSE and ASPRS/NSSDA figures (or the vertical check of a cloud)."""

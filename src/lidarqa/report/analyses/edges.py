@@ -48,7 +48,7 @@ KEYS = {
 TARGETS = targets(Target("n_edges", ("n_edges",), "min", "edges found", ""))
 
 
-@register("edges", _edge_params, keys=KEYS, targets=TARGETS, title="Edges")
+@register("edges", _edge_params, keys=KEYS, targets=TARGETS, title="Edges", order=30)
 def run_edges(ctx: RunContext, item: AnalysisItem) -> SectionResult:
     """Extract edges (plane intersections) per flight strip and write them."""
     from .. import plots

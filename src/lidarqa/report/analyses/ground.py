@@ -71,7 +71,9 @@ TARGETS = targets(
 )
 
 
-@register("ground", _ground_params, keys=KEYS, targets=TARGETS, title="Ground filtering")
+@register(
+    "ground", _ground_params, keys=KEYS, targets=TARGETS, title="Ground filtering", order=20
+)
 def run_ground(ctx: RunContext, item: AnalysisItem) -> SectionResult:
     """Ground filtering (segment-PTD or PTD) and its ISPRS errors against the input's classes."""
     from .. import plots

@@ -117,6 +117,7 @@ def _resolve(opts: dict, ctx: ResolveContext) -> None:
     targets=TARGETS,
     title="Height quality",
     resolve=_resolve,
+    order=60,
 )
 def run_heights(ctx: RunContext, item: AnalysisItem) -> SectionResult:
     """Height quality (Oude Elberink & Vosselman): predicted map-point σ, w-tests."""

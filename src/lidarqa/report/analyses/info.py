@@ -10,7 +10,7 @@ from .._schema import AnalysisItem
 from ..html import Figure, Table
 
 
-@register("info", keys={"cloud": CLOUD_KEY}, title="Input cloud")
+@register("info", keys={"cloud": CLOUD_KEY}, title="Input cloud", order=10)
 def run_info(ctx: RunContext, item: AnalysisItem) -> SectionResult:
     """Describe the cloud and show it from above, coloured by class and by flight strip."""
     from ...io.info import describe_cloud

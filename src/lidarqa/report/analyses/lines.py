@@ -110,7 +110,13 @@ def _resolve(opts: dict, ctx: ResolveContext) -> None:
 
 
 @register(
-    "lines", _lines_params, keys=KEYS, targets=TARGETS, title="Line matching", resolve=_resolve
+    "lines",
+    _lines_params,
+    keys=KEYS,
+    targets=TARGETS,
+    title="Line matching",
+    resolve=_resolve,
+    order=40,
 )
 def run_lines(ctx: RunContext, item: AnalysisItem) -> SectionResult:
     """Match test and model segments (Poreba & Goulette modified LHD), both ways."""
