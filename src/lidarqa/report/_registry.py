@@ -10,6 +10,7 @@ An analysis module registers itself in one call::
         title="Flight strips",
         resolve=None,                # optional: check nested tables / cross references
         order=70,                    # place among the report's sections (built-ins 10..60)
+        labels={"max_rmsdz": Label("worst pair RMSDz", "m")},  # report labels of new keys
     )
     def run_swaths(ctx, item) -> SectionResult: ...
 
@@ -95,6 +96,7 @@ def register(
     title: str | Callable[[dict], str] = "",
     resolve: Callable[[dict, ResolveContext], None] | None = None,
     order: int = 100,
+    labels: dict[str, Any] | None = None,
 ) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
     """Register the section function of an analysis kind with its config schema.
 
@@ -118,7 +120,14 @@ def register(
     order : int, optional
         Place of the kind among the report's sections and in the config
         reference (ascending; the built-in kinds use 10 to 60, ties by name).
+    labels : dict of str to lidarqa.report.labels.Label, optional
+        Report labels (with units) of the kind's own parameters and figures
+        that :data:`lidarqa.report.labels.LABELS` does not have yet.
     """
+    if labels:
+        from . import labels as _labels
+
+        _labels.add(labels)
 
     def deco(func: Callable[..., Any]) -> Callable[..., Any]:
         spec = AnalysisSpec(

@@ -7,7 +7,9 @@ most specific match first: ``check.n`` before ``n``. Fractions (``scale`` 100)
 are shown in percent.
 
 A key missing here is shown under its raw name; the tests walk a demo report and
-fail on any such key, so new parameters get a label when they are added.
+every registered analysis's keys and parameters and fail on any such key. An
+analysis module may bring its own labels: ``register(..., labels={...})`` adds
+them here (:func:`add`), so a new analysis stays one file.
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["Label", "LABELS", "lookup", "label_text", "display_value", "labelled_rows"]
+__all__ = ["Label", "LABELS", "add", "lookup", "label_text", "display_value", "labelled_rows"]
 
 
 @dataclass(frozen=True)
@@ -122,6 +124,8 @@ LABELS: dict[str, Label] = {
     "seed_support": _l("seed check: supporting points needed"),
     "seed_radius": _l("seed check: radius", M),
     "seed_dz": _l("seed check: height tolerance", M),
+    "low_outlier_distance": _l("low-outlier pre-filter: depth below the neighbours (0 = off)", M),
+    "low_outlier_radius": _l("low-outlier pre-filter: neighbourhood radius", M),
     "seed_support_ratio": _l("seed check: share of supporting points", PCT, 100.0),
     "raised_step": _l("raised-segment test: step height (0 = off)", M),
     "raised_angle": _l("raised-segment test: angle", DEG),
@@ -219,6 +223,23 @@ LABELS: dict[str, Label] = {
     "w.frac_lt2": _l("share of |w| < 2 (95 % expected)", PCT, 100.0),
     "w.n_outliers": _l("outliers (|w| above the critical value)"),
 }
+
+
+def add(labels: dict[str, Label]) -> None:
+    """Add labels (an analysis module's own keys); a key may not change its meaning.
+
+    Raises
+    ------
+    ValueError
+        If a key already has a different label.
+    """
+    for key, lab in labels.items():
+        if not isinstance(lab, Label):
+            raise TypeError(f"label of {key!r} must be a Label, got {type(lab).__name__}")
+        old = LABELS.get(key)
+        if old is not None and old != lab:
+            raise ValueError(f"{key!r} is already labelled {old.text!r}; use a dotted key")
+        LABELS[key] = lab
 
 
 def lookup(path: str) -> Label | None:
