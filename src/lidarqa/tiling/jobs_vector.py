@@ -42,6 +42,7 @@ __all__ = [
     "VectorTask",
     "dedupe_points",
     "dedupe_segments",
+    "fixed_auto_options",
     "in_core",
     "keep_anchored",
     "merge_vector_parts",
@@ -198,6 +199,42 @@ def merge_vector_parts(
 
 
 # ------------------------------------------------------------------ per-chunk work
+
+
+def fixed_auto_options(
+    points: Any,
+    *,
+    kind: str = "edges",
+    segment_options: dict[str, Any] | None = None,
+    options: dict[str, Any] | None = None,
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Fix the data-driven defaults once for a whole catalog.
+
+    Plane segmentation's growing radius (2 x the point spacing) and the edges'
+    support distance (1.2 x the spacing) default to values measured on the
+    points at hand; measured per chunk they would differ slightly from chunk to
+    chunk, and so would the features. This measures the spacing once on
+    `points` (e.g. the selected points of one chunk) and returns copies of
+    `segment_options` and `options` with those values filled in where the
+    caller left them unset.
+
+    Returns
+    -------
+    (segment_options, options)
+    """
+    from .._validate import as_points
+    from ..geometry.segmentation import point_spacing
+
+    seg = dict(segment_options or {})
+    opts = dict(options or {})
+    pts = as_points(points)
+    sp = point_spacing(pts) if len(pts) > 10 else float("nan")
+    if seg.get("grow_radius") is None:
+        seg["grow_radius"] = float(np.clip(2.0 * sp, 0.5, 3.0)) if np.isfinite(sp) else 0.5
+    if kind == "edges" and opts.get("near_dist") is None:
+        opts["near_dist"] = float(np.clip(1.2 * sp, 0.15, 1.0)) if np.isfinite(sp) else 0.15
+    return seg, opts
+
 
 
 def _planes_pointset(seg: Any, crs: Any) -> PointSet:
