@@ -39,7 +39,7 @@ import numpy as np
 from ..errors import DegenerateGeometryError, InvalidPointsError, OptionError
 from ..io.vector import PointSet
 from .jobs_stats import ResidualMoments, WStatistics
-from .jobs_vector import in_core
+from .jobs_vector import in_core, owned
 
 __all__ = [
     "CheckSpacingTask",
@@ -57,7 +57,7 @@ __all__ = [
 def chunks_with_points(chunks: Sequence[Any], xy: Any) -> tuple[Any, ...]:
     """The chunks whose core holds at least one of the points `xy` (the only ones to read)."""
     p = np.asarray(xy, dtype=np.float64).reshape(-1, np.shape(xy)[-1] if len(xy) else 2)
-    return tuple(c for c in chunks if len(p) and in_core(p, c.core).any())
+    return tuple(c for c in chunks if len(p) and owned(p, c).any())
 
 
 def _ground_xy(chunk_data: Any, classes: tuple[int, ...] | None) -> np.ndarray:
@@ -88,7 +88,7 @@ class CheckSpacingTask:
     def __call__(self, chunk_data: Any) -> tuple[np.ndarray, np.ndarray]:
         from scipy.spatial import cKDTree
 
-        idx = np.flatnonzero(in_core(self.check_xy, chunk_data.chunk.core))
+        idx = np.flatnonzero(owned(self.check_xy, chunk_data.chunk))
         g = _ground_xy(chunk_data, self.classes)
         if not len(idx) or len(g) == 0:
             return idx, np.full(len(idx), np.nan)
@@ -146,11 +146,11 @@ class VerticalCheckTask:
     def __call__(self, chunk_data: Any) -> VerticalPart:
         from ..accuracy.checkpoints import vertical_check
 
-        core = chunk_data.chunk.core
-        idx = np.flatnonzero(in_core(self.check.xyz, core))
+        core = chunk_data.chunk
+        idx = np.flatnonzero(owned(self.check.xyz, core))
         cloud = chunk_data.cloud
         g = _ground_xy(chunk_data, self.classes)
-        gcore = g[in_core(g, core)]
+        gcore = g[owned(g, core)]
         n_ground = len(np.unique(gcore[:, :2], axis=0)) if len(gcore) else 0
         m = len(idx)
         tin_z, longest = np.full(m, np.nan), np.full(m, np.nan)
@@ -302,10 +302,10 @@ class HeightsTask:
         chunk = chunk_data.chunk
         pts = _ground_xy(chunk_data, self.classes)
         mi = np.flatnonzero(in_core(self.map_xy, chunk.buffered))
-        ri = np.flatnonzero(in_core(self.reference_xyz, chunk.core))
+        ri = np.flatnonzero(owned(self.reference_xyz, chunk))
         opts = {k: v for k, v in self.options.items() if k != "estimate_offset"}
         rep = assess_heights(pts, self.map_xy[mi], self.reference_xyz[ri], **opts)
-        mine = in_core(self.map_xy[mi], chunk.core)
+        mine = owned(self.map_xy[mi], chunk)
         mp = rep.map_points
         rows = {k: np.asarray(getattr(mp, k))[mine] for k in _MAP_FIELDS}
         return HeightsPart(

@@ -66,7 +66,7 @@ class StripEdgesTask:
         if self.source_ids is not None:
             strips = strips[np.isin(strips, self.source_ids)]
         out: dict[int, Segments] = {}
-        core = chunk_data.chunk.core
+        core = chunk_data.chunk
         for s in strips.tolist():
             xyz = cloud.xyz[sid == s]
             if len(xyz) < self.min_points:

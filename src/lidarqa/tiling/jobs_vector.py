@@ -46,6 +46,7 @@ __all__ = [
     "in_core",
     "keep_anchored",
     "merge_vector_parts",
+    "owned",
     "vector_features",
 ]
 
@@ -71,15 +72,30 @@ def in_core(xy: Any, core: Sequence[float]) -> np.ndarray:
     return (p[:, 0] >= x0) & (p[:, 0] < x1) & (p[:, 1] >= y0) & (p[:, 1] < y1)
 
 
+def owned(xy: Any, where: Any) -> np.ndarray:
+    """Mask of the points `xy` owned by a chunk: in its core by the engine's own rule.
+
+    `where` is a chunk (its ``core_mask`` decides, the rule the catalog engine
+    uses for per-point outputs, so features, reference points and points agree
+    at borders), or a plain ``(xmin, ymin, xmax, ymax)`` core (:func:`in_core`).
+    """
+    p = np.asarray(xy, dtype=np.float64)
+    p = p.reshape(len(p), -1) if len(p) else np.empty((0, 2))
+    mask = getattr(where, "core_mask", None)
+    if mask is not None:
+        return np.asarray(mask(p), dtype=bool)
+    return in_core(p, getattr(where, "core", where))
+
+
 def _anchors(features: Segments | PointSet) -> np.ndarray:
     if isinstance(features, Segments):
         return 0.5 * (features.start + features.end)
     return features.xyz
 
 
-def keep_anchored(features: Segments | PointSet, core: Sequence[float]) -> Segments | PointSet:
-    """The features whose anchor (segment midpoint, or point) lies in the half-open `core`."""
-    return features.subset(np.flatnonzero(in_core(_anchors(features), core)))
+def keep_anchored(features: Segments | PointSet, core: Any) -> Segments | PointSet:
+    """The features whose anchor (segment midpoint, or point) lies in `core` (see :func:`owned`)."""
+    return features.subset(np.flatnonzero(owned(_anchors(features), core)))
 
 
 def _canonical(features: Segments | PointSet) -> np.ndarray:
@@ -253,7 +269,7 @@ def vector_features(
     points: np.ndarray,
     *,
     kind: str,
-    core: Sequence[float] | None = None,
+    core: Any = None,
     segment_options: dict[str, Any] | None = None,
     options: dict[str, Any] | None = None,
     crs: Any = None,
@@ -265,8 +281,8 @@ def vector_features(
     points : ndarray of shape (N, 3)
         x, y, z (m) of the chunk and its buffer, already selected (e.g. class 6).
     kind : {"planes", "edges", "corners"}
-    core : (xmin, ymin, xmax, ymax), optional
-        Half-open core of the chunk; None keeps every feature (an in-memory run).
+    core : Chunk or (xmin, ymin, xmax, ymax), optional
+        The chunk (or its half-open core); None keeps every feature (an in-memory run).
     segment_options : dict, optional
         Passed to :func:`lidarqa.geometry.segmentation.segment_planes`.
     options : dict, optional
@@ -341,7 +357,7 @@ class VectorTask:
             if f != 1.0:
                 xyz = xyz.copy()
                 xyz[:, 2] *= f
-        feats = vector_features(xyz, kind=self.kind, core=chunk_data.chunk.core,
+        feats = vector_features(xyz, kind=self.kind, core=chunk_data.chunk,
                                 segment_options=self.segment_options, options=self.options,
                                 crs=cloud.crs)
         if f != 1.0:  # back to the cloud's vertical unit, as the single-file commands do
