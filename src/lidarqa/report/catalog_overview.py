@@ -73,6 +73,7 @@ def plot_catalog_overview(
     corners += [(c[0], c[1]) for _, c in chunks] + [(c[2], c[3]) for _, c in chunks]
     xy = np.asarray(corners, dtype=float).reshape(-1, 2)
     x0, y0 = _map_axes(ax, xy)
+    ax.set_aspect("equal", adjustable="box")  # fixed limits below: shrink the box, not them
     core_of = {cid: core for cid, core in chunks}
     for cid, c in chunks:
         st = status.get(cid, "not run")
