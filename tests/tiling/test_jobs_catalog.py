@@ -1,0 +1,131 @@
+"""Area jobs on a real catalog of tiles (files on disk, serial engine) equal the in-memory runs."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from datapaths import SHARED, needs_shared
+
+from lidarqa.accuracy.checkpoints import vertical_check
+from lidarqa.io import PointCloud, read, write
+from lidarqa.testing import make_building_scene, sample_checkpoints
+from lidarqa.tiling import open_catalog
+from lidarqa.tiling.jobs_api import (
+    catalog_features,
+    catalog_repeatability,
+    catalog_vertical_check,
+)
+from lidarqa.tiling.jobs_lines import strip_pairs
+from lidarqa.tiling.jobs_vector import dedupe_segments, vector_features
+
+TILE = 50.0
+
+
+@pytest.fixture(scope="module")
+def tiles(tmp_path_factory):
+    """A synthetic building block with two strips as 50 m tiles, and its points read back."""
+    scene = make_building_scene(seed=1, roofs=("gable", "flat", "gable", "flat"), density=8,
+                                strips=2, strip_offset=(0.04, -0.03, 0.03))
+    folder = tmp_path_factory.mktemp("tiles")
+    xy = scene.points[:, :2]
+    key = np.floor(xy / TILE).astype(int)
+    for i, j in sorted({tuple(k) for k in key.tolist()}):
+        sel = (key[:, 0] == i) & (key[:, 1] == j)
+        cloud = PointCloud(scene.points[sel], {
+            "classification": scene.classification[sel],
+            "point_source_id": scene.fields["point_source_id"][sel]})
+        write(cloud, folder / f"tile_{i:+03d}_{j:+03d}.las")
+    clouds = [read(p) for p in sorted(folder.glob("*.las"))]
+    whole = PointCloud(np.concatenate([c.xyz for c in clouds]), {
+        k: np.concatenate([c.fields[k] for c in clouds])
+        for k in ("classification", "point_source_id")})
+    assert len(clouds) >= 4
+    return scene, folder, whole
+
+
+def _match_once(whole, merged, tol=0.05):
+    """How often each whole-area segment is found in `merged` (endpoints within tol)."""
+    out = []
+    for s, e in zip(whole.start, whole.end, strict=True):
+        same = np.maximum(np.linalg.norm(merged.start - s, axis=1),
+                          np.linalg.norm(merged.end - e, axis=1))
+        flip = np.maximum(np.linalg.norm(merged.start - e, axis=1),
+                          np.linalg.norm(merged.end - s, axis=1))
+        out.append(int((np.minimum(same, flip) < tol).sum()))
+    return np.array(out)
+
+
+def _chunk_of(run, xy):
+    out = np.full(len(xy), -1)
+    for k, c in enumerate(run.chunks):
+        out[c.core_mask(xy)] = k
+    return out
+
+
+def test_edges_and_corners_of_a_tiled_block_equal_the_in_memory_run(tiles):
+    _, folder, whole = tiles
+    b = whole.classification == 6
+    run = catalog_features(folder, kind="edges", classes=(6,), chunk_size=30.0, buffer=20.0,
+                           origin=(7.0, 3.0))
+    assert run.failed == [] and len(run.chunks) >= 9
+    ref = vector_features(whole.xyz[b], kind="edges", segment_options=run.extra["segment_options"],
+                          options=run.extra["options"])
+    m = run.value
+    assert len(m) == len(ref)
+    assert (_match_once(ref, m) == 1).all()  # every in-memory edge exactly once
+    crossing = _chunk_of(run, m.start) != _chunk_of(run, m.end)
+    assert crossing.sum() >= 3  # chunk borders really cut edges
+    corners = catalog_features(str(folder / "*.las"), kind="corners", classes=(6,),
+                               chunk_size=30.0, buffer=20.0, origin=(7.0, 3.0))
+    ref_c = vector_features(whole.xyz[b], kind="corners",
+                            segment_options=corners.extra["segment_options"])
+    d = np.linalg.norm(corners.value.xyz[:, None] - ref_c.xyz[None], axis=2)
+    assert len(corners.value) == len(ref_c) > 5
+    assert ((d < 0.05).sum(axis=0) == 1).all()
+
+
+def test_vertical_check_on_the_tiles_equals_the_in_memory_check(tiles):
+    scene, folder, whole = tiles
+    check = sample_checkpoints(scene, 40, seed=2)
+    ref = vertical_check(whole.xyz, check, classification=whole.classification)
+    run = catalog_vertical_check(folder, check, chunk_size=30.0, buffer=15.0)
+    rep = run.value
+    assert np.array_equal(rep.flag, ref.flag) and rep.n_check == ref.n_check > 20
+    np.testing.assert_allclose(rep.dz, ref.dz, rtol=0, atol=1e-9, equal_nan=True)
+    assert rep.to_dict()["rmse_z"] == pytest.approx(ref.to_dict()["rmse_z"], rel=1e-12)
+    assert len(run.chunks) < 20  # only chunks holding check points were read
+
+
+def test_strip_pairs_over_the_tiled_block_equal_the_in_memory_pairs(tiles):
+    _, folder, whole = tiles
+    run = catalog_repeatability(folder, classes=(6,), chunk_size=30.0, buffer=20.0)
+    b = whole.classification == 6
+    sid = whole.point_source_id
+    ref = {int(s): vector_features(whole.xyz[b & (sid == s)], kind="edges",
+                                   segment_options=run.extra["segment_options"],
+                                   options=run.extra["edge_options"])
+           for s in np.unique(sid[b])}
+    assert sorted(run.extra["strips"]) == sorted(ref)
+    rows, ref_rows = run.value, strip_pairs(ref)
+    assert len(rows) == len(ref_rows) == 1
+    for k in ("olhd_tm", "olhd_mt", "lhd", "n_pairs_tm", "n_pairs_mt"):
+        assert rows[0][k] == pytest.approx(ref_rows[0][k], abs=1e-9), k
+
+
+@needs_shared
+@pytest.mark.slow
+def test_ign_edges_crossing_chunk_borders_are_reported_once():
+    files = sorted((SHARED / "ign-lidarhd").glob("test_data_770*.laz"))
+    assert len(files) == 6
+    cat = open_catalog(files)
+    # tolerance 0: no near-duplicate removal, so only the anchor-in-core rule is tested
+    run = catalog_features(cat, kind="edges", classes=(6,), chunk_size=50.0, buffer=30.0,
+                           tolerance=0.0)
+    m = run.value
+    crossing = _chunk_of(run, m.start) != _chunk_of(run, m.end)
+    assert crossing.sum() >= 5
+    assert len(m) > 80
+    # no edge was kept by two chunks: no other edge has both endpoints within 30 cm
+    assert len(dedupe_segments(m, tolerance=0.3)) == len(m)
+    counts = _match_once(m.subset(np.flatnonzero(crossing)), m, tol=0.3)
+    assert (counts == 1).all()
