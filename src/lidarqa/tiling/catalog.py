@@ -508,9 +508,7 @@ def open_catalog(
     tiles = sorted(tiles, key=lambda t: t.path)
     if not tiles:
         if bad:
-            raise CatalogError(
-                "no readable tile: " + "; ".join(f"{p}: {r}" for p, r in bad[:5])
-            )
+            raise CatalogError("no readable tile: " + "; ".join(f"{p}: {r}" for p, r in bad[:5]))
         raise CatalogError(f"no tile found in {sources!s}")
     ids = sorted({t.file_source_id for t in tiles if t.file_source_id})
     return Catalog(

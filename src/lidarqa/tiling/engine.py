@@ -318,7 +318,9 @@ def run_chunks(
                         except Exception as exc:
                             if attempts <= retries:
                                 continue
-                            record(i, ChunkOutcome(chunks[i], False, None, _error_text(exc), attempts))
+                            record(
+                                i, ChunkOutcome(chunks[i], False, None, _error_text(exc), attempts)
+                            )
                             break
                         record(i, ChunkOutcome(chunks[i], True, res, None, attempts))
                         break

@@ -475,7 +475,9 @@ def ground_catalog(
     )
     out_catalog.write_vpc(vpc_path, overwrite=True)
     shutil.rmtree(work, ignore_errors=True)
-    evaluation = filter_errors_from_counts(*counts.tolist()) if have_counts and counts.sum() else None
+    evaluation = (
+        filter_errors_from_counts(*counts.tolist()) if have_counts and counts.sum() else None
+    )
     return CatalogGroundResult(
         outputs=tuple(str(o) for o in outputs),
         vpc=str(vpc_path),

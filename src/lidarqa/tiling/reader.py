@@ -53,7 +53,10 @@ class ChunkData:
 
 def _in_box(xyz: np.ndarray, box: tuple[float, float, float, float]) -> np.ndarray:
     return (
-        (xyz[:, 0] >= box[0]) & (xyz[:, 0] <= box[2]) & (xyz[:, 1] >= box[1]) & (xyz[:, 1] <= box[3])
+        (xyz[:, 0] >= box[0])
+        & (xyz[:, 0] <= box[2])
+        & (xyz[:, 1] >= box[1])
+        & (xyz[:, 1] <= box[3])
     )
 
 
@@ -125,7 +128,9 @@ def read_chunk(catalog: Any, chunk: Any) -> ChunkData:
             common &= set(f)
         names = [k for k in fieldsets[0] if k in common]
         fields = {
-            k: (np.concatenate([f[k] for f in fieldsets]) if len(fieldsets) > 1 else fieldsets[0][k])
+            k: (
+                np.concatenate([f[k] for f in fieldsets]) if len(fieldsets) > 1 else fieldsets[0][k]
+            )
             for k in names
         }
         point_index = np.concatenate(idxs)

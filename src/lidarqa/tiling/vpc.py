@@ -63,7 +63,10 @@ def vpc_document(catalog: Any, base: str | os.PathLike) -> dict[str, Any]:
             "pc:schemas": [],
             "pc:type": "lidar",
             "proj:bbox": [xmin, ymin, zmin, xmax, ymax, zmax],
-            "proj:geometry": {"type": "Polygon", "coordinates": [_ring(xmin, ymin, xmax, ymax, zmin)]},
+            "proj:geometry": {
+                "type": "Polygon",
+                "coordinates": [_ring(xmin, ymin, xmax, ymax, zmin)],
+            },
             "proj:wkt2": t.crs_wkt or (crs.to_wkt() if crs is not None else None),
         }
         if epsg is not None:
