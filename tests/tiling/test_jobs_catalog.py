@@ -129,3 +129,63 @@ def test_ign_edges_crossing_chunk_borders_are_reported_once():
     assert len(dedupe_segments(m, tolerance=0.3)) == len(m)
     counts = _match_once(m.subset(np.flatnonzero(crossing)), m, tol=0.3)
     assert (counts == 1).all()
+
+
+# ------------------------------------------------------------------ command line
+
+
+def _cli(args):
+    from click.testing import CliRunner
+
+    from lidarqa.cli.main import cli
+
+    return CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=False)
+
+
+def test_cli_edges_on_a_folder_writes_each_edge_once(tiles, tmp_path):
+    import json
+
+    from lidarqa.io.vector import read_segments
+
+    _, folder, _ = tiles
+    out, js = tmp_path / "edges.gpkg", tmp_path / "edges.json"
+    args = ["-q", "edges", folder, "-o", out, "--classes", "6", "--chunk-size", "30",
+            "--buffer", "20", "--scheduler", "serial", "--json", js]
+    r = _cli(args)
+    assert r.exit_code == 0, r.output
+    api = catalog_features(folder, kind="edges", classes=(6,), chunk_size=30.0, buffer=20.0)
+    seg = read_segments(out)
+    assert len(seg) == len(api.value) > 10
+    assert np.allclose(seg.start, api.value.start)
+    doc = json.loads(js.read_text())
+    cat = doc["results"]["catalog"]
+    assert cat["chunk_status"]["ok"] == cat["n_chunks"] == len(api.chunks)
+    # an existing output is refused before any work
+    r2 = _cli(args)
+    assert r2.exit_code == 1
+
+
+def test_cli_vertical_check_and_repeatability_on_a_catalog(tiles, tmp_path):
+    import json
+
+    from lidarqa.io.vector import write_points
+
+    scene, folder, whole = tiles
+    check = sample_checkpoints(scene, 25, seed=9)
+    cpath = tmp_path / "check.csv"
+    write_points(check, cpath)
+    js = tmp_path / "cp.json"
+    r = _cli(["-q", "checkpoints", *sorted(folder.glob("*.las")), cpath, "--vertical",
+              "--scheduler", "serial", "--chunk-size", "30", "--buffer", "15", "--json", js])
+    assert r.exit_code == 0, r.output
+    res = json.loads(js.read_text())["results"]
+    ref = vertical_check(whole.xyz, check, classification=whole.classification).to_dict()
+    assert res["n_check"] == ref["n_check"]
+    assert res["rmse_z"] == pytest.approx(ref["rmse_z"], rel=1e-9)
+    js2 = tmp_path / "rep.json"
+    r = _cli(["-q", "repeatability", folder, "--by-source-id", "--classes", "6",
+              "--scheduler", "serial", "--chunk-size", "30", "--buffer", "20", "--json", js2])
+    assert r.exit_code == 0, r.output
+    rep = json.loads(js2.read_text())["results"]
+    assert len(rep["pairs"]) == 1 and rep["pairs"][0]["lhd"] > 0
+    assert len(rep["strips"]) == 2  # both strips of the scene, pooled over every tile
