@@ -16,7 +16,8 @@ A :class:`Scene` holds ``points``, ``classification`` (ASPRS), ``is_ground``,
 model (``scene.ground_z(xy)``). :func:`rigid_motion` moves points and truth
 together; :func:`score_edges` / :func:`score_corners` score detections against
 the truth; :func:`sample_checkpoints` gives true ground check points;
-:mod:`lidarqa.testing.cases` has edge-case arrays. Hypothesis strategies live in
+:mod:`lidarqa.testing.cases` has edge-case arrays; :func:`write_tiles` /
+:func:`write_block` write scenes as tiled deliveries (catalog tests, benchmarks). Hypothesis strategies live in
 ``lidarqa.testing.strategies`` (needs the ``test`` extra; not imported here).
 
 >>> from lidarqa.testing import make_building_scene
@@ -44,6 +45,7 @@ from .scenes import (
     sample_checkpoints,
 )
 from .scoring import CornerScore, EdgeScore, score_corners, score_edges
+from .tiles import write_block, write_tiles
 
 __all__ = [
     "Scene",
@@ -64,4 +66,6 @@ __all__ = [
     "EdgeScore",
     "CornerScore",
     "cases",
+    "write_tiles",
+    "write_block",
 ]

@@ -421,9 +421,11 @@ def open_catalog(
     tiles: list[TileInfo] = []
     errors = [(f, e) for f, e in zip(unique, infos, strict=True) if isinstance(e, Exception)]
     if errors and not skip_bad:
+        shown = "; ".join(str(e) for _, e in errors[:10])
+        more = f" (and {len(errors) - 10} more)" if len(errors) > 10 else ""
+        head = "" if len(errors) == 1 else f"{len(errors)} bad files: "
         raise CatalogError(
-            str(errors[0][1])
-            + (f" (and {len(errors) - 1} more bad file(s))" if len(errors) > 1 else "")
+            head + shown + more + "; use --skip-bad (skip_bad=True) to leave them out"
         )
     for f, e in errors:
         bad.append((f, str(e).removeprefix(f + ": ")))
