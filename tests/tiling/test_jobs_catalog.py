@@ -189,3 +189,32 @@ def test_cli_vertical_check_and_repeatability_on_a_catalog(tiles, tmp_path):
     rep = json.loads(js2.read_text())["results"]
     assert len(rep["pairs"]) == 1 and rep["pairs"][0]["lhd"] > 0
     assert len(rep["strips"]) == 2  # both strips of the scene, pooled over every tile
+
+
+def test_cli_heights_on_a_catalog_equals_the_in_memory_run(tiles, tmp_path):
+    import json
+
+    from lidarqa.accuracy.heights import assess_heights
+    from lidarqa.io.vector import PointSet, write_points
+
+    scene, folder, whole = tiles
+    rng = np.random.default_rng(4)
+    lo, hi = whole.xyz[:, :2].min(0) + 3, whole.xyz[:, :2].max(0) - 3
+    mxy = lo + rng.random((60, 2)) * (hi - lo)
+    ref = sample_checkpoints(scene, 30, seed=11)
+    write_points(PointSet(np.arange(60), np.c_[mxy, np.zeros(60)]), tmp_path / "map.csv")
+    write_points(ref, tmp_path / "ref.csv")
+    js = tmp_path / "h.json"
+    r = _cli(["-q", "heights", folder, tmp_path / "map.csv", tmp_path / "ref.csv", "--classes",
+              "2", "--scheduler", "serial", "--chunk-size", "30", "--buffer", "20", "--json", js])
+    assert r.exit_code == 0, r.output
+    res = json.loads(js.read_text())["results"]
+    g = whole.classification == 2
+    mem = assess_heights(whole.xyz[g], mxy, ref.xyz).to_dict()
+    assert res["map_points"]["n_failed"] == mem["map_points"]["n_failed"]
+    assert res["comparison"]["n"] == mem["comparison"]["n"] > 10
+    for k in ("rms", "mean", "std"):
+        assert res["comparison"][k] == pytest.approx(mem["comparison"][k], rel=1e-9), k
+    assert res["w"]["n_outliers"] == mem["w"]["n_outliers"]
+    assert res["w"]["std"] == pytest.approx(mem["w"]["std"], rel=1e-9)
+    assert res["catalog"]["chunk_status"]["failed"] == 0

@@ -20,6 +20,7 @@ from ._common import Steps, echo, finish, prepare_outputs, settings
 __all__ = [
     "catalog_options",
     "features_on_catalog",
+    "heights_on_catalog",
     "repeatability_on_catalog",
     "vertical_on_catalog",
     "wants_catalog",
@@ -218,6 +219,27 @@ def vertical_on_catalog(
                        "scheduler": cat_opts.get("scheduler")},
            results=results)
     _failed_exit(run)
+
+
+# ------------------------------------------------------------------ heights
+
+
+def heights_on_catalog(
+    catalog: Any,
+    map_xy: Any,
+    reference_xyz: Any,
+    *,
+    classes: Any,
+    options: dict[str, Any],
+    cat_opts: dict[str, Any],
+) -> tuple[Any, Any]:
+    """``lidarqa heights CATALOG MAP REFERENCE``: (HeightReport, CatalogRun)."""
+    from ..tiling.jobs_api import catalog_heights
+
+    with _engine(cat_opts.get("scheduler"), cat_opts.get("workers")) as eng:
+        run = catalog_heights(catalog, map_xy, reference_xyz, classes=classes, options=options,
+                              **_common(cat_opts, eng))
+    return run.value, run
 
 
 # ------------------------------------------------------------------ repeatability
