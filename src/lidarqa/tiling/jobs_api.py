@@ -125,8 +125,8 @@ def _split(kw: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any], dict[str
     open_opts = {"skip_bad": kw.pop("skip_bad", False), "crs": kw.pop("crs", None)}
     chunk_opts = {"chunk_size": kw.pop("chunk_size", None), "buffer": kw.pop("buffer", None),
                   "origin": kw.pop("origin", (0.0, 0.0))}
-    run_opts = {k: kw.pop(k) for k in ("engine", "progress", "retries", "skip_failed")
-                if k in kw}
+    run_opts = {k: kw.pop(k) for k in ("engine", "progress", "retries", "skip_failed",
+                                       "order_seed") if k in kw}
     run_opts.setdefault("progress", False)
     if kw:
         raise OptionError(f"unknown option(s): {', '.join(sorted(kw))}")
@@ -178,7 +178,8 @@ def catalog_features(
         Near-duplicate distance (m) of the merge.
     **common
         ``chunk_size``, ``buffer``, ``origin``, ``engine``, ``progress``,
-        ``retries``, ``skip_failed``, ``skip_bad``, ``crs``.
+        ``retries``, ``skip_failed``, ``order_seed`` (shuffled submission, for
+        tests), ``skip_bad``, ``crs``.
     """
     from . import make_chunks
     from .jobs_vector import VectorTask, fixed_auto_options, merge_vector_parts
