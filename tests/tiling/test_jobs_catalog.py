@@ -234,3 +234,46 @@ def test_vector_output_is_byte_identical_for_any_completion_order(tiles, tmp_pat
         write_points(run.value, out)
         outs.append(out.read_bytes())
     assert outs[0] == outs[1] and len(outs[0]) > 200
+
+
+def test_assess_with_a_catalog_input_shows_the_overview_and_chunk_status(tiles, tmp_path):
+    import json
+
+    pytest.importorskip("matplotlib")
+    from lidarqa.io.vector import write_points
+    from lidarqa.report import run_assessment
+
+    scene, folder, whole = tiles
+    check = sample_checkpoints(scene, 20, seed=12)
+    write_points(check, tmp_path / "check.csv")
+    cfg = tmp_path / "a.toml"
+    cfg.write_text(f"""
+title = "catalog"
+[inputs.clouds]
+block = "{folder.as_posix()}"
+[inputs.points]
+check = "check.csv"
+[info]
+cloud = "block"
+[checkpoints]
+measured = "block"
+vertical = true
+check = "check"
+[ground]
+cloud = "block"
+""")
+    run = run_assessment(cfg, tmp_path / "out")
+    doc = json.loads((tmp_path / "out" / "report.json").read_text())
+    info = doc["results"]["info"]
+    assert info["n_tiles"] == len(list(folder.glob("*.las"))) and info["n_chunks"] >= 1
+    cp = doc["results"]["checkpoints"]
+    ref = vertical_check(whole.xyz, check, classification=whole.classification).to_dict()
+    assert cp["rmse_z"] == pytest.approx(ref["rmse_z"], rel=1e-9)
+    assert cp["catalog"]["chunk_status"]["ok"] >= 1
+    assert cp["catalog"]["chunk_status"]["failed"] == 0
+    # ground on a catalog is not an assess analysis yet: a clear error, the rest still ran
+    assert "cannot run on the catalog input" in doc["errors"]["ground"]
+    assert run.results["info"]["n_tiles"] == info["n_tiles"]
+    html = (tmp_path / "out" / "report.html").read_text()
+    assert "tiles, chunks" in html and "Chunks" in html
+    assert "cannot run on the catalog input" in html

@@ -157,11 +157,11 @@ def catalog_section(run: Any, *, title: str = "Catalog") -> dict[str, Any]:
                      "figures: " + ", ".join(r["chunk"] for r in rows if r["status"] == "failed"))
     results = {
         "n_tiles": len(cat.tiles), "n_points": int(cat.n_points), "bounds": list(cat.bounds),
-        "n_chunks": len(rows), "chunk_status": counts,
+        "n_chunks": len(run.chunks), "chunk_status": counts,
         "failed_chunks": [r["chunk"] for r in rows if r["status"] == "failed"],
         "bad_tiles": [{"path": str(p), "reason": str(why)} for p, why in bad],
     }
-    headline = (f"{len(cat.tiles)} tiles, {int(cat.n_points):,} points, {len(rows)} chunks: "
+    headline = (f"{len(cat.tiles)} tiles, {int(cat.n_points):,} points, {len(run.chunks)} chunks: "
                 + ", ".join(f"{v} {k}" for k, v in counts.items() if v))
     return {"results": results, "headline": headline, "figures": [fig],
             "tables": [status_table(rows), tab_tiles], "notes": notes}
