@@ -17,6 +17,7 @@ __all__ = ["ChunkData", "read_chunk", "READ_STEP"]
 
 #: Points read from a file at a time while streaming.
 READ_STEP = 1_000_000
+_TOL = 1e-6  # m
 
 
 @dataclass(eq=False)
@@ -52,11 +53,13 @@ class ChunkData:
 
 
 def _in_box(xyz: np.ndarray, box: tuple[float, float, float, float]) -> np.ndarray:
+    # widened by _TOL: a core cell's box (origin + index * size) may round a hair inside
+    # the points that the grid-index rule puts in it
     return (
-        (xyz[:, 0] >= box[0])
-        & (xyz[:, 0] <= box[2])
-        & (xyz[:, 1] >= box[1])
-        & (xyz[:, 1] <= box[3])
+        (xyz[:, 0] >= box[0] - _TOL)
+        & (xyz[:, 0] <= box[2] + _TOL)
+        & (xyz[:, 1] >= box[1] - _TOL)
+        & (xyz[:, 1] <= box[3] + _TOL)
     )
 
 
