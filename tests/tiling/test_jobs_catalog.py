@@ -221,6 +221,8 @@ def test_cli_heights_on_a_catalog_equals_the_in_memory_run(tiles, tmp_path):
 
 
 def test_vector_output_is_byte_identical_for_any_completion_order(tiles, tmp_path):
+    # The same with a 2-worker LocalCluster (Engine(workers=2)) was checked once by hand: it
+    # costs ~30 s here (worker start-up and imports), too much for the routine suite.
     from lidarqa.io.vector import write_points
 
     _, folder, _ = tiles
@@ -229,7 +231,7 @@ def test_vector_output_is_byte_identical_for_any_completion_order(tiles, tmp_pat
     for k, seed in enumerate((None, 5)):
         run = catalog_features(two, kind="corners", classes=(6,), chunk_size=20.0,
                                buffer=20.0, order_seed=seed)
-        assert len(run.chunks) >= 4
+        assert len(run.chunks) >= 4 and not run.failed
         out = tmp_path / f"corners{k}.csv"
         write_points(run.value, out)
         outs.append(out.read_bytes())
