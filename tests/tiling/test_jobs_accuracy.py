@@ -128,3 +128,16 @@ def test_heights_options_that_need_the_whole_set_are_refused():
 
     with pytest.raises(OptionError, match="covariance"):
         HeightsTask(np.zeros((1, 2)), np.zeros((1, 3)), options={"covariance": np.eye(1)})
+
+
+def test_heights_chunk_with_a_too_narrow_buffer_fails_loudly(scene, cloud):
+    from lidarqa.errors import TilingError
+
+    rng = np.random.default_rng(7)
+    lo, hi = scene.points[:, :2].min(0) + 5, scene.points[:, :2].max(0) - 5
+    map_xy = lo + rng.random((40, 2)) * (hi - lo)  # sparse map points: long triangles
+    ref = sample_checkpoints(scene, 30, seed=8).xyz
+    chunks = grid_chunks(cloud, 50.0, 3.0)
+    with pytest.raises(TilingError, match="larger buffer"):
+        run_fake(cloud, chunks, HeightsTask(map_xy, ref, options={"max_radius": 3.0},
+                                            classes=(2,)))

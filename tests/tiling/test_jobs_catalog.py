@@ -279,3 +279,48 @@ cloud = "block"
     html = (tmp_path / "out" / "report.html").read_text()
     assert "tiles, chunks" in html and "Chunks" in html
     assert "cannot run on the catalog input" in html
+
+
+@needs_shared
+@pytest.mark.slow
+def test_semis_tile_in_4_chunks_gives_the_whole_tile_rmse_and_w_statistics():
+    from lidarqa.accuracy.heights import assess_heights
+    from lidarqa.io.vector import PointSet
+    from lidarqa.tiling.jobs_api import catalog_heights
+
+    path = SHARED / "ign-lidarhd" / "test_semis_2023_0299_6802_LA93_IGN69.laz"
+    cloud = read(path)
+    g = cloud.classification == 2
+    gxyz = cloud.xyz[g]
+    rng = np.random.default_rng(0)
+    pick = rng.choice(len(gxyz), 300, replace=False)
+    # check points: real ground heights moved 0.37 m sideways, so the TIN is really interpolated
+    check = PointSet(np.arange(300), gxyz[pick] + [0.37, 0.0, 0.0])
+    ref = vertical_check(cloud.xyz, check, classification=cloud.classification)
+    run = catalog_vertical_check(path, check, chunk_size=500.0, buffer=30.0)
+    assert len(run.chunks) >= 4 and not run.failed
+    rep = run.value
+    assert np.array_equal(rep.flag, ref.flag) and rep.n_check > 250
+    np.testing.assert_allclose(rep.dz, ref.dz, rtol=0, atol=1e-9, equal_nan=True)
+    a, b = rep.to_dict(), ref.to_dict()
+    for k in ("rmse_z", "mean_z", "std_z", "max_abs_z"):
+        assert a[k] == pytest.approx(b[k], rel=1e-12), k
+    # heights: map points jittered on a 40 m grid (a regular grid has co-circular squares whose
+    # diagonal the triangulator picks freely), reference = other ground points
+    xs = np.arange(299020.0, 300000.0, 40.0)
+    mxy = np.array([(x, y) for x in xs for y in xs - 299000.0 + 6801000.0])
+    mxy = mxy + rng.uniform(-8, 8, mxy.shape)
+    refz = np.delete(gxyz, pick, axis=0)[rng.choice(len(gxyz) - 300, 400, replace=False)]
+    # away from the hull of the map points, where the TIN has slivers hundreds of metres long
+    # (a chunk refuses those with a "larger buffer" error rather than guessing)
+    inner = np.all((refz[:, :2] > [299050, 6801050]) & (refz[:, :2] < [299950, 6801950]), axis=1)
+    refz = refz[inner]
+    mem = assess_heights(gxyz, mxy, refz)
+    hrun = catalog_heights(path, mxy, refz, classes=(2,), chunk_size=500.0)
+    assert len(hrun.chunks) >= 4 and not hrun.failed
+    h = hrun.value
+    assert np.array_equal(h.outlier, mem.outlier)
+    np.testing.assert_allclose(h.dh, mem.dh, rtol=0, atol=1e-9, equal_nan=True)
+    for part in ("comparison", "w"):
+        for k, v in mem.to_dict()[part].items():
+            assert h.to_dict()[part][k] == pytest.approx(v, rel=1e-9, nan_ok=True), (part, k)

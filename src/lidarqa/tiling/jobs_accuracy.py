@@ -9,9 +9,14 @@ kernel looks at is present when the buffer is wide enough:
 
 * ``checkpoints --vertical``: the ground TIN around a check point uses ground
   points within ``2 x max_edge`` (so the buffer must be at least that wide);
-* ``heights``: a map point's plane uses laser points within ``max_radius``
-  and a reference point is interpolated in the TIN of the map points around
-  it (so the buffer must exceed ``max_radius`` plus the map point spacing).
+* ``heights``: a map point's plane uses laser points within the radius it
+  grew to (at most ``max_radius``), and a reference point is interpolated in
+  the TIN of the map points around it. A chunk uses only map points whose
+  search disc lies inside its buffered box, and refuses (an error naming the
+  chunk) a reference point whose triangle's circumcircle holds a map point it
+  could not fit: then its triangle may differ from the whole run's, and a
+  larger buffer is needed. :func:`lidarqa.tiling.jobs_api.catalog_heights`
+  chooses a buffer from the map point spacing by default.
 
 The per-point values (a few numbers per reference point) are the sufficient
 statistics here: the merge puts them back in the reference order and computes
@@ -284,12 +289,17 @@ class HeightsTask:
         (not ``covariance``, ``labels`` or ``largest_segment``, which need the whole set).
     classes : tuple of int, optional
         Laser points used (e.g. ground 2 and buildings 6); None = all.
+    bounds : (xmin, ymin, xmax, ymax), optional
+        The catalog's extent: beyond it there are no laser points, so a fit
+        reaching past a buffered box's side that is outside the catalog is
+        still the whole run's.
     """
 
     map_xy: np.ndarray
     reference_xyz: np.ndarray
     options: dict[str, Any] = field(default_factory=dict)
     classes: tuple[int, ...] | None = None
+    bounds: tuple[float, float, float, float] | None = None
 
     def __post_init__(self) -> None:
         bad = [k for k in _NO_CATALOG if self.options.get(k)]
@@ -297,22 +307,110 @@ class HeightsTask:
             raise OptionError(f"heights on a catalog does not support {', '.join(bad)}")
 
     def __call__(self, chunk_data: Any) -> HeightsPart:
-        from ..accuracy.heights import assess_heights
+        from ..accuracy.heights import MAX_RADIUS, interpolate_tin, map_point_heights
+        from ..errors import TilingError
 
         chunk = chunk_data.chunk
         pts = _ground_xy(chunk_data, self.classes)
-        mi = np.flatnonzero(in_core(self.map_xy, chunk.buffered))
+        box = chunk.buffered
+        mi = np.flatnonzero(in_core(self.map_xy, box))
         ri = np.flatnonzero(owned(self.reference_xyz, chunk))
-        opts = {k: v for k, v in self.options.items() if k != "estimate_offset"}
-        rep = assess_heights(pts, self.map_xy[mi], self.reference_xyz[ri], **opts)
-        mine = owned(self.map_xy[mi], chunk)
-        mp = rep.map_points
+        opts = dict(self.options)
+        tin_opts = {"correlation": opts.pop("correlation", 0.0)}
+        for k in ("sigma_ref", "alpha", "estimate_offset"):
+            opts.pop(k, None)
+        mp = map_point_heights(pts, self.map_xy[mi], **opts)
+        # A map point is trusted when the disc its fit looked at lies inside the buffered box:
+        # the radius grows deterministically, so the whole-area run saw the same laser points.
+        r_used = np.where(np.isfinite(mp.radius), mp.radius,
+                          float(opts.get("max_radius", MAX_RADIUS)))
+        xy = self.map_xy[mi]
+        lo_x, lo_y, hi_x, hi_y = box
+        if self.bounds is not None:  # no laser point beyond the catalog: that side is open
+            b = self.bounds
+            lo_x = -np.inf if box[0] <= b[0] else lo_x
+            lo_y = -np.inf if box[1] <= b[1] else lo_y
+            hi_x = np.inf if box[2] >= b[2] else hi_x
+            hi_y = np.inf if box[3] >= b[3] else hi_y
+        trusted = ((xy[:, 0] - r_used >= lo_x) & (xy[:, 0] + r_used <= hi_x)
+                   & (xy[:, 1] - r_used >= lo_y) & (xy[:, 1] + r_used <= hi_y))
+        mine = owned(xy, chunk)
+        if (mine & ~trusted).any():
+            need = float(np.nanmax(r_used[mine & ~trusted]))
+            raise TilingError(f"chunk {chunk.id}: map point fits reach {need:g} m, beyond the "
+                              "buffer; use a larger buffer")
+        vert = np.flatnonzero(trusted & ~mp.failed)
+        tin = interpolate_tin(np.column_stack([xy[vert], mp.height[vert]]), mp.sigma[vert],
+                              self.reference_xyz[ri, :2], **tin_opts)
+        self._check_delaunay(chunk.id, xy[vert], tin, mi[trusted], self.reference_xyz[ri, :2])
         rows = {k: np.asarray(getattr(mp, k))[mine] for k in _MAP_FIELDS}
+        from ..accuracy.heights import compare_heights, w_test
+
+        comp = compare_heights(tin.height, tin.sigma, self.reference_xyz[ri, 2],
+                               **({"sigma_ref": self.options["sigma_ref"]}
+                                  if "sigma_ref" in self.options else {}))
+        wt = w_test(comp.dh, comp.sigma_dh, alpha=self.options.get("alpha", 0.001))
         return HeightsPart(
             chunk=chunk.id, map_index=mi[mine], map_rows=rows, ref_index=ri,
-            height=rep.tin.height, sigma=rep.tin.sigma, inside=rep.tin.inside,
-            w=WStatistics.of(rep.w.w, rep.w.outlier, critical=rep.w.critical),
+            height=tin.height, sigma=tin.sigma, inside=tin.inside,
+            w=WStatistics.of(wt.w, wt.outlier, critical=wt.critical),
         )
+
+    def _check_delaunay(self, chunk_id: str, vxy: np.ndarray, tin: Any, used: np.ndarray,
+                        ref_xy: np.ndarray) -> None:
+        """Refuse a reference point whose triangle may not be a triangle of the whole-area TIN.
+
+        The chunk's triangle is the whole run's when no map point other than the chunk's
+        trusted ones (fitted or failed alike in both runs) lies strictly inside its
+        circumcircle (Delaunay criterion). Map points exactly on the circle (e.g. the four
+        corners of a square of a regular grid) leave the diagonal to the triangulator, in the
+        chunk as in the whole run: both are valid TINs, and they may differ.
+        """
+        from scipy.spatial import cKDTree
+
+        from ..errors import TilingError
+
+        trusted = np.zeros(len(self.map_xy), dtype=bool)
+        trusted[used] = True
+        outside = np.flatnonzero(~tin.inside)
+        if len(outside) and (~trusted).any():
+            # outside this chunk's TIN: also outside the whole run's unless a map point this
+            # chunk could not fit extends the hull
+            from scipy.spatial import Delaunay, QhullError
+
+            hull_pts = np.vstack([vxy, self.map_xy[~trusted, :2]])
+            try:
+                reach = Delaunay(hull_pts).find_simplex(ref_xy[outside]) >= 0
+            except QhullError:
+                reach = np.zeros(len(outside), dtype=bool)
+            if reach.any():
+                raise TilingError(
+                    f"chunk {chunk_id}: {int(reach.sum())} reference point(s) outside the map "
+                    "points this chunk can fit but possibly inside the whole TIN; use a larger "
+                    "buffer")
+        inside = np.flatnonzero(tin.inside)
+        if not len(inside):
+            return
+        tri = vxy[tin.vertices[inside]]  # (k, 3, 2)
+        a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
+        d = 2.0 * (a[:, 0] * (b[:, 1] - c[:, 1]) + b[:, 0] * (c[:, 1] - a[:, 1])
+                   + c[:, 0] * (a[:, 1] - b[:, 1]))
+        sa, sb, sc = (a * a).sum(1), (b * b).sum(1), (c * c).sum(1)
+        ux = (sa * (b[:, 1] - c[:, 1]) + sb * (c[:, 1] - a[:, 1]) + sc * (a[:, 1] - b[:, 1])) / d
+        uy = (sa * (c[:, 0] - b[:, 0]) + sb * (a[:, 0] - c[:, 0]) + sc * (b[:, 0] - a[:, 0])) / d
+        centre = np.column_stack([ux, uy])
+        rad = np.linalg.norm(a - centre, axis=1)
+        tree = cKDTree(self.map_xy[:, :2])
+        bad = 0
+        worst = 0.0
+        for k, near in enumerate(tree.query_ball_point(centre, rad * (1 - 1e-9))):
+            if near and not trusted[np.asarray(near)].all():
+                bad += 1
+                worst = max(worst, 2 * rad[k])
+        if bad:
+            raise TilingError(
+                f"chunk {chunk_id}: {bad} reference point(s) in map-point triangles that reach "
+                f"beyond the buffer (up to {worst:.0f} m across); use a larger buffer")
 
 
 def merge_heights(

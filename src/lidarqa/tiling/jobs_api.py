@@ -255,9 +255,11 @@ def catalog_heights(
 ) -> CatalogRun:
     """Height quality (map point heights, TIN, w-tests) over a catalog.
 
-    Map points are fitted from the chunk that owns them (with its buffer, which
-    must exceed the options' ``max_radius`` plus the map point spacing); the
-    w-tests and data snooping run once over all reference points.
+    Map points are fitted from the chunk that owns them; a chunk whose buffer
+    is too narrow for the fits or the TIN around its reference points fails
+    with a message naming it (see :mod:`lidarqa.tiling.jobs_accuracy`). The
+    default buffer is :func:`heights_buffer`. The w-tests and data snooping run
+    once over all reference points.
     """
     from . import make_chunks
     from .jobs_accuracy import HeightsTask, merge_heights
@@ -268,13 +270,34 @@ def catalog_heights(
     ref = np.asarray(reference_xyz, dtype=np.float64).reshape(-1, 3)
     from .jobs_vector import owned
 
+    if chunk_opts["buffer"] is None:
+        chunk_opts["buffer"] = heights_buffer(mxy, options)
     chunks = tuple(c for c in make_chunks(catalog, **chunk_opts)
                    if owned(mxy, c).any() or owned(ref, c).any())
     cls = tuple(int(c) for c in classes) if classes else None
-    task = HeightsTask(mxy, ref, options=dict(options or {}), classes=cls)
+    task = HeightsTask(mxy, ref, options=dict(options or {}), classes=cls,
+                       bounds=tuple(float(v) for v in catalog.bounds[:4]))
     outcomes, parts = _run(catalog, chunks, task, run_opts, "Heights")
     value = merge_heights(parts, mxy, ref, options=options)
     return CatalogRun(value, catalog, tuple(chunks), tuple(outcomes))
+
+
+def heights_buffer(map_xy: Any, options: dict[str, Any] | None = None) -> float:
+    """Default buffer of a heights job (m): room for the map point TIN around a chunk.
+
+    ``max(60, 3 x the largest nearest-neighbour distance between map points + 10)``:
+    a reference point's triangle and the map points that decide it lie within a
+    few map spacings, and their fits reach a few metres in dense data.
+    """
+    from scipy.spatial import cKDTree
+
+    from .chunks import DEFAULT_BUFFER
+
+    xy = np.asarray(map_xy, dtype=np.float64)[:, :2]
+    if len(xy) < 2:
+        return float(DEFAULT_BUFFER)
+    d, _ = cKDTree(xy).query(xy, k=2)
+    return float(max(DEFAULT_BUFFER, 3.0 * float(np.max(d[:, 1])) + 10.0))
 
 
 # ------------------------------------------------------------------ strips
