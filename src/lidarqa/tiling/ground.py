@@ -318,7 +318,16 @@ def ground_catalog(
         raise OptionError(f"invalid parameter for method {method!r}: {exc}") from None
     if buffer is None:
         buffer = max(DEFAULT_BUFFER, float(filt.cell_size))
-    chunks = make_chunks(catalog, chunk_size=chunk_size, buffer=buffer, origin=origin)
+    # Seed cells are laid from the south-west corner of the filter's input: snap every
+    # buffered box to the seed grid of the whole catalog (see make_chunks).
+    bx, by = catalog.bounds[:2]
+    chunks = make_chunks(
+        catalog,
+        chunk_size=chunk_size,
+        buffer=buffer,
+        origin=origin,
+        snap=(bx, by, float(filt.cell_size)),
+    )
     if not chunks:
         raise TilingError("the catalog holds no point")
     task = GroundTask(
