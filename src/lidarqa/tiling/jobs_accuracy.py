@@ -150,8 +150,13 @@ class VerticalCheckTask:
 
     def __call__(self, chunk_data: Any) -> VerticalPart:
         from ..accuracy.checkpoints import vertical_check
+        from ..errors import TilingError
 
         core = chunk_data.chunk
+        margin = min(core.core[0] - core.buffered[0], core.core[1] - core.buffered[1])
+        if margin < 2.0 * self.max_edge:
+            raise TilingError(f"chunk {core.id}: the buffer ({margin:g} m) must be at least "
+                              f"2 x max_edge = {2 * self.max_edge:g} m for the vertical check")
         idx = np.flatnonzero(owned(self.check.xyz, core))
         cloud = chunk_data.cloud
         g = _ground_xy(chunk_data, self.classes)
