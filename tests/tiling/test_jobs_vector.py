@@ -118,3 +118,19 @@ def test_dedupe_keeps_the_first_of_near_duplicates():
     seg = Segments(np.arange(3), [[0, 0, 0], [5, 0, 0], [0, 1, 0]],
                    [[5, 0, 0], [0.01, 0, 0], [5, 1, 0]])
     assert dedupe_segments(seg, tolerance=0.05).ids.tolist() == [0, 2]  # flipped duplicate
+
+
+def test_features_from_planes_cut_by_the_read_box_are_flagged(scene):
+    pts = scene.points[scene.classification == 6]
+    lo, hi = pts[:, :2].min(0), pts[:, :2].max(0)
+    whole_box = (lo[0] - 5, lo[1] - 5, hi[0] + 5, hi[1] + 5)
+    f = vector_features(pts, kind="edges", box=whole_box)
+    assert len(f) > 5 and f.attributes["at_buffer_edge"].sum() == 0
+    cut = (lo[0] - 5, lo[1] - 5, lo[0] + 9.0, hi[1] + 5)  # cuts through the first buildings
+    sel = in_core(pts, cut)
+    assert sel.sum() > 100
+    g = vector_features(pts[sel], kind="edges", box=cut)
+    assert g.attributes["at_buffer_edge"].sum() >= 1
+    open_sides = (-np.inf, -np.inf, np.inf, np.inf)  # nothing beyond: nothing is cut
+    assert vector_features(pts[sel], kind="edges", box=open_sides).attributes[
+        "at_buffer_edge"].sum() == 0

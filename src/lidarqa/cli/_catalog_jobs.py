@@ -14,6 +14,7 @@ from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
 import click
+import numpy as np
 
 from ._common import Steps, echo, finish, prepare_outputs, settings
 
@@ -153,6 +154,13 @@ def features_on_catalog(
     results: dict[str, Any] = {f"n_{kind}": len(f), "output": output, "catalog": _run_summary(run)}
     if kind == "edges":
         results["total_length_m"] = float(f.lengths.sum()) if len(f) else 0.0
+    n_edge = int(np.sum(f.attributes["at_buffer_edge"])) if "at_buffer_edge" in f.attributes \
+        else 0
+    results["n_at_buffer_edge"] = n_edge
+    if n_edge:
+        click.echo(f"Warning: {n_edge} of {len(f)} {kind} come from planes that reach a chunk's "
+                   "buffer edge (column at_buffer_edge): a roof wider than --buffer may be cut "
+                   "there; widen --buffer", err=True)
     per_chunk = Counter(f.attributes["chunk"].tolist()) if len(f) else Counter()
     results["per_chunk"] = dict(sorted(per_chunk.items()))
     echo(f"{len(f)} {kind} from {len(run.catalog.tiles)} tile(s) -> {output}")

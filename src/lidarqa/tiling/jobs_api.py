@@ -192,7 +192,7 @@ def catalog_features(
     seg_opts, opts = fixed_auto_options(_sample_points(catalog, chunks, cls, sid), kind=kind,
                                         segment_options=segment_options, options=options)
     task = VectorTask(kind=kind, classes=cls, source_id=sid, segment_options=seg_opts,
-                      options=opts)
+                      options=opts, bounds=tuple(float(v) for v in catalog.bounds[:4]))
     outcomes, parts = _run(catalog, chunks, task, run_opts, f"{kind.capitalize()}")
     value = merge_vector_parts(parts, tolerance=tolerance, crs=catalog.crs)
     return CatalogRun(value, catalog, tuple(chunks), tuple(outcomes),

@@ -10,7 +10,12 @@ the **anchor-in-core rule**:
   seen in the buffered chunk);
 * a chunk keeps a feature only when its anchor lies in the chunk's *core*,
   ``xmin <= x < xmax`` and ``ymin <= y < ymax`` (half-open, so the cores tile
-  the plane without overlap and an anchor belongs to exactly one core).
+  the plane without overlap and an anchor belongs to exactly one core; with a
+  catalog chunk, its own grid-index rule decides, :func:`owned`).
+
+A feature whose plane reaches the edge of the buffered box may belong to a
+roof wider than the buffer, cut by the box; it is kept but flagged in the
+column ``at_buffer_edge`` so that a user can widen ``--buffer``.
 
 When the buffer is wider than the features (a building's half-size), both
 chunks see the same points around a feature and find the same feature, so
@@ -273,6 +278,7 @@ def vector_features(
     segment_options: dict[str, Any] | None = None,
     options: dict[str, Any] | None = None,
     crs: Any = None,
+    box: Sequence[float] | None = None,
 ) -> Segments | PointSet:
     """Planes, edges or corners of (buffered) points, keeping those anchored in `core`.
 
@@ -289,6 +295,11 @@ def vector_features(
         Passed to :func:`~lidarqa.geometry.edges.edges_from_segmentation` /
         :func:`~lidarqa.geometry.corners.corners_from_segmentation` (e.g.
         ``min_angle``, ``min_length``, ``near_dist``).
+    box : (xmin, ymin, xmax, ymax), optional
+        The box the points were read from (the chunk's buffered box, with the sides
+        beyond the catalog set to ±inf). Adds the column ``at_buffer_edge``: 1 when
+        one of the feature's planes reaches that box's edge, so the plane (a roof
+        wider than the buffer) may be cut and the feature differ from a whole-area run.
 
     Returns
     -------
@@ -304,6 +315,8 @@ def vector_features(
                                                np.zeros((0, 3)), crs=crs) if kind == "edges"
                                       else PointSet(np.zeros(0, np.int64), np.zeros((0, 3)),
                                                     crs=crs))
+        if box is not None:
+            empty.attributes["at_buffer_edge"] = np.zeros(0, dtype=np.int64)
         return empty
     from ..geometry.segmentation import segment_planes
 
@@ -318,7 +331,45 @@ def vector_features(
         from ..geometry.corners import extract_corners
 
         feats = extract_corners(pts, segmentation=seg, crs=crs, **opts)
+    if box is not None:
+        feats.attributes["at_buffer_edge"] = _at_box_edge(pts, seg, feats, kind, box,
+                                                          seg.parameters.get("grow_radius"))
     return feats if core is None else keep_anchored(feats, core)
+
+
+def _at_box_edge(pts: np.ndarray, seg: Any, feats: Any, kind: str, box: Sequence[float],
+                 reach: Any) -> np.ndarray:
+    """1 where a feature's plane has points within `reach` of a closed side of `box`.
+
+    Such a plane may continue beyond the points the chunk read (a roof wider than the
+    buffer): the feature may then differ from the one a whole-area run finds.
+    """
+    r = float(reach) if reach is not None and np.isfinite(reach) else 1.0
+    x, y = pts[:, 0], pts[:, 1]
+    near = ((x - box[0] < r) | (box[2] - x < r) | (y - box[1] < r) | (box[3] - y < r))
+    lab = np.asarray(seg.labels)
+    n_seg = int(seg.n_segments)
+    touching = np.zeros(n_seg + 1, dtype=bool)
+    ok = near & (lab >= 0)
+    touching[lab[ok]] = True
+    if kind == "planes":
+        idx = [np.arange(len(feats))]
+    else:
+        idx = [np.asarray(feats.attributes[k], dtype=np.int64)
+               for k in ("plane_a", "plane_b", "plane_c") if k in feats.attributes]
+    flag = np.zeros(len(feats), dtype=bool)
+    for i in idx:
+        flag |= touching[np.clip(i, 0, n_seg)] & (i >= 0) & (i < n_seg)
+    return flag.astype(np.int64)
+
+
+def open_box(box: Sequence[float], bounds: Sequence[float] | None) -> tuple[float, ...]:
+    """`box` with its sides at or beyond the catalog `bounds` opened to ±inf (no data there)."""
+    b = tuple(float(v) for v in box[:4])
+    if bounds is None:
+        return b
+    return (-np.inf if b[0] <= bounds[0] else b[0], -np.inf if b[1] <= bounds[1] else b[1],
+            np.inf if b[2] >= bounds[2] else b[2], np.inf if b[3] >= bounds[3] else b[3])
 
 
 @dataclass(frozen=True)
@@ -332,6 +383,8 @@ class VectorTask:
         Point selection (classification codes, point_source_id values).
     segment_options, options : dict
         As in :func:`vector_features`.
+    bounds : (xmin, ymin, xmax, ymax), optional
+        The catalog's extent (for the ``at_buffer_edge`` column: no data beyond it).
     """
 
     kind: str
@@ -339,6 +392,7 @@ class VectorTask:
     source_id: tuple[int, ...] | None = None
     segment_options: dict[str, Any] = field(default_factory=dict)
     options: dict[str, Any] = field(default_factory=dict)
+    bounds: tuple[float, float, float, float] | None = None
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
@@ -359,7 +413,8 @@ class VectorTask:
                 xyz[:, 2] *= f
         feats = vector_features(xyz, kind=self.kind, core=chunk_data.chunk,
                                 segment_options=self.segment_options, options=self.options,
-                                crs=cloud.crs)
+                                crs=cloud.crs, box=open_box(chunk_data.chunk.buffered,
+                                                            self.bounds))
         if f != 1.0:  # back to the cloud's vertical unit, as the single-file commands do
             if isinstance(feats, Segments):
                 feats.start[:, 2] /= f
