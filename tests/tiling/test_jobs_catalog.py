@@ -62,11 +62,17 @@ def _chunk_of(run, xy):
     return out
 
 
-def test_edges_and_corners_of_a_tiled_block_equal_the_in_memory_run(tiles):
-    _, folder, whole = tiles
+@pytest.fixture(scope="module")
+def edges_run(tiles):
+    """Edges of the tiled block by catalog chunks (30 m, buffer 20 m), as the CLI test runs them."""
+    _, folder, _ = tiles
+    return catalog_features(folder, kind="edges", classes=(6,), chunk_size=30.0, buffer=20.0)
+
+
+def test_edges_of_a_tiled_block_equal_the_in_memory_run(tiles, edges_run):
+    _, _, whole = tiles
     b = whole.classification == 6
-    run = catalog_features(folder, kind="edges", classes=(6,), chunk_size=30.0, buffer=20.0,
-                           origin=(7.0, 3.0))
+    run = edges_run
     assert run.failed == [] and len(run.chunks) >= 9
     ref = vector_features(whole.xyz[b], kind="edges", segment_options=run.extra["segment_options"],
                           options=run.extra["options"])
@@ -75,13 +81,8 @@ def test_edges_and_corners_of_a_tiled_block_equal_the_in_memory_run(tiles):
     assert (_match_once(ref, m) == 1).all()  # every in-memory edge exactly once
     crossing = _chunk_of(run, m.start) != _chunk_of(run, m.end)
     assert crossing.sum() >= 3  # chunk borders really cut edges
-    corners = catalog_features(str(folder / "*.las"), kind="corners", classes=(6,),
-                               chunk_size=30.0, buffer=20.0, origin=(7.0, 3.0))
-    ref_c = vector_features(whole.xyz[b], kind="corners",
-                            segment_options=corners.extra["segment_options"])
-    d = np.linalg.norm(corners.value.xyz[:, None] - ref_c.xyz[None], axis=2)
-    assert len(corners.value) == len(ref_c) > 5
-    assert ((d < 0.05).sum(axis=0) == 1).all()
+    assert m.attributes["at_buffer_edge"].sum() == 0
+    # (corners chunk by chunk vs in memory: tests/tiling/test_jobs_vector.py)
 
 
 def test_vertical_check_on_the_tiles_equals_the_in_memory_check(tiles):
@@ -143,7 +144,7 @@ def _cli(args):
     return CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=False)
 
 
-def test_cli_edges_on_a_folder_writes_each_edge_once(tiles, tmp_path):
+def test_cli_edges_on_a_folder_writes_each_edge_once(tiles, edges_run, tmp_path):
     import json
 
     from lidarqa.io.vector import read_segments
@@ -154,7 +155,7 @@ def test_cli_edges_on_a_folder_writes_each_edge_once(tiles, tmp_path):
             "--buffer", "20", "--scheduler", "serial", "--json", js]
     r = _cli(args)
     assert r.exit_code == 0, r.output
-    api = catalog_features(folder, kind="edges", classes=(6,), chunk_size=30.0, buffer=20.0)
+    api = edges_run
     seg = read_segments(out)
     assert len(seg) == len(api.value) > 10
     assert np.allclose(seg.start, api.value.start)
@@ -227,16 +228,16 @@ def test_vector_output_is_byte_identical_for_any_completion_order(tiles, tmp_pat
     from lidarqa.io.vector import write_points
 
     _, folder, _ = tiles
-    two = [str(p) for p in sorted(folder.glob("*.las"))[:2]]  # a small catalog: fast
+    one = [str(sorted(folder.glob("*.las"))[0])]  # a small catalog: fast
     outs = []
     for k, seed in enumerate((None, 5)):
-        run = catalog_features(two, kind="corners", classes=(6,), chunk_size=20.0,
-                               buffer=20.0, order_seed=seed)
+        run = catalog_features(one, kind="corners", classes=(6,), chunk_size=15.0,
+                               buffer=15.0, order_seed=seed)
         assert len(run.chunks) >= 4 and not run.failed
         out = tmp_path / f"corners{k}.csv"
         write_points(run.value, out)
         outs.append(out.read_bytes())
-    assert outs[0] == outs[1] and len(outs[0]) > 200
+    assert outs[0] == outs[1] and len(outs[0]) > 100
 
 
 def test_assess_with_a_catalog_input_shows_the_overview_and_chunk_status(tiles, tmp_path):
@@ -297,11 +298,11 @@ def test_semis_tile_in_4_chunks_gives_the_whole_tile_rmse_and_w_statistics():
     pick = rng.choice(len(gxyz), 300, replace=False)
     # check points: real ground heights moved 0.37 m sideways, so the TIN is really interpolated
     check = PointSet(np.arange(300), gxyz[pick] + [0.37, 0.0, 0.0])
-    ref = vertical_check(cloud.xyz, check, classification=cloud.classification)
-    run = catalog_vertical_check(path, check, chunk_size=500.0, buffer=30.0)
+    ref = vertical_check(cloud.xyz, check, classification=cloud.classification, max_edge=6.0)
+    run = catalog_vertical_check(path, check, chunk_size=500.0, buffer=30.0, max_edge=6.0)
     assert len(run.chunks) >= 4 and not run.failed
     rep = run.value
-    assert np.array_equal(rep.flag, ref.flag) and rep.n_check > 250
+    assert np.array_equal(rep.flag, ref.flag) and rep.n_check > 200
     np.testing.assert_allclose(rep.dz, ref.dz, rtol=0, atol=1e-9, equal_nan=True)
     a, b = rep.to_dict(), ref.to_dict()
     for k in ("rmse_z", "mean_z", "std_z", "max_abs_z"):
