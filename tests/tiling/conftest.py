@@ -13,7 +13,7 @@ def scene_tiles(tmp_path_factory: pytest.TempPathFactory) -> tuple[object, list[
     from lidarqa.testing import make_scene, write_tiles
 
     scene = make_scene(
-        seed=7, size=(120.0, 120.0), density=4.0, returns=True, origin=(1000.0, 2000.0, 50.0)
+        seed=7, size=(120.0, 120.0), density=2.5, returns=True, origin=(1000.0, 2000.0, 50.0)
     )
     folder = tmp_path_factory.mktemp("tiles")
     paths = write_tiles(scene, folder, tile_size=60.0, origin=(1000.0, 2000.0))

@@ -134,15 +134,28 @@ def test_mixed_crs_is_refused_naming_the_files(scene_tiles, tmp_path):
 
 
 def test_gaps_and_duplicate_overlaps(scene_tiles, tmp_path):
+    from lidarqa.tiling import Catalog, TileInfo
+
     _, paths = scene_tiles
     full = open_catalog(paths)
     assert full.overlaps() == []
-    # leave out one 60 m tile of the 2x2 block: one gap cell
-    four = [p for p in paths if "1120" not in p.name]
-    cat = open_catalog([p for p in four if p.name != "tile_1000_2060.laz"])
-    gaps = cat.gaps(cell=60.0)
-    assert len(gaps) == 1
-    np.testing.assert_allclose(gaps[0][:2], (1000.0, cat.bounds[1] + 60.0), atol=1.0)
+    # a 3 x 3 block of 100 m tiles without its centre tile: one gap, where the centre was
+    tiles = tuple(
+        TileInfo(
+            f"/t_{i}_{j}.laz",
+            10,
+            (i * 100.0, j * 100.0, i * 100.0 + 100, j * 100.0 + 100, 0, 1),
+            None,
+            6,
+            "1.4",
+        )
+        for i in range(3)
+        for j in range(3)
+        if (i, j) != (1, 1)
+    )
+    cat = Catalog(tiles)
+    assert cat.gaps() == [(100.0, 100.0, 200.0, 200.0)]
+    assert Catalog(tiles[:4] + tiles[4:]).overlaps() == []
     # a tile cut from the same area as another, under a different name: a duplicate overlap
     cloud = lidarqa.read(paths[0])
     lidarqa.write(cloud.subset(np.arange(len(cloud)) % 2 == 0), tmp_path / "half.laz")

@@ -91,7 +91,7 @@ def test_evaluation_counts_from_chunks_equal_whole_area_counts(scene_tiles, seri
 def test_byte_identical_for_shuffled_order_and_two_workers(scene_tiles, tmp_path):
     pytest.importorskip("distributed")
     _, paths = scene_tiles
-    opts = {"chunk_size": 40.0, "buffer": 15.0, "evaluate": True, "cell_size": 20.0}
+    opts = {"chunk_size": 60.0, "buffer": 15.0, "evaluate": True, "cell_size": 20.0}
     ref = ground_catalog(paths, tmp_path / "serial", workers=1, **opts)
     shuffled = ground_catalog(paths, tmp_path / "shuffled", workers=1, order_seed=3, **opts)
     assert _digests(shuffled.outputs) == _digests(ref.outputs)
@@ -117,7 +117,7 @@ def test_failed_chunk_is_reported_and_resume_runs_only_the_missing(
     monkeypatch.setattr(GroundTask, "__call__", flaky)
     with pytest.raises(ChunkFailedError, match="c0001_r0001.*disk on fire") as info:
         ground_catalog(
-            paths, out, chunk_size=40.0, buffer=10.0, cell_size=20.0, workers=1, retries=1
+            paths, out, chunk_size=60.0, buffer=10.0, cell_size=20.0, workers=1, retries=1
         )
     failed = [o for o in info.value.outcomes if not o.ok]
     assert [o.chunk.id for o in failed] == ["c0001_r0001"] and failed[0].attempts == 2
@@ -126,15 +126,15 @@ def test_failed_chunk_is_reported_and_resume_runs_only_the_missing(
     assert "c0001_r0001" not in saved and len(saved) == len(info.value.outcomes) - 1
     monkeypatch.setattr(GroundTask, "__call__", original)
     res = ground_catalog(
-        paths, out, chunk_size=40.0, buffer=10.0, cell_size=20.0, workers=1, resume=True
+        paths, out, chunk_size=60.0, buffer=10.0, cell_size=20.0, workers=1, resume=True
     )
     assert res.n_chunks_run == 1 and res.n_chunks_resumed == len(saved)
     ref = ground_catalog(
-        paths, tmp_path / "ref", chunk_size=40.0, buffer=10.0, cell_size=20.0, workers=1
+        paths, tmp_path / "ref", chunk_size=60.0, buffer=10.0, cell_size=20.0, workers=1
     )
     assert _digests(res.outputs) == _digests(ref.outputs)
     with pytest.raises(OutputExistsError):
-        ground_catalog(paths, out, chunk_size=40.0, buffer=10.0, cell_size=20.0, workers=1)
+        ground_catalog(paths, out, chunk_size=60.0, buffer=10.0, cell_size=20.0, workers=1)
 
 
 def test_cli_ground_on_a_folder(scene_tiles, tmp_path):

@@ -43,7 +43,14 @@ import numpy as np
 
 from ..errors import OptionError, OutputExistsError, TilingError
 
-__all__ = ["GroundTask", "ChunkGround", "CatalogGroundResult", "ground_catalog", "WORK_DIR"]
+__all__ = [
+    "GroundTask",
+    "ChunkGround",
+    "CatalogGroundResult",
+    "ground_catalog",
+    "catalog_grow_radius",
+    "WORK_DIR",
+]
 
 WORK_DIR = ".lidarqa-work"
 
@@ -232,6 +239,60 @@ def _load_chunk(work: Path, chunk_id: str) -> ChunkGround | None:
     return ChunkGround(chunk_id, tiles, n_core, ground, counts=counts)
 
 
+def catalog_grow_radius(
+    catalog: Any,
+    *,
+    last_returns_only: bool = True,
+    exclude_classes: Any = (7, 18),
+    factor: float = 2.5,
+    max_points: int = 4_000_000,
+) -> float:
+    """The segment-PTD surface-growing radius of a catalog, estimated once for all chunks.
+
+    :func:`~lidarqa.ground.default_grow_radius` (``factor`` x the mean point spacing,
+    from the median point count of grid cells) on the ground candidates of whole
+    tiles: all tiles when they hold at most `max_points` points together, else tiles
+    spread evenly over the catalog (by index in path order) up to that many points.
+    Per-chunk estimates differ by a few per cent from chunk to chunk and from a whole
+    run, and the radius changes segments far from chunk borders; one value for the
+    catalog keeps chunks consistent (on a catalog small enough to be sampled entirely
+    it is exactly the whole-area value).
+    """
+    from ..errors import DataQualityWarning
+    from ..ground import default_grow_radius, ground_candidates
+    from ..io.las import LasReader
+
+    n = len(catalog.tiles)
+    total = catalog.n_points
+    if total <= max_points:
+        picks = list(range(n))
+    else:
+        k = max(1, int(n * max_points / total))
+        picks = sorted({int(round(v)) for v in np.linspace(0, n - 1, k)})
+    parts = []
+    budget = max_points
+    for t in picks:
+        tile = catalog.tiles[t]
+        if tile.n_points > budget and parts:
+            break
+        with LasReader(tile.path) as r:
+            for piece in r.chunks(1_000_000):
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", DataQualityWarning)
+                    cand, *_ = ground_candidates(
+                        piece,
+                        last_returns_only=last_returns_only,
+                        exclude_classes=exclude_classes,
+                    )
+                parts.append(piece.xyz[cand])
+        budget -= tile.n_points
+    xyz = np.concatenate(parts) if parts else np.empty((0, 3))
+    if len(xyz) < 3:
+        return 0.3
+    r0 = default_grow_radius(xyz - xyz.min(axis=0), factor=factor, floor=0.0)
+    return float(max(0.3, r0))
+
+
 def _output_names(catalog: Any, output_dir: Path) -> list[Path]:
     names = [Path(t.path).name for t in catalog.tiles]
     if len(set(names)) != len(names):
@@ -318,6 +379,15 @@ def ground_catalog(
         raise OptionError(f"invalid parameter for method {method!r}: {exc}") from None
     if buffer is None:
         buffer = max(DEFAULT_BUFFER, float(filt.cell_size))
+    if method == "segment-ptd" and filt.grow_radius is None:
+        # one surface-growing radius for the whole catalog, as one in-memory run would
+        # estimate it, instead of one per chunk (see catalog_grow_radius)
+        full_params["grow_radius"] = catalog_grow_radius(
+            catalog,
+            last_returns_only=bool(last_returns_only),
+            exclude_classes=tuple(exclude_classes or ()),
+            factor=float(filt.grow_radius_factor),
+        )
     # Seed cells are laid from the south-west corner of the filter's input: snap every
     # buffered box to the seed grid of the whole catalog (see make_chunks).
     bx, by = catalog.bounds[:2]
