@@ -19,6 +19,7 @@ from ..accuracy.heights import (
     SIGMA_REF,
     SIGMA_STRIP,
 )
+from ._catalog_jobs import catalog_options, wants_catalog
 from ._common import INT_LIST, Steps, common_options, echo, finish, prepare_outputs, settings
 
 OUT_SUFFIXES = (".csv", ".gpkg")  # GeoJSON cannot hold the NaN z of unfitted map points
@@ -207,6 +208,7 @@ def _fmt(v: float, scale: float = 100.0, unit: str = "cm") -> str:
     help="Per-point output (.csv or .gpkg, layer 'heights'): a row per map point and per "
     "reference point, told apart by the 'kind' column.",
 )
+@catalog_options
 @common_options
 def heights(
     cloud: str,
@@ -230,6 +232,7 @@ def heights(
     estimate_offset: bool,
     largest_segment: bool,
     output: str | None,
+    **cat_opts: Any,
 ) -> None:
     """Height quality of map points by error propagation, tested with w-tests.
 
@@ -239,6 +242,11 @@ def heights(
     model). Heights and σ are interpolated in a TIN of the map points to the
     REFERENCE points (id,x,y,z), and Δh/σ_Δh is w-tested (Oude Elberink &
     Vosselman).
+
+    CLOUD may be a catalog (a folder, a glob, a .vpc): each map point is
+    fitted, and each reference point interpolated, in the chunk whose core
+    holds it (the buffer must exceed --max-radius plus the map point spacing);
+    the w-tests then run once over all reference points, as for one file.
     """
     from ..accuracy.heights import assess_heights, read_map_points
     from ..errors import OptionError
@@ -249,12 +257,22 @@ def heights(
         raise OptionError(f"--output must end in {', '.join(OUT_SUFFIXES)}; got {output!r}")
     prepare_outputs(output, inputs=(cloud, map_path, reference))
     steps = Steps()
-    with steps("Reading " + cloud):
-        pc = read(cloud)
-        if classes:
-            pc = pc.select(classes=classes)
-        xyz = pc.xyz.copy()
-        xyz[:, 2] *= z_to_metres_factor(pc.crs)
+    on_catalog = wants_catalog((cloud,), cat_opts)
+    if on_catalog:
+        from ..tiling import open_catalog
+
+        if largest_segment:
+            raise OptionError("--largest-segment is not available on a catalog")
+        with steps("Reading the headers of " + cloud):
+            cat = open_catalog([cloud], skip_bad=bool(cat_opts.get("skip_bad")))
+        pc: Any = type("Header", (), {"crs": cat.crs})()
+    else:
+        with steps("Reading " + cloud):
+            pc = read(cloud)
+            if classes:
+                pc = pc.select(classes=classes)
+            xyz = pc.xyz.copy()
+            xyz[:, 2] *= z_to_metres_factor(pc.crs)
     with steps("Reading map and reference points"):
         mp = read_map_points(map_path, spacing=spacing)
         ref = _read_reference(reference)
@@ -263,27 +281,32 @@ def heights(
         _check_crs(mp.crs, ref.crs, ("map", "reference"))
         ref_xyz = ref.xyz.copy()
         ref_xyz[:, 2] *= z_to_metres_factor(ref.crs if ref.crs is not None else pc.crs)
-    with steps(f"Fitting {len(mp):,} map points, testing {len(ref):,} reference points"):
-        report = assess_heights(
-            xyz,
-            mp.xyz[:, :2],
-            ref_xyz,
-            radius=radius,
-            max_radius=max_radius,
-            min_points=min_points,
-            sigma_point=sigma_point,
-            sigma_gps=sigma_gps,
-            sigma_ins=sigma_ins,
-            sigma_strip=sigma_strip,
-            sigma_ref=sigma_ref,
-            curvature=curvature,
-            correlation=correlation,
-            alpha=alpha,
-            estimate_offset=estimate_offset,
-            eq8_diagonal=eq8_diagonal,
-            posterior=posterior,
-            largest_segment=largest_segment,
-        )
+    options = dict(
+        radius=radius,
+        max_radius=max_radius,
+        min_points=min_points,
+        sigma_point=sigma_point,
+        sigma_gps=sigma_gps,
+        sigma_ins=sigma_ins,
+        sigma_strip=sigma_strip,
+        sigma_ref=sigma_ref,
+        curvature=curvature,
+        correlation=correlation,
+        alpha=alpha,
+        estimate_offset=estimate_offset,
+        eq8_diagonal=eq8_diagonal,
+        posterior=posterior,
+    )
+    catalog_run = None
+    if on_catalog:
+        from ._catalog_jobs import heights_on_catalog
+
+        report, catalog_run = heights_on_catalog(cat, mp.xyz[:, :2], ref_xyz, classes=classes,
+                                                 options=options, cat_opts=cat_opts)
+    else:
+        with steps(f"Fitting {len(mp):,} map points, testing {len(ref):,} reference points"):
+            report = assess_heights(xyz, mp.xyz[:, :2], ref_xyz, largest_segment=largest_segment,
+                                    **options)
     if output is not None:
         from ..io.vector import write_points
 
@@ -310,9 +333,19 @@ def heights(
         echo("flags             " + ", ".join(report.flags))
     params = dict(report.parameters)
     params.update(classes=classes, spacing=spacing)
+    if catalog_run is not None:
+        from ._catalog_jobs import _echo_run, _run_summary
+
+        _echo_run(catalog_run)
+        res["catalog"] = _run_summary(catalog_run)
+        params.update({k: v for k, v in cat_opts.items() if v not in (None, False)})
     finish(
         "heights",
         inputs={"cloud": cloud, "map": map_path, "reference": reference, "output": output},
         parameters=params,
         results=res,
     )
+    if catalog_run is not None:
+        from ._catalog_jobs import _failed_exit
+
+        _failed_exit(catalog_run)

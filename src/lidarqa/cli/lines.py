@@ -9,6 +9,7 @@ from typing import Any
 
 import click
 
+from ._catalog_jobs import catalog_options, wants_catalog
 from ._common import (
     INT_LIST,
     Steps,
@@ -270,7 +271,7 @@ def _write_pairs(r: Any, path: Any) -> None:
 
 
 @click.command()
-@click.argument("files", nargs=-1, required=True, type=click.Path(dir_okay=False))
+@click.argument("files", nargs=-1, required=True, type=click.Path())
 @click.option(
     "--by-source-id",
     is_flag=True,
@@ -283,6 +284,7 @@ def _write_pairs(r: Any, path: Any) -> None:
     help="With --by-source-id: only these strips, e.g. 4320,4330.",
 )
 @_matching_options
+@catalog_options
 @common_options
 def repeatability(
     files: tuple[str, ...],
@@ -294,20 +296,36 @@ def repeatability(
     rotate: str,
     denominator: str,
     classes: list[int] | None,
+    **cat_opts: Any,
 ) -> None:
     """Compare every pair of passes both ways: a table like Poreba & Goulette's Table 1.
 
     Passes are FILES (segment files or clouds, all compared with each other), or with
     --by-source-id the flight strips of each cloud (compared within each file). The
     final LHD of each pair is marked with *.
+
+    With --by-source-id, FILES may be a catalog (several clouds, a folder, a
+    glob, a .vpc): the strips are then compared over the whole block, each
+    strip's edges found chunk by chunk (an edge once, by its midpoint's chunk).
     """
     from ..accuracy._lines_io import load_passes
     from ..accuracy.lines import match_segments
     from ..errors import CRSMismatchError, LidarQAError, OptionError
 
-    prepare_outputs(inputs=files)
     if source_id is not None and not by_source_id:
         raise OptionError("--source-id selects strips and needs --by-source-id")
+    if by_source_id and wants_catalog(files, cat_opts):
+        from ._catalog_jobs import repeatability_on_catalog
+
+        repeatability_on_catalog(
+            files, classes=classes, source_id=source_id,
+            match_options={"weight": weight, "sensitivity": sensitivity, "threshold": threshold,
+                           "rotate": rotate, "denominator": denominator},
+            cat_opts=cat_opts, print_rows=lambda rows: _print_rows(rows, threshold))
+        return
+    if any(v not in (None, False) for v in cat_opts.values()):
+        raise OptionError("catalog options apply to repeatability --by-source-id only")
+    prepare_outputs(inputs=files)
     steps = Steps()
     with steps("Reading passes and extracting edges"):
         passes = load_passes(
@@ -351,6 +369,26 @@ def repeatability(
         row.update(r.to_dict())
         rows.append(row)
 
+    _print_rows(rows, threshold)
+    finish(
+        "repeatability",
+        inputs={"files": list(files)},
+        parameters={
+            "by_source_id": by_source_id,
+            "source_id": source_id,
+            "weight": weight,
+            "sensitivity": sensitivity,
+            "threshold": threshold,
+            "rotate": rotate,
+            "denominator": denominator,
+            "classes": classes,
+        },
+        results=rows,
+    )
+
+
+def _print_rows(rows: list[dict], threshold: float | None) -> None:
+    """The repeatability table on stdout."""
     width = max([28] + [len(_row_name(r)) + 2 for r in rows])
     head = (
         f"{'Data sets':<{width}}{'p':>6}{'q':>6}{'pairs T→M':>11}{'pairs M→T':>11}"
@@ -380,21 +418,6 @@ def repeatability(
     echo(
         "* final modified LHD of the pair"
         + ("; ! threshold fell back (no knee found)" if fallback else "")
-    )
-    finish(
-        "repeatability",
-        inputs={"files": list(files)},
-        parameters={
-            "by_source_id": by_source_id,
-            "source_id": source_id,
-            "weight": weight,
-            "sensitivity": sensitivity,
-            "threshold": threshold,
-            "rotate": rotate,
-            "denominator": denominator,
-            "classes": classes,
-        },
-        results=rows,
     )
 
 

@@ -647,6 +647,12 @@ def _parse_crs(value: Any, where: str) -> Any:
 _NAME_RE = re.compile(r"^[A-Za-z0-9_.-]+$")
 
 
+def _is_catalog_path(p: Path) -> bool:
+    from .catalog_analyses import is_catalog_path
+
+    return is_catalog_path(p)
+
+
 def _parse_inputs(table: Any, base: Path) -> dict[str, InputSpec]:
     groups = _check_table(table, {k: Key("table", default={}) for k in INPUT_KINDS}, "[inputs]")
     out: dict[str, InputSpec] = {}
@@ -674,6 +680,10 @@ def _parse_inputs(table: Any, base: Path) -> dict[str, InputSpec]:
             p = Path(os.path.expanduser(entry["path"]))
             if not p.is_absolute():
                 p = base / p
+            if kind == "clouds" and _is_catalog_path(p):  # a folder, glob or .vpc of tiles
+                crs = _parse_crs(entry["crs"], where) if entry["crs"] is not None else None
+                out[name] = InputSpec(name=name, kind=kind, path=p, crs=crs)
+                continue
             if not p.exists():
                 raise ConfigError(f"input {name!r} ([inputs.{kind}]): file {p} does not exist")
             if not p.is_file():
@@ -879,6 +889,10 @@ def read_header_crs(spec: InputSpec) -> Any:
     """The CRS declared by an input file's header (cheap: no points are read)."""
     suffix = spec.path.suffix.lower()
     try:
+        if spec.kind == "clouds" and _is_catalog_path(spec.path):
+            from .catalog_analyses import catalog_crs
+
+            return catalog_crs(spec.path)
         if spec.kind == "clouds" and suffix in {".las", ".laz"}:
             from ..io.las import LasReader
 

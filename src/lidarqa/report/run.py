@@ -167,10 +167,14 @@ def _verdict(item: AnalysisItem, results: dict[str, Any]) -> tuple[str, str, lis
 def _input_records(config: AssessmentConfig, progress: _Progress) -> dict[str, dict[str, Any]]:
     from ..io.crs import crs_epsg, crs_name
     from .analyses import sha256_file
+    from .catalog_analyses import catalog_record, is_catalog_path
 
     out = {}
     with progress("Hashing inputs"):
         for name, spec in config.inputs.items():
+            if spec.kind == "clouds" and is_catalog_path(spec.path):
+                out[name] = catalog_record(name, spec)
+                continue
             crs = spec.effective_crs
             out[name] = {
                 "name": name,
@@ -233,6 +237,7 @@ def run_assessment(
     """
     from .. import show_versions
     from .analyses import ANALYSES, RunContext
+    from .catalog_analyses import catalog_analysis
 
     if not isinstance(config, AssessmentConfig):
         config = load_config(config)
@@ -260,7 +265,7 @@ def run_assessment(
             section = Section(id=item.id, title=item.title, kind=item.kind)
             try:
                 with progress(item.title):
-                    res = ANALYSES[item.kind](ctx, item)
+                    res = (catalog_analysis(ctx, item) or ANALYSES[item.kind])(ctx, item)
             except (KeyboardInterrupt, SystemExit):
                 raise
             except Exception as exc:  # one failing analysis must not lose the others
