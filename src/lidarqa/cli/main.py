@@ -16,8 +16,26 @@ from typing import Any
 import click
 
 from .._version import __version__
-from ..errors import LidarQAError, MissingDependencyError
+from ..errors import LidarQAError, MissingDependencyError, TargetNotMetError
 from ._common import Settings, settings
+
+# Exit statuses (documented in README.md and ``lidarqa --help``).
+EXIT_OK = 0  # success; every target met
+EXIT_ERROR = 1  # a clear error: bad input, bad option value, unwritable output, nothing to measure
+EXIT_INTERNAL = 2  # a bug in lidarqa ("Internal error"), or a malformed command line (click)
+EXIT_MISSING_DEPENDENCY = 3  # an optional dependency (extra) is not installed
+EXIT_TARGET_FAILED = 4  # the run completed but an accuracy target was not met
+EXIT_SIGINT = 130  # interrupted (Ctrl-C); 128 + signal number for SIGTERM (143), SIGHUP (129)
+
+EXIT_STATUS_HELP = """\b
+Exit status:
+  0    success (every target met)
+  1    error, explained in one line on stderr (bad input, option, output; nothing to measure)
+  2    malformed command line, or an internal error (a bug: please report it)
+  3    an optional dependency is missing (the message names the extra to install)
+  4    completed, but an accuracy target was not met (assess, checkpoints --target-*)
+  130  interrupted (SIGINT); 143 terminated (SIGTERM); no partial output is left behind
+"""
 
 COMMANDS: dict[str, str] = {
     "info": "lidarqa.cli.info:info",
@@ -56,30 +74,77 @@ class LazyGroup(click.Group):
         return getattr(importlib.import_module(module), func)
 
     def invoke(self, ctx: click.Context) -> Any:
+        from ..io._atomic import Terminated, install_signal_handlers, output_session
+
+        install_signal_handlers()
         try:
-            return super().invoke(ctx)
+            with output_session():
+                return super().invoke(ctx)
         except (click.exceptions.Exit, click.exceptions.Abort, click.ClickException):
             raise
         except KeyboardInterrupt:
             click.echo("Interrupted; no partial output was left behind.", err=True)
-            sys.exit(130)
+            sys.exit(EXIT_SIGINT)
+        except Terminated as exc:
+            click.echo(
+                f"Terminated (signal {exc.signum}); no partial output was left behind.", err=True
+            )
+            sys.exit(128 + exc.signum)
         except MissingDependencyError as exc:
             _report(ctx, exc, prefix="Error")
-            sys.exit(3)
+            sys.exit(EXIT_MISSING_DEPENDENCY)
+        except TargetNotMetError as exc:
+            _report(ctx, exc, prefix="Target not met")
+            sys.exit(EXIT_TARGET_FAILED)
         except LidarQAError as exc:
             _report(ctx, exc, prefix="Error")
-            sys.exit(1)
-        except MemoryError as exc:
-            _report(ctx, exc, prefix="Error: out of memory")
-            sys.exit(1)
+            sys.exit(EXIT_ERROR)
         except Exception as exc:  # never a traceback unless -v
+            known = _foreseeable(exc)
+            if known is not None:
+                _report(ctx, exc, prefix="Error", message=known)
+                sys.exit(EXIT_ERROR)
             _report(ctx, exc, prefix=f"Internal error ({type(exc).__name__})", hint=True)
-            sys.exit(2)
+            sys.exit(EXIT_INTERNAL)
 
 
-def _report(ctx: click.Context, exc: BaseException, *, prefix: str, hint: bool = False) -> None:
+def _foreseeable(exc: BaseException) -> str | None:
+    """A one-line message for exceptions the environment or the data cause, else None.
+
+    These are not bugs in lidarqa: a file system refusing a write, the memory
+    running out, an input too deeply nested for the parser, text that is not in
+    the expected encoding. Everything else is reported as an internal error.
+    """
+    import errno
+
+    if isinstance(exc, MemoryError):
+        return "out of memory (the input is too large for this machine, or its header lies)"
+    if isinstance(exc, RecursionError):
+        return "input nested too deeply to be processed"
+    if isinstance(exc, UnicodeError):
+        return f"input is not valid text in the expected encoding (UTF-8): {exc}"
+    if isinstance(exc, OSError):
+        where = f" {exc.filename}" if getattr(exc, "filename", None) else ""
+        if exc.errno == errno.ENOSPC:
+            return f"no space left on the device{where and ' writing' + where}"
+        if exc.strerror:
+            return f"{exc.strerror}{':' + where if where else ''}"
+        return str(exc) or type(exc).__name__
+    return None
+
+
+def _report(
+    ctx: click.Context,
+    exc: BaseException,
+    *,
+    prefix: str,
+    hint: bool = False,
+    message: str | None = None,
+) -> None:
     s: Settings = settings(ctx)
-    message = " ".join(str(exc).split()) or type(exc).__name__
+    message = " ".join((message or str(exc)).split()) or type(exc).__name__
+    if len(message) > 1000:
+        message = message[:1000] + " ..."
     line = f"{prefix}: {message}"
     if hint and not s.verbose:
         line += " (run with -v for the traceback; please report it)"
@@ -100,6 +165,7 @@ def _show_versions(ctx: click.Context, param: click.Parameter, value: bool) -> N
 
 @click.group(
     cls=LazyGroup,
+    epilog=EXIT_STATUS_HELP,
     context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
 )
 @click.version_option(__version__, "--version", prog_name="lidarqa")
