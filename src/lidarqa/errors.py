@@ -77,6 +77,8 @@ class ConfigError(LidarQAError, ValueError):
 class AnalysisError(LidarQAError):
     """One or more analyses of an assessment run failed (the report says which and why)."""
 
+    keep_outputs = True  # the report is complete and explains the failure
+
 
 class TargetNotMetError(LidarQAError):
     """A run completed but an accuracy target was not met (command-line exit status 4).
@@ -84,6 +86,8 @@ class TargetNotMetError(LidarQAError):
     The outputs (report, JSON) are complete; the error only carries the verdict
     to scripts and CI pipelines.
     """
+
+    keep_outputs = True
 
 
 class NothingToMeasureError(LidarQAError, ValueError):

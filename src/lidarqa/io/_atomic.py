@@ -121,10 +121,13 @@ def output_session() -> Iterator[list[Path]]:
         _session.append(created)
     try:
         yield created
-    except SystemExit:  # a deliberate exit status (e.g. a failed target) keeps the outputs
-        _forget_created_on_success(created)
-        raise
-    except BaseException:
+    except BaseException as exc:
+        # A deliberate exit status, or an error raised *about* complete outputs (a failed
+        # target, a failed analysis shown in the report), keeps them.
+        deliberate = isinstance(exc, SystemExit) or type(exc).__name__ == "Exit"  # click's
+        if deliberate or getattr(exc, "keep_outputs", False):
+            _forget_created_on_success(created)
+            raise
         for p in reversed(created):
             with contextlib.suppress(OSError):
                 p.unlink()

@@ -84,7 +84,7 @@ def check_las_header(path: str | Path) -> LasHeaderFacts:
 
 def _check(p: Path, fh, head: bytes, size: int) -> LasHeaderFacts:  # noqa: C901, PLR0912, PLR0915
     if len(head) < 4 or head[:4] != b"LASF":
-        raise LasReadError(f"input {p} is not a LAS/LAZ file (no 'LASF' signature)")
+        raise LasReadError(f"cannot read {p} as LAS/LAZ: no 'LASF' signature")
     if len(head) < 227:
         raise _fail(p, "size", f"is {size} bytes, shorter than the 227-byte public header")
     major, minor = head[24], head[25]
@@ -236,9 +236,9 @@ def _check(p: Path, fh, head: bytes, size: int) -> LasHeaderFacts:  # noqa: C901
         raise _fail(
             p,
             "point count",
-            f"{count} records of {record_length} bytes need {count * record_length} bytes, "
-            f"the file has {available} after the offset to point data; the file is "
-            "truncated or its header is wrong",
+            f"(header declares {count} points) needs {count * record_length} bytes of "
+            f"{record_length}-byte records, the file has {available} after the offset to point "
+            "data; the file is truncated or its header is wrong",
         )
     return LasHeaderFacts(
         version=(major, minor),

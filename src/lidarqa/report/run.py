@@ -128,6 +128,7 @@ def _verdict(item: AnalysisItem, results: dict[str, Any]) -> tuple[str, str, lis
     specs = {t.metric: t for t in ANALYSIS_TARGETS[item.kind].values()}
     records = []
     texts = []
+    missing: list[str] = []
     ok_all = True
     for metric, target in item.targets.items():
         t = specs[metric]
@@ -139,6 +140,8 @@ def _verdict(item: AnalysisItem, results: dict[str, Any]) -> tuple[str, str, lis
         if metric == "mean_z" and value_f is not None:
             value_f = abs(value_f)
         if value_f is None or value_f != value_f:
+            # Nothing to measure (0 check points, no matched pair): an error, not a NaN verdict.
+            missing.append(t.label)
             ok = False
         elif t.direction == "max":
             ok = value_f <= target
@@ -160,6 +163,12 @@ def _verdict(item: AnalysisItem, results: dict[str, Any]) -> tuple[str, str, lis
                 "direction": t.direction,
                 "passed": ok,
             }
+        )
+    if missing:
+        return (
+            "error",
+            f"nothing to measure: {', '.join(missing)} could not be computed",
+            records,
         )
     return ("pass" if ok_all else "fail"), "; ".join(texts), records
 
@@ -283,6 +292,9 @@ def run_assessment(
                 section.notes = res.notes
                 section.outputs = ctx.outputs.get(item.id, [])
                 verdict, detail, records = _verdict(item, res.results)
+                if verdict == "error":
+                    errors[item.id] = detail
+                    section.error = detail
                 summary.append(SummaryRow(item.title, item.id, res.headline, verdict, detail))
                 verdicts[item.id] = {"verdict": verdict, "targets": records}
             timings[item.id] = round(time.perf_counter() - ta, 3)
