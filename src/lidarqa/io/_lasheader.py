@@ -153,10 +153,14 @@ def _check(p: Path, fh, head: bytes, size: int) -> LasHeaderFacts:  # noqa: C901
         if not math.isfinite(s) or s <= 0:
             raise _fail(p, f"{axis} scale factor", f"{s!r} is not a finite positive number")
         if not MIN_SCALE <= s <= MAX_SCALE:
-            raise _fail(p, f"{axis} scale factor", f"{s!r} is outside [{MIN_SCALE:g}, {MAX_SCALE:g}]")
+            raise _fail(
+                p, f"{axis} scale factor", f"{s!r} is outside [{MIN_SCALE:g}, {MAX_SCALE:g}]"
+            )
     for axis, o in zip("xyz", offsets, strict=True):
         if not math.isfinite(o) or abs(o) > MAX_ABS_OFFSET:
-            raise _fail(p, f"{axis} offset", f"{o!r} is not a finite number below {MAX_ABS_OFFSET:g}")
+            raise _fail(
+                p, f"{axis} offset", f"{o!r} is not a finite number below {MAX_ABS_OFFSET:g}"
+            )
     names = ("max x", "min x", "max y", "min y", "max z", "min z")
     for name, b in zip(names, bounds, strict=True):
         if not math.isfinite(b) or abs(b) > MAX_ABS_BOUND:
