@@ -790,6 +790,10 @@ def _parse_analysis(
         return None
     params_defaults = library_params(kind, opts)
     opts = _check_table(table, framework, where, extra=params_defaults)
+    for name in target_keys:  # every target is a size, a rate or an error: >= 0
+        value = opts.get(name)
+        if value is not None and not value >= 0:
+            raise ConfigError(f"key {name!r} in {where} must be >= 0, got {value!r}")
     params = check_params(
         {k: v for k, v in table.items() if k not in framework}, params_defaults, where
     )
