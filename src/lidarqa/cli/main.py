@@ -76,10 +76,15 @@ class LazyGroup(click.Group):
     def invoke(self, ctx: click.Context) -> Any:
         from ..io._atomic import Terminated, install_signal_handlers, output_session
 
-        install_signal_handlers()
+        install_signal_handlers(exit_immediately=_STANDALONE)
         try:
             with output_session():
-                return super().invoke(ctx)
+                result = super().invoke(ctx)
+                if _STANDALONE:
+                    # The outputs are complete: a signal from now on must not undo them,
+                    # nor kill the interpreter half-way through its exit.
+                    _ignore_signals()
+            return result
         except (click.exceptions.Exit, click.exceptions.Abort, click.ClickException):
             raise
         except KeyboardInterrupt:
@@ -106,6 +111,20 @@ class LazyGroup(click.Group):
                 sys.exit(EXIT_ERROR)
             _report(ctx, exc, prefix=f"Internal error ({type(exc).__name__})", hint=True)
             sys.exit(EXIT_INTERNAL)
+
+
+_STANDALONE = False  # set by main(): the process is ours (not a test runner's)
+
+
+def _ignore_signals() -> None:
+    import signal
+
+    for name in ("SIGINT", "SIGTERM", "SIGHUP"):
+        if hasattr(signal, name):
+            try:
+                signal.signal(getattr(signal, name), signal.SIG_IGN)
+            except (ValueError, OSError):  # not the main thread
+                pass
 
 
 def _foreseeable(exc: BaseException) -> str | None:
@@ -193,6 +212,8 @@ def cli(ctx: click.Context, quiet: bool, verbose: int) -> None:
 
 def main(argv: list[str] | None = None) -> None:
     """Console-script entry point."""
+    global _STANDALONE
+    _STANDALONE = True
     cli.main(args=argv, prog_name="lidarqa")
 
 

@@ -41,6 +41,7 @@ __all__ = [
     "file_mode",
     "install_signal_handlers",
     "output_session",
+    "note_created",
     "register_temp",
     "unregister_temp",
     "Terminated",
@@ -129,8 +130,7 @@ def output_session() -> Iterator[list[Path]]:
             _forget_created_on_success(created)
             raise
         for p in reversed(created):
-            with contextlib.suppress(OSError):
-                p.unlink()
+            _remove(str(p), False)
         cleanup_temps()
         raise
     else:
@@ -155,14 +155,32 @@ def _forget_created_on_success(created: list[Path]) -> None:
 
 
 _installed = False
+_exit_now = False
+
+
+def note_created(path: str | os.PathLike) -> None:
+    """Record an output (file or folder) this process created outside :func:`atomic_output`.
+
+    Inside an :func:`output_session` it is removed if the session fails or the
+    process is stopped by a signal (a folder with everything in it).
+    """
+    _record_created(Path(path))
 
 
 def _handler(signum: int, frame: object) -> None:
-    # Ignore repeats while we clean up, remove temporaries now, then unwind.
+    # Ignore repeats while we clean up, remove temporaries (and outputs created by the
+    # failing command) now, then unwind or exit.
     for sig in _SIGNALS:
         with contextlib.suppress(ValueError, OSError):
             signal.signal(sig, signal.SIG_IGN)
     cleanup_temps()
+    if _exit_now:
+        # A command-line process exits at once: raising an exception here could land in
+        # native code (a compiler or driver callback) that cannot unwind it.
+        what = "Interrupted" if signum == signal.SIGINT else f"Terminated (signal {signum})"
+        with contextlib.suppress(OSError):
+            os.write(2, f"{what}; no partial output was left behind.\n".encode())
+        os._exit(128 + signum)
     if signum == signal.SIGINT:
         raise KeyboardInterrupt
     raise Terminated(signum)
@@ -173,15 +191,20 @@ _SIGNALS = tuple(
 )
 
 
-def install_signal_handlers() -> bool:
-    """Turn SIGINT, SIGTERM and SIGHUP into exceptions that clean up temporary outputs.
+def install_signal_handlers(*, exit_immediately: bool = False) -> bool:
+    """Make SIGINT, SIGTERM and SIGHUP remove temporary and unfinished outputs.
 
-    Only possible from the main thread; returns whether the handlers are installed.
-    Signals that are ignored by the parent (``nohup``) stay ignored.
+    The handler removes every registered temporary file and the outputs created
+    by the running command, then raises ``KeyboardInterrupt`` / :class:`Terminated`
+    or, with `exit_immediately` (the ``lidarqa`` process itself), exits with
+    status 128 + signal number. Only possible from the main thread; returns
+    whether the handlers are installed. Signals ignored by the parent (``nohup``)
+    stay ignored.
     """
-    global _installed
+    global _installed, _exit_now
     if threading.current_thread() is not threading.main_thread():
         return False
+    _exit_now = exit_immediately
     for sig in _SIGNALS:
         with contextlib.suppress(ValueError, OSError):
             if signal.getsignal(sig) is signal.SIG_IGN and sig != signal.SIGINT:

@@ -257,10 +257,15 @@ def run_assessment(
     out = check_out_dir(out_dir, overwrite=overwrite)
     created = not out.exists()
     out.mkdir(parents=True, exist_ok=True)
+    from ..io._atomic import note_created, register_temp, unregister_temp
+
+    if created:
+        note_created(out)  # removed with everything in it if the command fails or is stopped
     progress = _Progress(steps)
     started = _dt.datetime.now(_dt.UTC)
     t0 = time.perf_counter()
     work = Path(tempfile.mkdtemp(prefix=".lidarqa-run-", dir=out))
+    register_temp(work)  # removed by the signal handler too
     try:
         inputs = _input_records(config, progress)
         ctx = RunContext(config, work, step=progress)
@@ -410,6 +415,7 @@ def run_assessment(
         raise
     finally:
         shutil.rmtree(work, ignore_errors=True)
+        unregister_temp(work)
     return AssessmentRun(
         out_dir=out,
         html_path=out / REPORT_HTML,
