@@ -109,6 +109,9 @@ def text_cases() -> dict[str, bytes]:
     }
 
 
+_GROUND = b'[inputs.clouds]\ntile = "scene.las"\n[ground]\ncloud = "tile"\n'
+
+
 def toml_cases() -> dict[str, bytes]:
     return {
         "deep": b"a = " + b"[" * 3000 + b"]" * 3000 + b"\n",
@@ -120,12 +123,12 @@ def toml_cases() -> dict[str, bytes]:
         "not-toml": b"[[[\n",
         "wrong-type": b'[inputs.clouds]\ntile = 5\n',
         "unknown-key": b'bogus = 1\n',
-        "nan-target": b'[inputs.clouds]\ntile = "scene.las"\n[ground]\ncloud = "tile"\ntarget_total = nan\n',
+        "nan-target": _GROUND + b"target_total = nan\n",
         "missing-input": b'[inputs.clouds]\ntile = "nope.las"\n[info]\ncloud = "tile"\n',
         "empty": b"\n",
         "huge-string": b'title = "' + b"x" * 2_000_000 + b'"\n',
         "array-of-tables": b"[[inputs]]\na = 1\n",
-        "neg-target": b'[inputs.clouds]\ntile = "scene.las"\n[ground]\ncloud = "tile"\ntarget_total = -1e308\n',
+        "neg-target": _GROUND + b"target_total = -1e308\n",
     }
 
 

@@ -78,3 +78,36 @@ def test_bad_configs(name, world, tmp_path):
     cfg.write_bytes(toml_cases()[name])
     r = run_cli(["-q", "assess", cfg, "-o", tmp_path / "out" / "report"], out_dir=tmp_path / "out")
     assert r.exit_code == 1, r.output
+
+
+@pytest.mark.parametrize(
+    "target,expected",
+    [("target_rmse_z = 10.0", 0), ("target_rmse_z = 0.0001", 4), ("", 0)],
+)
+def test_assess_exit_status_follows_targets(target, expected, world, tmp_path):
+    for f in ("scene.las", "check.csv"):
+        shutil.copy(world["dir"] / f, tmp_path / f)
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(
+        '[inputs.clouds]\ntile = "scene.las"\n[inputs.points]\ncheck = "check.csv"\n'
+        f'[checkpoints]\nmeasured = "tile"\ncheck = "check"\nvertical = true\n{target}\n'
+    )
+    out = tmp_path / "out"
+    r = run_cli(["-q", "assess", cfg, "-o", out / "r"], out_dir=out)
+    assert r.exit_code == expected, r.output
+    assert (out / "r" / "report.html").is_file()
+
+
+def test_assess_nothing_to_measure_is_an_error_verdict(world, tmp_path):
+    shutil.copy(world["dir"] / "scene.las", tmp_path / "scene.las")
+    (tmp_path / "far.csv").write_text("id,x,y,z\n1,0,0,0\n2,1,1,1\n3,2,0,1\n")
+    cfg = tmp_path / "c.toml"
+    cfg.write_text(
+        '[inputs.clouds]\ntile = "scene.las"\n[inputs.points]\ncheck = "far.csv"\n'
+        '[checkpoints]\nmeasured = "tile"\ncheck = "check"\nvertical = true\n'
+        "target_rmse_z = 0.1\n"
+    )
+    out = tmp_path / "out"
+    r = run_cli(["-q", "assess", cfg, "-o", out / "r"], out_dir=out)
+    assert r.exit_code == 1 and "none of the 3 check point(s)" in r.stderr, r.output
+    assert "nan" not in r.output.lower()

@@ -11,9 +11,9 @@ import warnings
 
 import numpy as np
 import pytest
+from hostile import LAS_FIELDS, extremes, flip_bits, run_cli, set_field, time_limit
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from hostile import LAS_FIELDS, extremes, flip_bits, run_cli, set_field, time_limit
 
 from lidarqa.errors import LidarQAError
 
