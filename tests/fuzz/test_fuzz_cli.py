@@ -6,6 +6,8 @@ import shutil
 
 import pytest
 from hostile import SPECIAL_KINDS, make_special, run_cli, text_cases, toml_cases
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 pytestmark = pytest.mark.fuzz
 
@@ -111,3 +113,33 @@ def test_assess_nothing_to_measure_is_an_error_verdict(world, tmp_path):
     r = run_cli(["-q", "assess", cfg, "-o", out / "r"], out_dir=out)
     assert r.exit_code == 1 and "none of the 3 check point(s)" in r.stderr, r.output
     assert "nan" not in r.output.lower()
+
+
+def _numeric_options(command: str) -> list[str]:
+    import click
+
+    from lidarqa.cli.main import cli
+
+    cmd = cli.get_command(click.Context(cli), command)
+    return sorted(
+        p.opts[-1] for p in cmd.params
+        if isinstance(p, click.Option) and not p.is_flag
+        and isinstance(p.type, click.types.FloatParamType | click.types.IntParamType)
+    )
+
+
+BAD_NUMBERS = ["nan", "inf", "-inf", "-1", "0", "1e308", "1e-300", "99999999999999999999", "x"]
+
+
+@settings(max_examples=120, deadline=None, suppress_health_check=list(HealthCheck))
+@given(data=st.data())
+def test_bad_numeric_options(data, baseline, tmp_path_factory):
+    """Any numeric option of any command set to NaN, inf, 0, negative, huge or tiny."""
+    command = data.draw(st.sampled_from(COMMANDS))
+    options = _numeric_options(command)
+    if not options:
+        return
+    opt = data.draw(st.sampled_from(options))
+    value = data.draw(st.sampled_from(BAD_NUMBERS))
+    out = tmp_path_factory.mktemp("opt")
+    run_cli(["-q", *baseline(out)[command], opt, value], out_dir=out)
