@@ -76,6 +76,7 @@ class LazyGroup(click.Group):
     def invoke(self, ctx: click.Context) -> Any:
         from ..io._atomic import Terminated, install_signal_handlers, output_session
 
+        saved = None if _STANDALONE else _save_signals()  # in-process callers get theirs back
         install_signal_handlers(exit_immediately=_STANDALONE)
         try:
             with output_session():
@@ -111,9 +112,36 @@ class LazyGroup(click.Group):
                 sys.exit(EXIT_ERROR)
             _report(ctx, exc, prefix=f"Internal error ({type(exc).__name__})", hint=True)
             sys.exit(EXIT_INTERNAL)
+        finally:
+            if saved:
+                _restore_signals(saved)
 
 
 _STANDALONE = False  # set by main(): the process is ours (not a test runner's)
+
+
+def _save_signals() -> dict:
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return {}
+    return {
+        getattr(signal, n): signal.getsignal(getattr(signal, n))
+        for n in ("SIGINT", "SIGTERM", "SIGHUP")
+        if hasattr(signal, n)
+    }
+
+
+def _restore_signals(saved: dict) -> None:
+    import signal
+
+    for sig, handler in saved.items():
+        if handler is not None:
+            try:
+                signal.signal(sig, handler)
+            except (ValueError, OSError, TypeError):
+                pass
 
 
 def _ignore_signals() -> None:
