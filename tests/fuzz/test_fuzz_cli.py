@@ -123,7 +123,7 @@ def _numeric_options(command: str) -> list[str]:
     cmd = cli.get_command(click.Context(cli), command)
     return sorted(
         p.opts[-1] for p in cmd.params
-        if isinstance(p, click.Option) and not p.is_flag
+        if isinstance(p, click.Option) and not p.is_flag and not p.count
         and isinstance(p.type, click.types.FloatParamType | click.types.IntParamType)
     )
 

@@ -71,7 +71,7 @@ class LazyGroup(click.Group):
         if name not in COMMANDS or not _available(name):
             return None
         module, func = COMMANDS[name].split(":")
-        return getattr(importlib.import_module(module), func)
+        return _bound_options(getattr(importlib.import_module(module), func))
 
     def invoke(self, ctx: click.Context) -> Any:
         from ..io._atomic import Terminated, install_signal_handlers, output_session
@@ -115,6 +115,89 @@ class LazyGroup(click.Group):
         finally:
             if saved:
                 _restore_signals(saved)
+
+
+_INT64 = 2**63 - 1
+_MAX_FLOAT = 1e15  # as for coordinates: far beyond any real distance, size or tolerance
+
+
+def _option_name(param: click.Parameter | None) -> str:
+    if param is None:
+        return "value"
+    opts = getattr(param, "opts", None) or [param.name or "value"]
+    return max(opts, key=len)
+
+
+class _BoundedInt(click.types.IntParamType):
+    """An integer option that also fits a 64-bit integer (numeric kernels take int64)."""
+
+    def __init__(self, inner: click.ParamType) -> None:
+        self.inner = inner
+        self.name = inner.name
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> Any:
+        from ..errors import OptionError
+
+        v = self.inner.convert(value, param, ctx)
+        if isinstance(v, int) and not -_INT64 <= v <= _INT64:
+            raise OptionError(f"{_option_name(param)} {value!s:.40} is too large")
+        return v
+
+    def get_metavar(self, *args: Any, **kwargs: Any) -> str | None:
+        return self.inner.get_metavar(*args, **kwargs)
+
+    def __repr__(self) -> str:
+        return repr(self.inner)
+
+
+class _BoundedFloat(click.types.FloatParamType):
+    """A number option that must be finite and within +-1e15 (no NaN, inf or 1e308)."""
+
+    def __init__(self, inner: click.ParamType) -> None:
+        self.inner = inner
+        self.name = inner.name
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> Any:
+        import math
+
+        from ..errors import OptionError
+
+        v = self.inner.convert(value, param, ctx)
+        if isinstance(v, float):
+            if not math.isfinite(v):
+                raise OptionError(f"{_option_name(param)} must be a finite number, got {value!s:.40}")
+            if abs(v) > _MAX_FLOAT:
+                raise OptionError(
+                    f"{_option_name(param)} {value!s:.40} is out of range (at most {_MAX_FLOAT:g})"
+                )
+        return v
+
+    def get_metavar(self, *args: Any, **kwargs: Any) -> str | None:
+        return self.inner.get_metavar(*args, **kwargs)
+
+    def __repr__(self) -> str:
+        return repr(self.inner)
+
+
+def _bound_options(cmd: click.Command) -> click.Command:
+    """Bound every integer (64 bits) and number (finite, +-1e15) option of `cmd`, once.
+
+    Done here, where every command is loaded, so new commands get it for free.
+    """
+    if getattr(cmd, "_lidarqa_bounded", False):
+        return cmd
+    for p in cmd.params:
+        if isinstance(p, click.Option) and p.count:
+            continue
+        t = p.type
+        if isinstance(t, _BoundedInt | _BoundedFloat):
+            continue
+        if isinstance(t, click.types.IntParamType):
+            p.type = _BoundedInt(t)
+        elif isinstance(t, click.types.FloatParamType):
+            p.type = _BoundedFloat(t)
+    cmd._lidarqa_bounded = True  # type: ignore[attr-defined]
+    return cmd
 
 
 _STANDALONE = False  # set by main(): the process is ours (not a test runner's)
