@@ -165,7 +165,9 @@ class _BoundedFloat(click.types.FloatParamType):
         v = self.inner.convert(value, param, ctx)
         if isinstance(v, float):
             if not math.isfinite(v):
-                raise OptionError(f"{_option_name(param)} must be a finite number, got {value!s:.40}")
+                raise OptionError(
+                    f"{_option_name(param)} must be a finite number, got {value!s:.40}"
+                )
             if abs(v) > _MAX_FLOAT:
                 raise OptionError(
                     f"{_option_name(param)} {value!s:.40} is out of range (at most {_MAX_FLOAT:g})"
