@@ -29,6 +29,10 @@ HOSTILE_POINTS = {
     "4-columns": np.zeros((10, 4)),
     "none": None,
     "scalar": 3.0,
+    # long degenerate lines: neighbour searches run past the grid's last row (a kNN row named
+    # a point twice and surface growing overran its queue: heap corruption, abort)
+    "line-x": np.column_stack([np.linspace(0, 10, 500), np.zeros(500), np.zeros(500)]),
+    "line-z": np.column_stack([np.zeros(500), np.zeros(500), np.linspace(0, 10, 500)]),
 }
 
 
@@ -51,6 +55,7 @@ POINT_FUNCS = {
     "ransac": lambda p: geo.ransac(p, seed=0),
     "segment_planes": lambda p: geo.segment_planes(p),
     "surface_growing": lambda p: geo.surface_growing(p),
+    "classify_ground": lambda p: gnd.classify_ground(p),
     "extract_edges": lambda p: geo.extract_edges(p),
     "extract_corners": lambda p: geo.extract_corners(p),
     "vertical_check": lambda p: acc.vertical_check(p, acc.checkpoints.PointSet(
@@ -76,6 +81,19 @@ def test_point_functions_on_hostile_points(func, case):
 )
 def test_point_functions_random(func, pts):
     _fine(POINT_FUNCS[func], pts)
+
+
+def test_knn_rows_are_distinct_on_a_line():
+    from scipy.spatial import cKDTree
+
+    from lidarqa.geometry import _kernels as K
+
+    line = HOSTILE_POINTS["line-x"]
+    kn = K.knn(line - line.mean(axis=0), 10)
+    assert all(len(set(row)) == 10 for row in kn.tolist())
+    d, _ = cKDTree(line).query(line, 10)
+    mine = np.sort(np.linalg.norm(line[kn] - line[:, None], axis=2), axis=1)
+    np.testing.assert_allclose(mine, d, atol=1e-12)
 
 
 def _seg(*rows):
