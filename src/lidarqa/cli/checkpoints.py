@@ -18,6 +18,7 @@ from ._common import (
     fmt_number,
     prepare_outputs,
     settings,
+    target_options,
 )
 
 
@@ -163,6 +164,12 @@ def _scaled(xyz: Any, fh: float, fv: float) -> Any:
     help="Write per-point residuals (.csv, .gpkg or .geojson).",
 )
 @catalog_options
+@target_options(
+    rmse_z=("rmse_z", "the vertical RMSE (m)"),
+    rmse_h=("rmse_h", "the horizontal RMSE (m)"),
+    rmse_3d=("rmse_3d", "the 3D RMSE (m)"),
+    mean_z=("mean_z", "the absolute mean vertical error (m)"),
+)
 @common_options
 def checkpoints(
     measured: tuple[str, ...],

@@ -269,7 +269,9 @@ def classify_ground(
         check_choice(preset, tuple(PRESETS), "preset")
         params = {**PRESETS[preset][method], **params}
     if not isinstance(cloud, PointCloud):
-        cloud = PointCloud(np.asarray(cloud, dtype=np.float64))
+        from .._validate import as_points
+
+        cloud = PointCloud(as_points(cloud, "cloud"))
     cls_type = SegmentPTD if method == "segment-ptd" else PTD
     try:
         filt = cls_type(**params)

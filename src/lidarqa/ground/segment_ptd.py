@@ -83,6 +83,7 @@ def default_grow_radius(points: np.ndarray, *, factor: float = 2.5, floor: float
     divided by the cell area (robust to scan-line patterns and to empty areas).
     Never below `floor`.
     """
+    points = as_points(points)
     n = points.shape[0]
     if n < 2:
         return floor

@@ -14,6 +14,7 @@ import numpy as np
 
 from ..errors import InvalidPointsError, LasReadError, WriteError
 from ._atomic import atomic_path, check_input, check_output
+from ._lasheader import check_las_header
 from .pointcloud import PointCloud
 
 __all__ = [
@@ -70,7 +71,9 @@ def _laspy():
 
 
 def _check_input(path: str | os.PathLike) -> Path:
-    return check_input(path, error=LasReadError)
+    p = check_input(path, error=LasReadError)
+    check_las_header(p)  # before laspy trusts any count or offset
+    return p
 
 
 def _check_record_count(p: Path, header: Any) -> None:
