@@ -477,7 +477,8 @@ def assess_swaths(
                         strips[i].sigma ** 2 * A.q00[ia][use]
                         + strips[j].sigma ** 2 * B.q00[ib][use]
                     )
-                    obs[(i, j)] = (g, dz_all[use], 1.0 / var)
+                    flat = ((sa <= tan_smooth**2) & (sb <= tan_smooth**2))[use]
+                    obs[(i, j)] = (g, dz_all[use], 1.0 / var, flat)
     if not pairs:
         raise DegenerateGeometryError(
             f"no two of the strips {', '.join(map(str, ids))} overlap (fewer than "
@@ -495,9 +496,10 @@ def assess_swaths(
     e4 = np.nan
     if estimate_offsets:
         kept = {}
-        for (i, j), (g, l, w) in obs.items():
+        for (i, j), (g, l, w, flat) in obs.items():
             keep = _robust_keep(g, l, w)
-            g, l, w = g[keep], l[keep], w[keep]
+            g, l, w, flat = g[keep], l[keep], w[keep], flat[keep]
+            w = _variance_components(g, l, w, flat)
             kept[(i, j)] = (g, l, w)
             sol = _solve([(g, l, w)])
             if sol is not None:
@@ -567,6 +569,35 @@ def _robust_keep(g: np.ndarray, l: np.ndarray, w: np.ndarray, k: float = 4.0) ->
             break
         keep = new
     return keep
+
+
+def _variance_components(
+    g: np.ndarray, l: np.ndarray, w: np.ndarray, group: np.ndarray
+) -> np.ndarray:
+    """Rescale the weights of flat and tilted cells by their own variance factors.
+
+    Cells on tilted faces carry more than point noise (a crease or a slightly
+    curved face inside the cell is sampled differently by each strip), so one
+    variance factor for all cells would inflate the σ of dz (fixed mostly by
+    flat cells). Two groups, their factors estimated from the residuals with
+    redundancy numbers, two passes.
+    """
+    w = w.copy()
+    for _ in range(2):
+        sw = np.sqrt(w)
+        a = g * sw[:, None]
+        try:
+            q, _ = np.linalg.qr(a)
+        except np.linalg.LinAlgError:
+            return w
+        x, *_ = np.linalg.lstsq(a, l * sw, rcond=None)
+        r2 = w * (l - g @ x) ** 2
+        redundancy = 1.0 - np.sum(q * q, axis=1)
+        for m in (group, ~group):
+            red = float(redundancy[m].sum())
+            if m.sum() > g.shape[1] and red > 0:
+                w[m] /= float(r2[m].sum()) / red
+    return w
 
 
 def _solve(

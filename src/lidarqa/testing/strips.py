@@ -66,7 +66,7 @@ def make_strip_scene(
     *,
     offsets: Any = None,
     noise: float = 0.02,
-    density: float = 8.0,
+    density: float = 16.0,
     length: float = 100.0,
     strip_width: float = 60.0,
     overlap: float = 0.5,
@@ -83,7 +83,7 @@ def make_strip_scene(
         Each strip's shift (dx, dy, dz) in metres; default all zero.
     noise : float, default 0.02
         σ of the Gaussian height noise of every point (m).
-    density : float, default 8.0
+    density : float, default 16.0
         Points per m² of one strip.
     length, strip_width : float
         Strip length along x and width across (m).
