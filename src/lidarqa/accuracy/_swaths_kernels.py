@@ -93,6 +93,7 @@ class CellPlanes:
     b: np.ndarray  # ∂z/∂x
     c: np.ndarray  # ∂z/∂y
     q00: np.ndarray  # (XᵀX)⁻¹[0, 0]: var(a) = σ² q00
+    q: np.ndarray  # (M, 3, 3) (XᵀX)⁻¹: cov(a, b, c) = σ² q
     rms: np.ndarray  # residual RMS with n - 3 degrees of freedom (m)
     spread: np.ndarray  # smallest standard deviation of the xy distribution (m)
     ok: np.ndarray  # bool: enough points and a well-spread design
@@ -133,6 +134,7 @@ def fit_cell_planes(
         b=p[:, 1] * nan,
         c=p[:, 2] * nan,
         q00=inv[:, 0, 0] * nan,
+        q=inv * nan[:, None, None],
         rms=rms * nan,
         spread=spread,
         ok=ok,

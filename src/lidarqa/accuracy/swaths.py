@@ -398,7 +398,7 @@ def assess_swaths(
     # ---- pairs
     pairs: list[PairDifference] = []
     grids: list[DzGrid] = []
-    obs: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+    obs: dict[tuple[int, int], tuple[np.ndarray, ...]] = {}
     centre = np.array(
         [grid.x0 + 0.5 * grid.nx * cell_size, grid.y0 + 0.5 * grid.ny * cell_size, z0]
     )
@@ -473,12 +473,20 @@ def assess_swaths(
                             bb * d[:, 1] - cc * d[:, 0],
                         ]
                     g = np.column_stack(cols)
-                    var = (
-                        strips[i].sigma ** 2 * A.q00[ia][use]
-                        + strips[j].sigma ** 2 * B.q00[ib][use]
-                    )
+                    sa2, sb2 = strips[i].sigma ** 2, strips[j].sigma ** 2
+                    qa, qb = A.q[ia][use], B.q[ib][use]
+                    var = sa2 * qa[:, 0, 0] + sb2 * qb[:, 0, 0]
+                    # Errors in variables: the slopes in g are estimates too. Their
+                    # covariance (and their covariance with dz) is removed from the
+                    # normal equations (corrected score), else offsets shrink by
+                    # var(slope) / (slope² + var(slope)): a few % on 1 m cells.
+                    u = g.shape[1]
+                    cg = np.zeros((len(g), u, u))
+                    cg[:, :2, :2] = 0.25 * (sa2 * qa[:, 1:, 1:] + sb2 * qb[:, 1:, 1:])
+                    cgl = np.zeros((len(g), u))
+                    cgl[:, :2] = -0.5 * (sb2 * qb[:, 0, 1:] - sa2 * qa[:, 0, 1:])
                     flat = ((sa <= tan_smooth**2) & (sb <= tan_smooth**2))[use]
-                    obs[(i, j)] = (g, dz_all[use], 1.0 / var, flat)
+                    obs[(i, j)] = (g, dz_all[use], 1.0 / var, flat, cg, cgl)
     if not pairs:
         raise DegenerateGeometryError(
             f"no two of the strips {', '.join(map(str, ids))} overlap (fewer than "
@@ -496,16 +504,16 @@ def assess_swaths(
     e4 = np.nan
     if estimate_offsets:
         kept = {}
-        for (i, j), (g, l, w, flat) in obs.items():
+        for (i, j), (g, l, w, flat, cg, cgl) in obs.items():
             keep = _robust_keep(g, l, w)
-            g, l, w, flat = g[keep], l[keep], w[keep], flat[keep]
+            g, l, w, flat, cg, cgl = g[keep], l[keep], w[keep], flat[keep], cg[keep], cgl[keep]
             w = _variance_components(g, l, w, flat)
-            kept[(i, j)] = (g, l, w)
-            sol = _solve([(g, l, w)])
+            kept[(i, j)] = _normals(g, l, w, cg, cgl)
+            sol = _solve(kept[(i, j)])
             if sol is not None:
                 x, cov, s0 = sol
                 pair_offsets.append(
-                    _offset(strips[i].id, strips[j].id, x, cov, len(l), s0, rotations, "pair")
+                    _offset(strips[i].id, strips[j].id, x, cov, len(g), s0, rotations, "pair")
                 )
         if kept:
             counts = np.array([len(s.planes.keys) for s in strips])
@@ -600,22 +608,26 @@ def _variance_components(
     return w
 
 
+def _normals(
+    g: np.ndarray, l: np.ndarray, w: np.ndarray, cg: np.ndarray, cgl: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, float, int]:
+    """Bias-corrected normal equations of one pair: (N, n, Σ w l², number of observations)."""
+    gw = g * w[:, None]
+    n_mat = gw.T @ g - np.einsum("m,mij->ij", w, cg)
+    rhs = gw.T @ l - np.einsum("m,mi->i", w, cgl)
+    return n_mat, rhs, float(np.sum(w * l * l)), len(l)
+
+
 def _solve(
-    groups: list[tuple[np.ndarray, np.ndarray, np.ndarray]],
+    normals: tuple[np.ndarray, np.ndarray, float, int],
 ) -> tuple[np.ndarray, np.ndarray, float] | None:
-    g = np.concatenate([x[0] for x in groups])
-    l = np.concatenate([x[1] for x in groups])
-    w = np.concatenate([x[2] for x in groups])
-    u = g.shape[1]
-    if len(l) <= u:
-        return None
-    n_mat = (g * w[:, None]).T @ g
-    if np.linalg.cond(n_mat) > 1e12:
+    n_mat, rhs, ll, m = normals
+    u = len(rhs)
+    if m <= u or np.linalg.cond(n_mat) > 1e12:
         return None
     inv = np.linalg.inv(n_mat)
-    x = inv @ ((g * w[:, None]).T @ l)
-    r = l - g @ x
-    s0 = float(np.sqrt(np.sum(w * r * r) / (len(l) - u)))
+    x = inv @ rhs
+    s0 = float(np.sqrt(max(ll - x @ rhs, 0.0) / (m - u)))
     return x, inv * s0**2, s0
 
 
@@ -633,7 +645,7 @@ def _offset(
 
 def _network(
     strips: list[_Strip],
-    kept: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, np.ndarray]],
+    kept: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, float, int]],
     ref_i: int,
     rot: bool,
 ) -> tuple[list[StripOffset], float, list[str]]:
@@ -657,13 +669,11 @@ def _network(
     n_mat = np.zeros((dim, dim))
     rhs = np.zeros(dim)
     ll, m = 0.0, 0
-    for (i, j), (g, l, w) in kept.items():
+    for (i, j), (nn, nl, pair_ll, pair_m) in kept.items():
         if not (conn[i] and conn[j]):
             continue
-        gw = g * w[:, None]
-        nn, nl = gw.T @ g, gw.T @ l
-        ll += float(np.sum(w * l * l))
-        m += len(l)
+        ll += pair_ll
+        m += pair_m
         for k, sign in ((j, 1.0), (i, -1.0)):
             if k == ref_i:
                 continue
