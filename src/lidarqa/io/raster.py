@@ -49,7 +49,7 @@ def write_geotiff(
     Path
     """
     rasterio = require("rasterio", "raster")
-    from rasterio.transform import from_origin
+    from rasterio.transform import Affine
 
     data = np.where(np.isfinite(array), array, nodata).astype(np.float32)
     profile = dict(
@@ -59,7 +59,7 @@ def write_geotiff(
         count=1,
         dtype="float32",
         nodata=nodata,
-        transform=from_origin(x0, y1, cell_size, cell_size),
+        transform=Affine(cell_size, 0.0, x0, 0.0, -cell_size, y1),
         compress="deflate",
     )
     if crs is not None:

@@ -28,8 +28,7 @@ def plot_dz_map(grid: Any, *, vmax: float = 0.16, title: str | None = None) -> b
     fig, ax = plt.subplots(figsize=(6.4, 5.2))
     rows, cols = grid.dz.shape
     extent = (0.0, cols * grid.cell_size, -rows * grid.cell_size, 0.0)
-    cmap = plt.get_cmap("RdBu_r").copy()
-    cmap.set_bad("#eeeeee")
+    cmap = plt.get_cmap("RdBu_r").with_extremes(bad="#eeeeee")
     im = ax.imshow(
         np.ma.masked_invalid(grid.dz),
         cmap=cmap,
