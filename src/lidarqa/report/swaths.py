@@ -46,9 +46,16 @@ def plot_dz_map(grid: Any, *, vmax: float = 0.16, title: str | None = None) -> b
 
 
 def _params(options: dict) -> Any:
-    from ..accuracy.swaths import assess_swaths
+    from .._validate import check_choice
+    from ..accuracy.swaths import QUALITY_LEVELS, assess_swaths
 
-    return keyword_defaults(assess_swaths, exclude=("return_grids",))
+    out = keyword_defaults(assess_swaths, exclude=("return_grids",))
+
+    def validate(params: dict[str, Any]) -> None:
+        check_choice(params.get("quality_level", "QL1"), tuple(QUALITY_LEVELS), "quality_level")
+
+    out.validate = validate
+    return out
 
 
 def _fmt_cm(v: Any) -> str:
@@ -84,13 +91,20 @@ def run_swaths(ctx: RunContext, item: AnalysisItem) -> SectionResult:
         (r.median_range for r in rep.repeatability if np.isfinite(r.median_range)), default=None
     )
     figures, outputs = [], []
-    from ..io.raster import write_geotiff
+    notes = list(rep.flags)
+    import importlib.util
 
+    has_rasterio = importlib.util.find_spec("rasterio") is not None
+    if not has_rasterio and rep.grids:
+        notes.append("DZ GeoTIFFs not written: install the 'raster' extra (rasterio)")
     for g in rep.grids:
-        path = ctx.output_path(item, f"dz_{g.strip_a}_{g.strip_b}.tif")
-        write_geotiff(path, g.dz, x0=g.x0, y1=g.y1, cell_size=g.cell_size, crs=cloud.crs,
-                      overwrite=True)
-        outputs.append(path.name)
+        if has_rasterio:
+            from ..io.raster import write_geotiff
+
+            path = ctx.output_path(item, f"dz_{g.strip_a}_{g.strip_b}.tif")
+            write_geotiff(path, g.dz, x0=g.x0, y1=g.y1, cell_size=g.cell_size, crs=cloud.crs,
+                          overwrite=True)
+            outputs.append(path.name)
         figures.append(
             Figure(
                 f"DZ map, strips {g.strip_a} and {g.strip_b}",
@@ -149,7 +163,7 @@ def run_swaths(ctx: RunContext, item: AnalysisItem) -> SectionResult:
         figures=figures,
         tables=tables,
         outputs=outputs,
-        notes=list(rep.flags),
+        notes=notes,
         parameters=dict(rep.parameters),
         paragraphs=[
             "Each strip fits a plane per grid cell; on cells that are smooth in both strips "
