@@ -153,9 +153,12 @@ def run_swaths(ctx: RunContext, item: AnalysisItem) -> SectionResult:
             )
         )
     worst = res["max_rmsdz"]
+    overlap_ok = all(p.passed for p in rep.pairs)
+    repeat_ok = all(r.passed for r in rep.repeatability if r.n_cells)
     headline = (
         f"{len(rep.pairs)} overlapping pair(s), worst RMSDz {_fmt_cm(worst)} cm, "
-        f"E4 {_fmt_cm(rep.e4)} cm: {'pass' if rep.passed else 'FAIL'} at {rep.quality_level}"
+        f"E4 {_fmt_cm(rep.e4)} cm; {rep.quality_level}: overlap "
+        f"{'pass' if overlap_ok else 'FAIL'}, repeatability {'pass' if repeat_ok else 'FAIL'}"
     )
     return SectionResult(
         results=res,
