@@ -70,6 +70,30 @@ def speed() -> None:
             f"peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:7.0f} MB  "
             f"pairs {len(rep.pairs)}"
         )
+    # The whole command: read the LAZ, compare, write rasters, maps and tables.
+    import subprocess
+    import tempfile
+
+    import lidarqa
+    from lidarqa.io import PointCloud
+
+    with tempfile.TemporaryDirectory() as d:
+        f = Path(d) / "block.laz"
+        fields = {
+            "classification": np.full(len(scene.points), 2, dtype=np.uint8),
+            "point_source_id": scene.strip.astype(np.uint16),
+        }
+        lidarqa.write(PointCloud(xyz=scene.points + [650_000.0, 6_860_000.0, 0.0], fields=fields), f)
+        t0 = time.perf_counter()
+        subprocess.run(
+            [sys.executable, "-m", "lidarqa.cli.main", "swaths", str(f), "--by-source-id", "-o",
+             str(Path(d) / "out"), "-q"],
+            check=True, stdout=subprocess.DEVNULL,
+        )
+        wall = time.perf_counter() - t0
+        ru = resource.getrusage(resource.RUSAGE_CHILDREN)
+        print(f"lidarqa swaths (LAZ in, GeoTIFF/PNG/CSV out): wall {wall:6.2f} s  cpu "
+              f"{ru.ru_utime + ru.ru_stime:6.2f} s  peak RSS {ru.ru_maxrss / 1024:7.0f} MB")
 
 
 def real() -> None:
