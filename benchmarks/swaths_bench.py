@@ -40,7 +40,10 @@ def calibration(runs: int) -> None:
         rms.append([p.rmsdz for p in rep.pairs])
     est, sig = np.array(est), np.array(sig)
     print(f"{runs} three-strip scenes, network offsets relative to strip 1 (noise 3 cm)")
-    print(f"{'strip':>5} {'param':>5} {'true':>8} {'mean':>9} {'emp. sd':>9} {'mean σ':>9} {'ratio':>6}")
+    print(
+        f"{'strip':>5} {'param':>5} {'true':>8} {'mean':>9} {'emp. sd':>9} {'mean σ':>9} "
+        f"{'ratio':>6}"
+    )
     for k, s in enumerate((2, 3)):
         for p, name in enumerate(("dx", "dy", "dz")):
             e, sg = est[:, k, p], sig[:, k, p]
@@ -83,17 +86,31 @@ def speed() -> None:
             "classification": np.full(len(scene.points), 2, dtype=np.uint8),
             "point_source_id": scene.strip.astype(np.uint16),
         }
-        lidarqa.write(PointCloud(xyz=scene.points + [650_000.0, 6_860_000.0, 0.0], fields=fields), f)
+        lidarqa.write(
+            PointCloud(xyz=scene.points + [650_000.0, 6_860_000.0, 0.0], fields=fields), f
+        )
         t0 = time.perf_counter()
         subprocess.run(
-            [sys.executable, "-m", "lidarqa.cli.main", "swaths", str(f), "--by-source-id", "-o",
-             str(Path(d) / "out"), "-q"],
-            check=True, stdout=subprocess.DEVNULL,
+            [
+                sys.executable,
+                "-m",
+                "lidarqa.cli.main",
+                "swaths",
+                str(f),
+                "--by-source-id",
+                "-o",
+                str(Path(d) / "out"),
+                "-q",
+            ],
+            check=True,
+            stdout=subprocess.DEVNULL,
         )
         wall = time.perf_counter() - t0
         ru = resource.getrusage(resource.RUSAGE_CHILDREN)
-        print(f"lidarqa swaths (LAZ in, GeoTIFF/PNG/CSV out): wall {wall:6.2f} s  cpu "
-              f"{ru.ru_utime + ru.ru_stime:6.2f} s  peak RSS {ru.ru_maxrss / 1024:7.0f} MB")
+        print(
+            f"lidarqa swaths (LAZ in, GeoTIFF/PNG/CSV out): wall {wall:6.2f} s  cpu "
+            f"{ru.ru_utime + ru.ru_stime:6.2f} s  peak RSS {ru.ru_maxrss / 1024:7.0f} MB"
+        )
 
 
 def real() -> None:
@@ -105,24 +122,37 @@ def real() -> None:
         sys.exit(f"no data in {SHARED}")
     for f in files:
         pc = read(f)
-        keep = last_return_mask(pc.fields, len(pc)) & ~np.isin(pc.classification, (1, 7, 18, 64, 65, 66, 67))
+        keep = last_return_mask(pc.fields, len(pc)) & ~np.isin(
+            pc.classification, (1, 7, 18, 64, 65, 66, 67)
+        )
         sid = np.asarray(pc.point_source_id)
         keep &= sid != 0
         t0 = time.perf_counter()
         rep = assess_swaths(pc.xyz[keep], sid[keep].astype(np.int64))
         dt = time.perf_counter() - t0
-        print(f"\n{f.name}: {keep.sum():,} points, cell {rep.cell_size:g} m, {dt:.2f} s, E4 "
-              f"{rep.e4 * 100:.1f} cm")
-        print(f"  {'pair':>9} {'overlap m2':>10} {'area m2':>8} {'RMSDz':>7} {'mean':>7} {'max':>7} pass")
+        print(
+            f"\n{f.name}: {keep.sum():,} points, cell {rep.cell_size:g} m, {dt:.2f} s, E4 "
+            f"{rep.e4 * 100:.1f} cm"
+        )
+        print(
+            f"  {'pair':>9} {'overlap m2':>10} {'area m2':>8} {'RMSDz':>7} {'mean':>7} "
+            f"{'max':>7} pass"
+        )
         for p in rep.pairs:
-            print(f"  {p.strip_a:>4}-{p.strip_b:<4} {p.overlap_area:10.0f} {p.area:8.0f} "
-                  f"{p.rmsdz:7.3f} {p.mean:7.3f} {p.max_abs:7.3f} {p.passed}")
+            print(
+                f"  {p.strip_a:>4}-{p.strip_b:<4} {p.overlap_area:10.0f} {p.area:8.0f} "
+                f"{p.rmsdz:7.3f} {p.mean:7.3f} {p.max_abs:7.3f} {p.passed}"
+            )
         for o in rep.pair_offsets:
-            print(f"  offset {o.strip_a}->{o.strip_b}: dx {o.dx:+.3f}±{o.sigma_dx:.3f} dy "
-                  f"{o.dy:+.3f}±{o.sigma_dy:.3f} dz {o.dz:+.3f}±{o.sigma_dz:.3f} (n {o.n_obs})")
+            print(
+                f"  offset {o.strip_a}->{o.strip_b}: dx {o.dx:+.3f}±{o.sigma_dx:.3f} dy "
+                f"{o.dy:+.3f}±{o.sigma_dy:.3f} dz {o.dz:+.3f}±{o.sigma_dz:.3f} (n {o.n_obs})"
+            )
         for r in rep.repeatability:
-            print(f"  strip {r.strip}: RMSE {r.rmse:.3f} median range {r.median_range:.3f} "
-                  f"area {r.area:.0f}")
+            print(
+                f"  strip {r.strip}: RMSE {r.rmse:.3f} median range {r.median_range:.3f} "
+                f"area {r.area:.0f}"
+            )
 
 
 def main() -> None:

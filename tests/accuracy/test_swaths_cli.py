@@ -47,8 +47,9 @@ def strips(tmp_path_factory):
     apart[scene.strip == 53, 1] += 500.0  # strip 53 moved away: no overlap at all
     keep = scene.strip != 54
     lidarqa.write(_cloud(apart[keep], scene.strip[keep]), d / "apart.laz")
-    np.savetxt(d / "noid.csv", scene.points + [X0, Y0, 0], delimiter=",", header="x,y,z",
-               comments="")
+    np.savetxt(
+        d / "noid.csv", scene.points + [X0, Y0, 0], delimiter=",", header="x,y,z", comments=""
+    )
     return d, scene
 
 
@@ -56,8 +57,20 @@ def test_by_source_id_writes_tables_rasters_json(strips, tmp_path):
     rasterio = pytest.importorskip("rasterio")
     d, scene = strips
     out = tmp_path / "out"
-    r = run("swaths", d / "block.laz", "--by-source-id", "-o", out, "--json", tmp_path / "s.json",
-            "-q", "--cell-size", "1", "--reference-strip", "52")
+    r = run(
+        "swaths",
+        d / "block.laz",
+        "--by-source-id",
+        "-o",
+        out,
+        "--json",
+        tmp_path / "s.json",
+        "-q",
+        "--cell-size",
+        "1",
+        "--reference-strip",
+        "52",
+    )
     assert r.exit_code == 0, r.output
     doc = json.loads((tmp_path / "s.json").read_text())
     res = doc["results"]
@@ -131,22 +144,55 @@ def test_heights_sigma_strip_auto_uses_measured_e4(strips, tmp_path):
         fh.write("id,x,y,z\n")
         for i, (x, y) in enumerate(ref):
             fh.write(f"r{i},{x + X0},{y + Y0},{100.0 + 0.01 * x}\n")
-    sw = run("swaths", d / "block.laz", "--by-source-id", "-o", tmp_path / "sw", "--no-maps",
-             "-q", "--json", tmp_path / "sw.json")
+    sw = run(
+        "swaths",
+        d / "block.laz",
+        "--by-source-id",
+        "-o",
+        tmp_path / "sw",
+        "--no-maps",
+        "-q",
+        "--json",
+        tmp_path / "sw.json",
+    )
     assert sw.exit_code == 0, sw.output
     e4 = json.loads((tmp_path / "sw.json").read_text())["results"]["e4"]
-    r = run("heights", d / "block.laz", tmp_path / "map.csv", tmp_path / "ref.csv",
-            "--sigma-strip", "auto", "--classes", "2", "-q", "--json", tmp_path / "h.json")
+    r = run(
+        "heights",
+        d / "block.laz",
+        tmp_path / "map.csv",
+        tmp_path / "ref.csv",
+        "--sigma-strip",
+        "auto",
+        "--classes",
+        "2",
+        "-q",
+        "--json",
+        tmp_path / "h.json",
+    )
     assert r.exit_code == 0, r.output
     params = json.loads((tmp_path / "h.json").read_text())["parameters"]
     assert params["sigma_strip"] == pytest.approx(e4, rel=1e-9)
     assert params["sigma_strip_source"].startswith("measured")
     assert e4 == pytest.approx(np.std(np.array(TRUTH)[:, 2], ddof=1), abs=0.01)
-    bad = run("heights", d / "one.laz", tmp_path / "map.csv", tmp_path / "ref.csv",
-              "--sigma-strip", "auto", "-q")
+    bad = run(
+        "heights",
+        d / "one.laz",
+        tmp_path / "map.csv",
+        tmp_path / "ref.csv",
+        "--sigma-strip",
+        "auto",
+        "-q",
+    )
     assert bad.exit_code == 1 and "one flight strip" in bad.output
-    typo = run("heights", d / "block.laz", tmp_path / "map.csv", tmp_path / "ref.csv",
-               "--sigma-strip", "automatic")
+    typo = run(
+        "heights",
+        d / "block.laz",
+        tmp_path / "map.csv",
+        tmp_path / "ref.csv",
+        "--sigma-strip",
+        "automatic",
+    )
     assert typo.exit_code == 2 and "auto" in typo.output
 
 
@@ -155,8 +201,9 @@ def test_real_ign_block_every_pair_and_epsg(tmp_path):
     rasterio = pytest.importorskip("rasterio")
     f = SHARED / "ign-lidarhd" / "test_semis_2023_0299_6802_LA93_IGN69.laz"
     out = tmp_path / "o"
-    r = run("swaths", f, "--by-source-id", "-o", out, "--no-maps", "-q", "--json",
-            tmp_path / "s.json")
+    r = run(
+        "swaths", f, "--by-source-id", "-o", out, "--no-maps", "-q", "--json", tmp_path / "s.json"
+    )
     assert r.exit_code == 0, r.output
     res = json.loads((tmp_path / "s.json").read_text())["results"]
     pairs = {(p["strip_a"], p["strip_b"]): p for p in res["pairs"]}

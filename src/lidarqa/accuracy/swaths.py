@@ -220,7 +220,9 @@ def last_return_mask(fields: dict[str, np.ndarray], n: int) -> np.ndarray:
     return keep
 
 
-def auto_cell_size(points: np.ndarray, strip: np.ndarray, *, target: int = CELL_TARGET_POINTS) -> float:
+def auto_cell_size(
+    points: np.ndarray, strip: np.ndarray, *, target: int = CELL_TARGET_POINTS
+) -> float:
     """A cell size (m, multiple of 0.25) holding about `target` points of one strip.
 
     The density of each strip is its point count over the area of the 5 m cells
@@ -374,9 +376,7 @@ def assess_swaths(
         st.sigma = float(np.sqrt(np.median(p.rms[off_ok] ** 2))) if off_ok.any() else np.nan
         n_c = int(smooth.sum())
         if n_c == 0:
-            repeat.append(
-                StripRepeatability(st.id, 0, 0.0, np.nan, np.nan, np.nan, np.nan, False)
-            )
+            repeat.append(StripRepeatability(st.id, 0, 0.0, np.nan, np.nan, np.nan, np.nan, False))
             continue
         _, ranges = K.residual_ranges(pts, grid, p, smooth)
         dof = np.maximum(p.n[smooth] - 3, 1)
@@ -422,8 +422,18 @@ def assess_swaths(
                 nan = np.nan
                 pairs.append(
                     PairDifference(
-                        *sid, len(common) * cell_size**2, 0.0, 0, nan, nan, nan, nan, nan, nan,
-                        False, False,
+                        *sid,
+                        len(common) * cell_size**2,
+                        0.0,
+                        0,
+                        nan,
+                        nan,
+                        nan,
+                        nan,
+                        nan,
+                        nan,
+                        False,
+                        False,
                     )
                 )
             else:
@@ -504,11 +514,18 @@ def assess_swaths(
     e4 = np.nan
     if estimate_offsets:
         kept = {}
-        for (i, j), (g, l, w, flat, cg, cgl) in obs.items():
-            keep = _robust_keep(g, l, w)
-            g, l, w, flat, cg, cgl = g[keep], l[keep], w[keep], flat[keep], cg[keep], cgl[keep]
-            w = _variance_components(g, l, w, flat)
-            kept[(i, j)] = _normals(g, l, w, cg, cgl)
+        for (i, j), (g, obs_dz, w, flat, cg, cgl) in obs.items():
+            keep = _robust_keep(g, obs_dz, w)
+            g, obs_dz, w, flat, cg, cgl = (
+                g[keep],
+                obs_dz[keep],
+                w[keep],
+                flat[keep],
+                cg[keep],
+                cgl[keep],
+            )
+            w = _variance_components(g, obs_dz, w, flat)
+            kept[(i, j)] = _normals(g, obs_dz, w, cg, cgl)
             sol = _solve(kept[(i, j)])
             if sol is not None:
                 x, cov, s0 = sol
@@ -560,15 +577,15 @@ def assess_swaths(
     )
 
 
-def _robust_keep(g: np.ndarray, l: np.ndarray, w: np.ndarray, k: float = 4.0) -> np.ndarray:
+def _robust_keep(g: np.ndarray, obs_dz: np.ndarray, w: np.ndarray, k: float = 4.0) -> np.ndarray:
     """Iteratively drop observations whose standardised residual exceeds k robust σ."""
-    keep = np.ones(len(l), dtype=bool)
+    keep = np.ones(len(obs_dz), dtype=bool)
     for _ in range(5):
         if keep.sum() <= g.shape[1]:
             break
         sw = np.sqrt(w[keep])
-        x, *_ = np.linalg.lstsq(g[keep] * sw[:, None], l[keep] * sw, rcond=None)
-        r = (l - g @ x) * np.sqrt(w)
+        x, *_ = np.linalg.lstsq(g[keep] * sw[:, None], obs_dz[keep] * sw, rcond=None)
+        r = (obs_dz - g @ x) * np.sqrt(w)
         scale = 1.4826 * np.median(np.abs(r[keep]))
         if not np.isfinite(scale) or scale == 0:
             break
@@ -580,7 +597,7 @@ def _robust_keep(g: np.ndarray, l: np.ndarray, w: np.ndarray, k: float = 4.0) ->
 
 
 def _variance_components(
-    g: np.ndarray, l: np.ndarray, w: np.ndarray, group: np.ndarray
+    g: np.ndarray, obs_dz: np.ndarray, w: np.ndarray, group: np.ndarray
 ) -> np.ndarray:
     """Rescale the weights of flat and tilted cells by their own variance factors.
 
@@ -598,8 +615,8 @@ def _variance_components(
             q, _ = np.linalg.qr(a)
         except np.linalg.LinAlgError:
             return w
-        x, *_ = np.linalg.lstsq(a, l * sw, rcond=None)
-        r2 = w * (l - g @ x) ** 2
+        x, *_ = np.linalg.lstsq(a, obs_dz * sw, rcond=None)
+        r2 = w * (obs_dz - g @ x) ** 2
         redundancy = 1.0 - np.sum(q * q, axis=1)
         for m in (group, ~group):
             red = float(redundancy[m].sum())
@@ -609,13 +626,13 @@ def _variance_components(
 
 
 def _normals(
-    g: np.ndarray, l: np.ndarray, w: np.ndarray, cg: np.ndarray, cgl: np.ndarray
+    g: np.ndarray, obs_dz: np.ndarray, w: np.ndarray, cg: np.ndarray, cgl: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, float, int]:
     """Bias-corrected normal equations of one pair: (N, n, Σ w l², number of observations)."""
     gw = g * w[:, None]
     n_mat = gw.T @ g - np.einsum("m,mij->ij", w, cg)
-    rhs = gw.T @ l - np.einsum("m,mi->i", w, cgl)
-    return n_mat, rhs, float(np.sum(w * l * l)), len(l)
+    rhs = gw.T @ obs_dz - np.einsum("m,mi->i", w, cgl)
+    return n_mat, rhs, float(np.sum(w * obs_dz * obs_dz)), len(obs_dz)
 
 
 def _solve(
@@ -638,8 +655,19 @@ def _offset(
     r = tuple(float(np.degrees(v)) for v in x[3:6]) if rot else None
     sr = tuple(float(np.degrees(v)) for v in sd[3:6]) if rot else None
     return StripOffset(
-        a, b, float(x[0]), float(x[1]), float(x[2]), float(sd[0]), float(sd[1]), float(sd[2]),
-        r, sr, int(n), float(s0), method,
+        a,
+        b,
+        float(x[0]),
+        float(x[1]),
+        float(x[2]),
+        float(sd[0]),
+        float(sd[1]),
+        float(sd[2]),
+        r,
+        sr,
+        int(n),
+        float(s0),
+        method,
     )
 
 
@@ -660,8 +688,10 @@ def _network(
     _, label = connected_components(graph, directed=False)
     conn = label == label[ref_i]
     for k in np.flatnonzero(~conn):
-        flags.append(f"strip {strips[k].id} is not connected to reference strip "
-                     f"{strips[ref_i].id}: no network offset")
+        flags.append(
+            f"strip {strips[k].id} is not connected to reference strip "
+            f"{strips[ref_i].id}: no network offset"
+        )
     unknown = [k for k in range(s) if conn[k] and k != ref_i]
     pos = {k: n for n, k in enumerate(unknown)}
     u = 6 if rot else 3

@@ -126,9 +126,7 @@ def _cm(v: float | None) -> str:
 @click.option("--all-returns", is_flag=True, help="Use every return, not only last/single.")
 @click.option("--rotations", is_flag=True, help="Also estimate small rotations per strip.")
 @click.option("--no-offsets", is_flag=True, help="Skip the strip offsets.")
-@click.option(
-    "--reference-strip", type=int, default=None, help="Strip held fixed in the network."
-)
+@click.option("--reference-strip", type=int, default=None, help="Strip held fixed in the network.")
 @click.option("--no-maps", is_flag=True, help="Do not write PNG maps (no matplotlib needed).")
 @common_options
 def swaths(
@@ -167,7 +165,9 @@ def swaths(
     if out.exists() and not out.is_dir():
         raise WriteError(f"output {out} exists and is not a folder")
     if out.exists() and any(out.iterdir()) and not s.overwrite:
-        raise OutputExistsError(f"output folder {out} is not empty; pass --overwrite to write into it")
+        raise OutputExistsError(
+            f"output folder {out} is not empty; pass --overwrite to write into it"
+        )
     if not out.parent.exists():
         raise WriteError(f"output folder {out.parent} does not exist")
     resolved = {Path(f).resolve() for f in files}
@@ -244,8 +244,10 @@ def swaths(
         f"{lvl['max_abs'] * 100:.0f} cm, repeatability ≤ {lvl['repeatability'] * 100:.0f} cm; "
         f"cell {rep.cell_size:g} m"
     )
-    echo(f"{'pair':>13} {'overlap m²':>11} {'area m²':>9} {'RMSDz':>6} {'mean':>6} "
-         f"{'median':>6} {'p95':>6} {'max':>6}  (cm)")
+    echo(
+        f"{'pair':>13} {'overlap m²':>11} {'area m²':>9} {'RMSDz':>6} {'mean':>6} "
+        f"{'median':>6} {'p95':>6} {'max':>6}  (cm)"
+    )
     for p in rep.pairs:
         echo(
             f"{p.strip_a:>6}-{p.strip_b:<6} {p.overlap_area:11,.0f} {p.area:9,.0f} {_cm(p.rmsdz)} "
@@ -265,16 +267,19 @@ def swaths(
             f"{o.dz * 100:+.1f} ± {o.sigma_dz * 100:.1f} cm"
         )
     if np.isfinite(rep.e4):
-        echo(f"E4 (strip height noise) {rep.e4 * 100:.1f} cm; use: lidarqa heights ... "
-             f"--sigma-strip {rep.e4:.3f}")
+        echo(
+            f"E4 (strip height noise) {rep.e4 * 100:.1f} cm; use: lidarqa heights ... "
+            f"--sigma-strip {rep.e4:.3f}"
+        )
     for f in rep.flags:
         echo("note: " + f)
     echo(f"{'PASS' if rep.passed else 'FAIL'}; wrote {len(written)} file(s) to {out}")
     finish(
         "swaths",
         inputs={"files": list(files), "strips": labels},
-        parameters=dict(rep.parameters, by_source_id=by_source_id, classes=classes,
-                        all_returns=all_returns),
+        parameters=dict(
+            rep.parameters, by_source_id=by_source_id, classes=classes, all_returns=all_returns
+        ),
         results=dict(rep.to_dict(), outputs=written),
     )
 
@@ -283,6 +288,10 @@ def _rot_cols(o: Any) -> dict[str, Any]:
     r = o.rotations or (None, None, None)
     sr = o.sigma_rotations or (None, None, None)
     return {
-        "rot_x_deg": r[0], "rot_y_deg": r[1], "rot_z_deg": r[2],
-        "sigma_rot_x_deg": sr[0], "sigma_rot_y_deg": sr[1], "sigma_rot_z_deg": sr[2],
+        "rot_x_deg": r[0],
+        "rot_y_deg": r[1],
+        "rot_z_deg": r[2],
+        "sigma_rot_x_deg": sr[0],
+        "sigma_rot_y_deg": sr[1],
+        "sigma_rot_z_deg": sr[2],
     }

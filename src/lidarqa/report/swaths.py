@@ -102,8 +102,9 @@ def run_swaths(ctx: RunContext, item: AnalysisItem) -> SectionResult:
             from ..io.raster import write_geotiff
 
             path = ctx.output_path(item, f"dz_{g.strip_a}_{g.strip_b}.tif")
-            write_geotiff(path, g.dz, x0=g.x0, y1=g.y1, cell_size=g.cell_size, crs=cloud.crs,
-                          overwrite=True)
+            write_geotiff(
+                path, g.dz, x0=g.x0, y1=g.y1, cell_size=g.cell_size, crs=cloud.crs, overwrite=True
+            )
             outputs.append(path.name)
         figures.append(
             Figure(
@@ -117,12 +118,29 @@ def run_swaths(ctx: RunContext, item: AnalysisItem) -> SectionResult:
         Table(
             f"Swath overlap ({rep.quality_level}: RMSDz ≤ {t['rmsdz'] * 100:.0f} cm, "
             f"max ≤ {t['max_abs'] * 100:.0f} cm)",
-            ["pair", "overlap (m²)", "compared (m²)", "RMSDz (cm)", "mean (cm)", "median (cm)",
-             "p95 |dz| (cm)", "max |dz| (cm)", "result"],
             [
-                [f"{p.strip_a}–{p.strip_b}", round(p.overlap_area), round(p.area),
-                 _fmt_cm(p.rmsdz), _fmt_cm(p.mean), _fmt_cm(p.median), _fmt_cm(p.p95_abs),
-                 _fmt_cm(p.max_abs), "pass" if p.passed else "FAIL"]
+                "pair",
+                "overlap (m²)",
+                "compared (m²)",
+                "RMSDz (cm)",
+                "mean (cm)",
+                "median (cm)",
+                "p95 |dz| (cm)",
+                "max |dz| (cm)",
+                "result",
+            ],
+            [
+                [
+                    f"{p.strip_a}–{p.strip_b}",
+                    round(p.overlap_area),
+                    round(p.area),
+                    _fmt_cm(p.rmsdz),
+                    _fmt_cm(p.mean),
+                    _fmt_cm(p.median),
+                    _fmt_cm(p.p95_abs),
+                    _fmt_cm(p.max_abs),
+                    "pass" if p.passed else "FAIL",
+                ]
                 for p in rep.pairs
             ],
         ),
@@ -130,8 +148,14 @@ def run_swaths(ctx: RunContext, item: AnalysisItem) -> SectionResult:
             f"Smooth-surface repeatability (≤ {t['repeatability'] * 100:.0f} cm)",
             ["strip", "area (m²)", "RMSE (cm)", "median max−min (cm)", "p95 (cm)", "result"],
             [
-                [r.strip, round(r.area), _fmt_cm(r.rmse), _fmt_cm(r.median_range),
-                 _fmt_cm(r.p95_range), "pass" if r.passed else "FAIL"]
+                [
+                    r.strip,
+                    round(r.area),
+                    _fmt_cm(r.rmse),
+                    _fmt_cm(r.median_range),
+                    _fmt_cm(r.p95_range),
+                    "pass" if r.passed else "FAIL",
+                ]
                 for r in rep.repeatability
                 if r.n_cells
             ],
@@ -141,12 +165,17 @@ def run_swaths(ctx: RunContext, item: AnalysisItem) -> SectionResult:
     if offs:
         tables.append(
             Table(
-                "Strip offsets" + (f" (network, strip {rep.reference_strip} fixed)"
-                                   if rep.network_offsets else ""),
+                "Strip offsets"
+                + (f" (network, strip {rep.reference_strip} fixed)" if rep.network_offsets else ""),
                 ["strip − reference", "dx (cm)", "dy (cm)", "dz (cm)", "σ dx / dy / dz (cm)"],
                 [
-                    [f"{o.strip_b} − {o.strip_a}", _fmt_cm(o.dx), _fmt_cm(o.dy), _fmt_cm(o.dz),
-                     f"{_fmt_cm(o.sigma_dx)} / {_fmt_cm(o.sigma_dy)} / {_fmt_cm(o.sigma_dz)}"]
+                    [
+                        f"{o.strip_b} − {o.strip_a}",
+                        _fmt_cm(o.dx),
+                        _fmt_cm(o.dy),
+                        _fmt_cm(o.dz),
+                        f"{_fmt_cm(o.sigma_dx)} / {_fmt_cm(o.sigma_dy)} / {_fmt_cm(o.sigma_dz)}",
+                    ]
                     for o in offs
                 ],
                 note=f"E4 (strip height noise) = {_fmt_cm(rep.e4)} cm",

@@ -8,6 +8,8 @@ Scenes (every maker takes ``seed=`` and returns a :class:`Scene`):
 - :func:`make_terrain_scene`: bare terrain with break lines (ground tests).
 - :func:`make_plane_pair`, :func:`make_corner`: two planes at a given angle,
   three planes at a corner.
+- :func:`make_strip_scene`: overlapping flight strips over ground and hip roofs
+  with known per-strip offsets and height noise (:class:`StripScene`).
 
 A :class:`Scene` holds ``points``, ``classification`` (ASPRS), ``is_ground``,
 ``object_id``, ``plane_id``, ``planes`` (:class:`TruePlane`), ``edges``
@@ -44,6 +46,7 @@ from .scenes import (
     sample_checkpoints,
 )
 from .scoring import CornerScore, EdgeScore, score_corners, score_edges
+from .strips import StripScene, make_strip_scene
 
 __all__ = [
     "Scene",
@@ -64,4 +67,6 @@ __all__ = [
     "EdgeScore",
     "CornerScore",
     "cases",
+    "StripScene",
+    "make_strip_scene",
 ]

@@ -120,7 +120,12 @@ def make_strip_scene(
         offsets=off,
         noise=float(noise),
         params=dict(
-            n_strips=n_strips, density=density, length=length, strip_width=strip_width,
-            overlap=overlap, seed=seed, **surface,
+            n_strips=n_strips,
+            density=density,
+            length=length,
+            strip_width=strip_width,
+            overlap=overlap,
+            seed=seed,
+            **surface,
         ),
     )
