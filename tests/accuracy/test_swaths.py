@@ -202,3 +202,26 @@ def test_bad_options():
         assess_swaths(scene.points, scene.strip[:-1])
     with pytest.raises(InvalidPointsError):
         assess_swaths(scene.points, scene.strip.astype(float))
+
+
+def test_cell_planes_match_per_cell_lstsq_oracle():
+    """The batched normal equations against one plain lstsq per cell (random cloud)."""
+    rng = np.random.default_rng(1234)
+    pts = np.column_stack(
+        [rng.uniform(0, 6, 3000), rng.uniform(0, 4, 3000), rng.normal(50.0, 0.3, 3000)]
+    )
+    pts[:, 2] += 0.2 * pts[:, 0] - 0.1 * pts[:, 1]
+    grid = K.grid_for(pts[:, :2], 1.0)
+    keys, sums = K.cell_sums(pts, grid, 50.0)
+    planes = K.fit_cell_planes(keys, sums, 50.0, min_points=4, min_spread=0.0)
+    cell = grid.cell_of(pts[:, :2])
+    centres = grid.centres(keys)
+    for k, key in enumerate(keys):
+        p = pts[cell == key]
+        x = np.column_stack([np.ones(len(p)), p[:, 0] - centres[k, 0], p[:, 1] - centres[k, 1]])
+        coef, *_ = np.linalg.lstsq(x, p[:, 2], rcond=None)
+        r = p[:, 2] - x @ coef
+        assert planes.ok[k]
+        np.testing.assert_allclose([planes.a[k], planes.b[k], planes.c[k]], coef, rtol=0, atol=1e-9)
+        assert planes.rms[k] == pytest.approx(np.sqrt(r @ r / (len(p) - 3)), rel=1e-6)
+        assert planes.q00[k] == pytest.approx(np.linalg.inv(x.T @ x)[0, 0], rel=1e-9)
