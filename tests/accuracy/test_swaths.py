@@ -225,3 +225,15 @@ def test_cell_planes_match_per_cell_lstsq_oracle():
         np.testing.assert_allclose([planes.a[k], planes.b[k], planes.c[k]], coef, rtol=0, atol=1e-9)
         assert planes.rms[k] == pytest.approx(np.sqrt(r @ r / (len(p) - 3)), rel=1e-6)
         assert planes.q00[k] == pytest.approx(np.linalg.inv(x.T @ x)[0, 0], rel=1e-9)
+
+
+def test_strip_with_little_smooth_surface_is_not_judged():
+    scene = make_strip_scene(3, noise=0.02, seed=12)
+    p = scene.points
+    patch = (p[:, 0] < 3.0) & (p[:, 1] > 60.0) & (p[:, 1] < 63.0)
+    keep = (scene.strip != 3) | patch  # strip 3: a 3 m × 3 m patch only
+    rep = assess_swaths(scene.points[keep], scene.strip[keep], cell_size=1.0)
+    rep3 = next(r for r in rep.repeatability if r.strip == 3)
+    assert not rep3.assessed and rep3.n_cells < 10
+    assert all(r.assessed for r in rep.repeatability if r.strip != 3)
+    assert any("strip 3" in f for f in rep.flags)

@@ -131,6 +131,7 @@ class StripRepeatability:
     p95_range: float
     max_range: float
     passed: bool  # median_range within the level's smooth-surface threshold
+    assessed: bool = True  # False: too little smooth surface (< min_overlap_cells cells)
 
     def to_dict(self) -> dict[str, Any]:
         return {k: getattr(self, k) for k in self.__dataclass_fields__}
@@ -190,7 +191,9 @@ class SwathReport:
 
     @property
     def passed(self) -> bool:
-        return all(p.passed for p in self.pairs) and all(r.passed for r in self.repeatability)
+        return all(p.passed for p in self.pairs) and all(
+            r.passed for r in self.repeatability if r.assessed
+        )
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -376,7 +379,10 @@ def assess_swaths(
         st.sigma = float(np.sqrt(np.median(p.rms[off_ok] ** 2))) if off_ok.any() else np.nan
         n_c = int(smooth.sum())
         if n_c == 0:
-            repeat.append(StripRepeatability(st.id, 0, 0.0, np.nan, np.nan, np.nan, np.nan, False))
+            repeat.append(
+                StripRepeatability(st.id, 0, 0.0, np.nan, np.nan, np.nan, np.nan, False, False)
+            )
+            flags.append(f"strip {st.id}: no smooth surface, repeatability not assessed")
             continue
         _, ranges = K.residual_ranges(pts, grid, p, smooth)
         dof = np.maximum(p.n[smooth] - 3, 1)
@@ -392,8 +398,11 @@ def assess_swaths(
                 float(np.percentile(ranges, 95)),
                 float(ranges.max()),
                 bool(med <= thr_rep),
+                n_c >= min_overlap_cells,
             )
         )
+        if n_c < min_overlap_cells:
+            flags.append(f"strip {st.id}: only {n_c} smooth cells, repeatability not assessed")
 
     # ---- pairs
     pairs: list[PairDifference] = []

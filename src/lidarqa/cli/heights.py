@@ -121,7 +121,8 @@ def _measured_e4(pc: Any) -> float:
     if not np.isfinite(rep.e4):
         raise EstimationError(
             "--sigma-strip auto: the strip offsets could not be estimated ("
-            + "; ".join(rep.flags or ("too few matched planes",)) + ")"
+            + "; ".join(rep.flags or ("too few matched planes",))
+            + ")"
         )
     return float(rep.e4)
 

@@ -255,12 +255,14 @@ def swaths(
             f"{'pass' if p.passed else 'FAIL'}"
         )
     for r in rep.repeatability:
-        if r.n_cells:
+        if r.assessed:
             echo(
                 f"strip {r.strip}: repeatability RMSE {_cm(r.rmse)} cm, median max−min "
                 f"{_cm(r.median_range)} cm on {r.area:,.0f} m²  {'pass' if r.passed else 'FAIL'}"
             )
     for o in rep.network_offsets or rep.pair_offsets:
+        if o.strip_a == o.strip_b:  # the reference strip itself
+            continue
         echo(
             f"offset {o.strip_b} − {o.strip_a} ({o.method}): dx {o.dx * 100:+.1f} ± "
             f"{o.sigma_dx * 100:.1f}, dy {o.dy * 100:+.1f} ± {o.sigma_dy * 100:.1f}, dz "

@@ -88,7 +88,7 @@ def run_swaths(ctx: RunContext, item: AnalysisItem) -> SectionResult:
     res["max_rmsdz"] = max(finite) if finite else None
     res["max_abs_dz"] = max((p.max_abs for p in rep.pairs if np.isfinite(p.max_abs)), default=None)
     res["max_repeatability"] = max(
-        (r.median_range for r in rep.repeatability if np.isfinite(r.median_range)), default=None
+        (r.median_range for r in rep.repeatability if r.assessed), default=None
     )
     figures, outputs = [], []
     notes = list(rep.flags)
@@ -157,7 +157,7 @@ def run_swaths(ctx: RunContext, item: AnalysisItem) -> SectionResult:
                     "pass" if r.passed else "FAIL",
                 ]
                 for r in rep.repeatability
-                if r.n_cells
+                if r.assessed
             ],
         ),
     ]
@@ -177,13 +177,14 @@ def run_swaths(ctx: RunContext, item: AnalysisItem) -> SectionResult:
                         f"{_fmt_cm(o.sigma_dx)} / {_fmt_cm(o.sigma_dy)} / {_fmt_cm(o.sigma_dz)}",
                     ]
                     for o in offs
+                    if o.strip_a != o.strip_b or not rep.network_offsets
                 ],
                 note=f"E4 (strip height noise) = {_fmt_cm(rep.e4)} cm",
             )
         )
     worst = res["max_rmsdz"]
     overlap_ok = all(p.passed for p in rep.pairs)
-    repeat_ok = all(r.passed for r in rep.repeatability if r.n_cells)
+    repeat_ok = all(r.passed for r in rep.repeatability if r.assessed)
     headline = (
         f"{len(rep.pairs)} overlapping pair(s), worst RMSDz {_fmt_cm(worst)} cm, "
         f"E4 {_fmt_cm(rep.e4)} cm; {rep.quality_level}: overlap "
