@@ -12,17 +12,20 @@ from lidarqa.testing.strips import make_strip_scene, strip_surface_z
 
 
 def _cell_q00(points: np.ndarray, cell_size: float, centres: np.ndarray) -> np.ndarray:
-    """Oracle: (XᵀX)⁻¹[0,0] of a plane fit per cell, one plain lstsq design per cell."""
+    """Oracle: (XᵀX)⁻¹[0,0] of a plane fit per cell, one plain design matrix per cell."""
+    h = 0.5 * cell_size
+    corner = centres.min(axis=0) - h
+    ij = np.floor((points[:, :2] - corner) / cell_size).astype(np.int64)
+    cij = np.floor((centres - corner) / cell_size).astype(np.int64)
+    key = ij[:, 0] * 1_000_003 + ij[:, 1]
+    order = np.argsort(key, kind="stable")
+    sorted_key = key[order]
     out = np.empty(len(centres))
-    for k, (cx, cy) in enumerate(centres):
-        h = 0.5 * cell_size
-        sel = (
-            (points[:, 0] >= cx - h)
-            & (points[:, 0] < cx + h)
-            & (points[:, 1] >= cy - h)
-            & (points[:, 1] < cy + h)
-        )
-        x = np.column_stack([np.ones(sel.sum()), points[sel, 0] - cx, points[sel, 1] - cy])
+    for k, ((cx, cy), (ci, cj)) in enumerate(zip(centres, cij, strict=True)):
+        want = ci * 1_000_003 + cj
+        lo, hi = np.searchsorted(sorted_key, [want, want + 1])
+        p = points[order[lo:hi]]
+        x = np.column_stack([np.ones(len(p)), p[:, 0] - cx, p[:, 1] - cy])
         out[k] = np.linalg.inv(x.T @ x)[0, 0]
     return out
 

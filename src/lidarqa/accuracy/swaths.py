@@ -79,7 +79,7 @@ QUALITY_LEVELS: dict[str, tuple[float, float, float]] = {
     "QL2": (0.06, 0.08, 0.16),
     "QL3": (0.12, 0.16, 0.32),
 }
-#: IGN LiDAR HD and most current ALS deliveries are specified at QL1 or better.
+#: Default level: QL1 (≥ 8 pts/m², the density class of IGN LiDAR HD and most current ALS).
 DEFAULT_QUALITY_LEVEL = "QL1"
 
 CELL_TARGET_POINTS = 16  # auto cell size: about this many points per strip and cell
