@@ -464,12 +464,19 @@ def assess_swaths(
                         passes_max=bool(ad.max() <= thr_max),
                     )
                 )
-                if return_grids:
-                    img = np.full(grid.ny * grid.nx, np.nan, dtype=np.float32)
-                    img[common[smooth]] = dz
-                    img = img.reshape(grid.ny, grid.nx)[::-1]
+                if return_grids:  # cropped to the pair's overlap (rows: north first)
+                    iy, ix = np.divmod(common, grid.nx)
+                    r0, r1, c0, c1 = iy.min(), iy.max(), ix.min(), ix.max()
+                    img = np.full((r1 - r0 + 1, c1 - c0 + 1), np.nan, dtype=np.float32)
+                    img[r1 - iy[smooth], ix[smooth] - c0] = dz
                     grids.append(
-                        DzGrid(*sid, grid.x0, grid.y0 + grid.ny * cell_size, cell_size, img)
+                        DzGrid(
+                            *sid,
+                            grid.x0 + c0 * cell_size,
+                            grid.y0 + (r1 + 1) * cell_size,
+                            cell_size,
+                            img,
+                        )
                     )
             if estimate_offsets:
                 with np.errstate(invalid="ignore"):
