@@ -27,8 +27,8 @@ def plot_dz_map(grid: Any, *, vmax: float = 0.16, title: str | None = None) -> b
     plt = _plt()
     fig, ax = plt.subplots(figsize=(6.4, 5.2))
     rows, cols = grid.dz.shape
-    extent = (0.0, cols * grid.cell_size, -rows * grid.cell_size, 0.0)
-    cmap = plt.get_cmap("RdBu_r").with_extremes(bad="#eeeeee")
+    extent = (0.0, cols * grid.cell_size, 0.0, rows * grid.cell_size)
+    cmap = plt.get_cmap("RdBu_r").with_extremes(bad="#c8c8c8")
     im = ax.imshow(
         np.ma.masked_invalid(grid.dz),
         cmap=cmap,
@@ -39,7 +39,7 @@ def plot_dz_map(grid: Any, *, vmax: float = 0.16, title: str | None = None) -> b
     )
     ax.set_aspect("equal")
     ax.set_xlabel(f"x − {grid.x0:,.0f} (m)")
-    ax.set_ylabel(f"y − {grid.y1:,.0f} (m)")
+    ax.set_ylabel(f"y − {grid.y1 - rows * grid.cell_size:,.0f} (m)")
     ax.set_title(title or f"dz = strip {grid.strip_b} − strip {grid.strip_a}")
     fig.colorbar(im, ax=ax, label="dz (m)", shrink=0.85)
     return _png(fig)
