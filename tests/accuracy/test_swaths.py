@@ -39,7 +39,9 @@ def _analytic_rmsdz(scene, report, pair) -> tuple[float, float]:
     qa = _cell_q00(scene.points[scene.strip == pair[0]], cs, centres)
     qb = _cell_q00(scene.points[scene.strip == pair[1]], cs, centres)
     var_cell = scene.noise**2 * (qa + qb)
-    dz_true = scene.offset(*pair)[2]  # smooth cells are flat enough that dx, dy do not leak
+    # smooth cells are all ground (z = z0 + 0.01 x): a shift dx changes its height by -0.01 dx
+    t = scene.offset(*pair)
+    dz_true = t[2] - scene.params.get("ground_slope", 0.01) * t[0]
     return float(np.sqrt(dz_true**2 + var_cell.mean())), float(np.sqrt(0.5 * var_cell.mean()))
 
 
@@ -79,6 +81,9 @@ def test_three_strip_network_recovers_every_strip():
     rep = assess_swaths(scene.points, scene.strip, cell_size=1.0, reference_strip=1)
     assert rep.reference_strip == 1
     assert [(p.strip_a, p.strip_b) for p in rep.pairs] == [(1, 2), (2, 3)]  # 1 and 3 do not meet
+    for p in rep.pairs:
+        expected, _ = _analytic_rmsdz(scene, rep, (p.strip_a, p.strip_b))
+        assert p.rmsdz == pytest.approx(expected, rel=0.05)
     net = {o.strip_b: o for o in rep.network_offsets}
     assert set(net) == {1, 2, 3}
     for s in (2, 3):
