@@ -245,3 +245,13 @@ def test_strip_with_little_smooth_surface_is_not_judged():
     assert not rep3.assessed and rep3.n_cells < 10
     assert all(r.assessed for r in rep.repeatability if r.strip != 3)
     assert any("strip 3" in f for f in rep.flags)
+
+
+def test_surface_class_mask_defaults_and_fallback():
+    from lidarqa.accuracy.swaths import surface_class_mask
+
+    cls = np.array([1, 2, 5, 6, 7, 17])
+    np.testing.assert_array_equal(surface_class_mask(cls, 6), [0, 1, 0, 1, 0, 0])
+    unclassified = np.array([0, 1, 1, 7, 18])
+    np.testing.assert_array_equal(surface_class_mask(unclassified, 5), [1, 1, 1, 0, 0])
+    assert surface_class_mask(None, 3).all()

@@ -68,6 +68,8 @@ __all__ = [
     "SwathReport",
     "assess_swaths",
     "last_return_mask",
+    "surface_class_mask",
+    "SURFACE_CLASSES",
     "auto_cell_size",
 ]
 
@@ -221,6 +223,22 @@ def last_return_mask(fields: dict[str, np.ndarray], n: int) -> np.ndarray:
     rn, nr = np.asarray(rn), np.asarray(nr)
     keep = (rn == nr) | (nr == 0)
     return keep
+
+
+#: Classes compared by default: ground and buildings (hard surfaces). Unclassified points
+#: hold vehicles and other objects that move between passes, vegetation is not smooth.
+SURFACE_CLASSES = (2, 6)
+#: Never compared: noise (7, 18) and IGN's artefact/virtual/other classes.
+EXCLUDED_CLASSES = (7, 18, 64, 65, 66, 67)
+
+
+def surface_class_mask(classification: np.ndarray | None, n: int) -> np.ndarray:
+    """Points of :data:`SURFACE_CLASSES`; if there are none (unclassified data), all but noise."""
+    if classification is None:
+        return np.ones(n, dtype=bool)
+    cls = np.asarray(classification)
+    keep = np.isin(cls, SURFACE_CLASSES)
+    return keep if keep.any() else ~np.isin(cls, EXCLUDED_CLASSES)
 
 
 def auto_cell_size(

@@ -101,20 +101,17 @@ class _SigmaStrip(click.ParamType):
 
 
 def _measured_e4(pc: Any) -> float:
-    """E4 from the overlaps of the cloud's strips (all classes but noise, last returns)."""
-    from ..accuracy.swaths import assess_swaths, last_return_mask
+    """E4 from the overlaps of the cloud's strips (ground and buildings, last returns)."""
+    from ..accuracy.swaths import assess_swaths, last_return_mask, surface_class_mask
     from ..errors import EstimationError, InvalidPointsError
     from ..io.crs import z_to_metres_factor
-    from .swaths import DEFAULT_EXCLUDED
 
     sid = pc.point_source_id
     if sid is None:
         raise InvalidPointsError(
             "--sigma-strip auto needs the cloud's point_source_id (flight strips); it has none"
         )
-    keep = last_return_mask(pc.fields, len(pc))
-    if pc.classification is not None:
-        keep &= ~np.isin(pc.classification, DEFAULT_EXCLUDED)
+    keep = last_return_mask(pc.fields, len(pc)) & surface_class_mask(pc.classification, len(pc))
     xyz = pc.xyz[keep].copy()
     xyz[:, 2] *= z_to_metres_factor(pc.crs)
     rep = assess_swaths(xyz, np.asarray(sid)[keep].astype(np.int64), return_grids=False)

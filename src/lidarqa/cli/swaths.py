@@ -13,9 +13,6 @@ import numpy as np
 from ..accuracy.swaths import DEFAULT_QUALITY_LEVEL, QUALITY_LEVELS
 from ._common import INT_LIST, Steps, common_options, echo, finish, settings
 
-#: Classes left out by default: noise (7, 18) and IGN's artefact/virtual/other classes.
-DEFAULT_EXCLUDED = (7, 18, 64, 65, 66, 67)
-
 
 def load_strips(
     files: tuple[str, ...],
@@ -27,10 +24,11 @@ def load_strips(
     """Read FILES into points, strip ids, CRS and a strip -> label map.
 
     One strip per file, or per ``point_source_id`` with `by_source_id`. Keeps
-    last/single returns unless `all_returns`, and `classes` (default: every
-    class except noise and IGN's artefact classes). Heights are in metres.
+    last/single returns unless `all_returns`, and `classes` (default: ground
+    and buildings, :func:`~lidarqa.accuracy.swaths.surface_class_mask`). Heights
+    are in metres.
     """
-    from ..accuracy.swaths import last_return_mask
+    from ..accuracy.swaths import last_return_mask, surface_class_mask
     from ..errors import InvalidPointsError
     from ..io import read
     from ..io.crs import ensure_same_crs, z_to_metres_factor
@@ -45,7 +43,7 @@ def load_strips(
         keep = np.ones(len(pc), dtype=bool) if all_returns else last_return_mask(pc.fields, len(pc))
         cls = pc.classification
         if cls is not None:
-            keep &= np.isin(cls, classes) if classes else ~np.isin(cls, DEFAULT_EXCLUDED)
+            keep &= np.isin(cls, classes) if classes else surface_class_mask(cls, len(pc))
         elif classes:
             raise InvalidPointsError(f"{path} has no classification; cannot select --classes")
         if by_source_id:
@@ -122,7 +120,12 @@ def _cm(v: float | None) -> str:
     show_default=True,
     help="Smooth surface for dz: slope at most this (degrees).",
 )
-@click.option("--classes", type=INT_LIST, default=None, help="Use only these classes, e.g. 2,6.")
+@click.option(
+    "--classes",
+    type=INT_LIST,
+    default=None,
+    help="Compare these classes [default: 2,6 (ground, buildings); all but noise if absent].",
+)
 @click.option("--all-returns", is_flag=True, help="Use every return, not only last/single.")
 @click.option("--rotations", is_flag=True, help="Also estimate small rotations per strip.")
 @click.option("--no-offsets", is_flag=True, help="Skip the strip offsets.")

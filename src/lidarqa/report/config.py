@@ -408,7 +408,7 @@ ANALYSIS_KEYS: dict[str, dict[str, Key]] = {
     },
     "swaths": {
         "cloud": Key("str", required=True, help="name of a cloud in [inputs.clouds]"),
-        "classes": Key("int_list", default=None, help="classes compared (default: not noise)"),
+        "classes": Key("int_list", default=None, help="classes compared (default: 2 and 6)"),
         "source_ids": Key("int_list", default=None, help="strips compared (default: all)"),
         "last_returns": Key("bool", default=True, help="only last/single returns"),
     },

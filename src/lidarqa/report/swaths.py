@@ -65,7 +65,7 @@ def _fmt_cm(v: Any) -> str:
 @register("swaths", _params)
 def run_swaths(ctx: RunContext, item: AnalysisItem) -> SectionResult:
     """Overlap differences, repeatability and offsets of the strips of one cloud."""
-    from ..accuracy.swaths import assess_swaths, last_return_mask
+    from ..accuracy.swaths import assess_swaths, last_return_mask, surface_class_mask
     from ..errors import AnalysisError
     from ..io.crs import z_to_metres_factor
 
@@ -77,8 +77,8 @@ def run_swaths(ctx: RunContext, item: AnalysisItem) -> SectionResult:
     keep = last_return_mask(cloud.fields, len(cloud)) if opts["last_returns"] else None
     if keep is None:
         keep = np.ones(len(cloud), dtype=bool)
-    if opts["classes"] is None and cloud.classification is not None:
-        keep &= ~np.isin(cloud.classification, (7, 18, 64, 65, 66, 67))
+    if opts["classes"] is None:
+        keep &= surface_class_mask(cloud.classification, len(cloud))
     xyz = cloud.xyz[keep].copy()
     xyz[:, 2] *= z_to_metres_factor(cloud.crs)
     with ctx.step(f"Comparing flight strips ({len(xyz):,} points)"):
