@@ -282,12 +282,19 @@ def _write_pairs(r: Any, path: Any) -> None:
     default=None,
     help="With --by-source-id: only these strips, e.g. 4320,4330.",
 )
+@click.option(
+    "--shared-threshold",
+    is_flag=True,
+    help="One automatic threshold for every pair: the knee of all pairs' nearest distances "
+    "pooled (passes of one survey get the same answer).",
+)
 @_matching_options
 @common_options
 def repeatability(
     files: tuple[str, ...],
     by_source_id: bool,
     source_id: list[int] | None,
+    shared_threshold: bool,
     weight: float,
     sensitivity: float,
     threshold: float | None,
@@ -322,6 +329,30 @@ def repeatability(
             f"repeatability needs at least two passes, got {len(passes)}"
             + ("" if by_source_id else " (use --by-source-id for the strips of one file)")
         )
+    if shared_threshold and threshold is not None:
+        raise OptionError("--shared-threshold computes the threshold; do not also give --threshold")
+    shared = None
+    if shared_threshold:
+        import numpy as np
+
+        from ..accuracy.lines import auto_threshold
+
+        pooled = []
+        for _, (_, a), (_, b) in steps.track(todo, "Pooling nearest distances"):
+            if isinstance(a, Exception) or isinstance(b, Exception):
+                continue
+            try:
+                r0 = match_segments(a, b, weight=weight, sensitivity=sensitivity, rotate=rotate)
+            except LidarQAError:
+                continue
+            pooled += [r0.nearest_tm, r0.nearest_mt]
+        if pooled:
+            shared = auto_threshold(np.concatenate(pooled), sensitivity=sensitivity)
+            threshold = shared.threshold
+            echo(
+                f"shared threshold δ = {threshold:.3f} m from {sum(map(len, pooled))} nearest "
+                f"distances ({'knee' if shared.found else 'no knee: largest distance'})"
+            )
     rows: list[dict] = []
     for group, (na, a), (nb, b) in steps.track(todo, "Matching pass pairs"):
         row: dict[str, Any] = (
@@ -390,6 +421,7 @@ def repeatability(
             "weight": weight,
             "sensitivity": sensitivity,
             "threshold": threshold,
+            "shared_threshold": shared_threshold,
             "rotate": rotate,
             "denominator": denominator,
             "classes": classes,
