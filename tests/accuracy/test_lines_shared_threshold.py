@@ -7,6 +7,7 @@ import json
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from datapaths import SHARED, needs_shared
 
 from lidarqa.accuracy.lines import auto_threshold, match_segments
 from lidarqa.cli.main import cli
@@ -62,3 +63,32 @@ def test_shared_threshold_conflicts_with_a_fixed_one(tmp_path):
         cli, ["repeatability", *map(str, paths), "--shared-threshold", "--threshold", "0.5"]
     )
     assert r.exit_code == 1 and "--shared-threshold" in r.output
+
+
+@needs_shared
+def test_outlines_raise_strip_pairs_on_an_ign_tile(tmp_path):
+    f = SHARED / "ign-lidarhd" / "test_data_77055_627755_LA93_IGN69.laz"
+    counts = []
+    for extra in ([], ["--outlines"]):
+        out = tmp_path / f"r{len(extra)}.json"
+        r = CliRunner().invoke(
+            cli,
+            [
+                "repeatability",
+                str(f),
+                "--by-source-id",
+                "--classes",
+                "6",
+                "--threshold",
+                "0.5",
+                "-q",
+                "--json",
+                str(out),
+                *extra,
+            ],
+        )
+        assert r.exit_code == 0, r.output
+        (row,) = json.loads(out.read_text())["results"]
+        counts.append(row["n_pairs_tm"])
+        assert row["lhd"] < 0.5
+    assert counts[1] >= 10 > counts[0]

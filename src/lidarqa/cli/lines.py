@@ -283,6 +283,12 @@ def _write_pairs(r: Any, path: Any) -> None:
     help="With --by-source-id: only these strips, e.g. 4320,4330.",
 )
 @click.option(
+    "--outlines",
+    is_flag=True,
+    help="Also use roof-plane outlines (stand-ins for roof-wall and step edges, which airborne "
+    "scans leave without a wall plane): many more lines per strip pair.",
+)
+@click.option(
     "--shared-threshold",
     is_flag=True,
     help="One automatic threshold for every pair: the knee of all pairs' nearest distances "
@@ -294,6 +300,7 @@ def repeatability(
     files: tuple[str, ...],
     by_source_id: bool,
     source_id: list[int] | None,
+    outlines: bool,
     shared_threshold: bool,
     weight: float,
     sensitivity: float,
@@ -318,7 +325,11 @@ def repeatability(
     steps = Steps()
     with steps("Reading passes and extracting edges"):
         passes = load_passes(
-            list(files), by_source_id=by_source_id, classes=classes, source_id=source_id
+            list(files),
+            by_source_id=by_source_id,
+            classes=classes,
+            source_id=source_id,
+            edge_options={"outlines": True} if outlines else None,
         )
     groups: dict[str, list] = {}
     for group, name, seg in passes:
@@ -422,6 +433,7 @@ def repeatability(
             "sensitivity": sensitivity,
             "threshold": threshold,
             "shared_threshold": shared_threshold,
+            "outlines": outlines,
             "rotate": rotate,
             "denominator": denominator,
             "classes": classes,
