@@ -9,7 +9,7 @@ import pytest
 from click.testing import CliRunner
 from datapaths import SHARED, needs_shared
 
-from lidarqa.accuracy.lines import auto_threshold, match_segments
+from lidarqa.accuracy.lines import match_segments
 from lidarqa.cli.main import cli
 from lidarqa.io.vector import Segments, read_segments, write_segments
 
@@ -29,7 +29,7 @@ def _passes(tmp_path, n_files=3, seed=0):
     return paths
 
 
-def test_shared_threshold_is_the_knee_of_pooled_distances(tmp_path):
+def test_shared_threshold_is_the_median_of_pair_thresholds(tmp_path):
     paths = _passes(tmp_path)
     r = CliRunner().invoke(
         cli,
@@ -46,11 +46,19 @@ def test_shared_threshold_is_the_knee_of_pooled_distances(tmp_path):
     rows = json.loads((tmp_path / "r.json").read_text())["results"]
     assert len(rows) == 3
     segs = [read_segments(p) for p in paths]
-    pooled = []
+    knees = []
     for i, j in ((0, 1), (0, 2), (1, 2)):
         m = match_segments(segs[i], segs[j])
-        pooled += [m.nearest_tm, m.nearest_mt]
-    delta = auto_threshold(np.concatenate(pooled)).threshold
+        knees += [
+            t
+            for t, ok in (
+                (m.threshold_tm, m.threshold_found_tm),
+                (m.threshold_mt, m.threshold_found_mt),
+            )
+            if ok
+        ]
+    assert knees
+    delta = float(np.median(knees))
     for row in rows:
         assert row["threshold_tm"] == pytest.approx(delta)
         assert row["threshold_mt"] == pytest.approx(delta)

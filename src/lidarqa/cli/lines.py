@@ -291,8 +291,8 @@ def _write_pairs(r: Any, path: Any) -> None:
 @click.option(
     "--shared-threshold",
     is_flag=True,
-    help="One automatic threshold for every pair: the knee of all pairs' nearest distances "
-    "pooled (passes of one survey get the same answer).",
+    help="One automatic threshold for every pair: the median of the pairs' own automatic "
+    "thresholds (passes of one survey get the same answer).",
 )
 @_matching_options
 @common_options
@@ -342,28 +342,23 @@ def repeatability(
         )
     if shared_threshold and threshold is not None:
         raise OptionError("--shared-threshold computes the threshold; do not also give --threshold")
-    shared = None
     if shared_threshold:
         import numpy as np
 
-        from ..accuracy.lines import auto_threshold
-
-        pooled = []
-        for _, (_, a), (_, b) in steps.track(todo, "Pooling nearest distances"):
+        knees = []
+        for _, (_, a), (_, b) in steps.track(todo, "Finding each pair's threshold"):
             if isinstance(a, Exception) or isinstance(b, Exception):
                 continue
             try:
                 r0 = match_segments(a, b, weight=weight, sensitivity=sensitivity, rotate=rotate)
             except LidarQAError:
                 continue
-            pooled += [r0.nearest_tm, r0.nearest_mt]
-        if pooled:
-            shared = auto_threshold(np.concatenate(pooled), sensitivity=sensitivity)
-            threshold = shared.threshold
-            echo(
-                f"shared threshold δ = {threshold:.3f} m from {sum(map(len, pooled))} nearest "
-                f"distances ({'knee' if shared.found else 'no knee: largest distance'})"
-            )
+            knees += [t for t, ok in ((r0.threshold_tm, r0.threshold_found_tm),
+                                      (r0.threshold_mt, r0.threshold_found_mt)) if ok]
+        if not knees:
+            raise OptionError("--shared-threshold: no pair has an automatic threshold (no knee)")
+        threshold = float(np.median(knees))
+        echo(f"shared threshold δ = {threshold:.3f} m: median of {len(knees)} pair thresholds")
     rows: list[dict] = []
     for group, (na, a), (nb, b) in steps.track(todo, "Matching pass pairs"):
         row: dict[str, Any] = (
