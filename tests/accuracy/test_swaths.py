@@ -255,3 +255,11 @@ def test_surface_class_mask_defaults_and_fallback():
     unclassified = np.array([0, 1, 1, 7, 18])
     np.testing.assert_array_equal(surface_class_mask(unclassified, 5), [1, 1, 1, 0, 0])
     assert surface_class_mask(None, 3).all()
+
+
+def test_cluster_robust_sigma_close_to_formal_for_independent_noise():
+    scene = make_strip_scene(2, offsets=[[0, 0, 0], [0.02, 0.01, 0.03]], length=200.0, seed=13)
+    (o,) = assess_swaths(scene.points, scene.strip, cell_size=1.0).pair_offsets
+    formal = np.array([o.sigma_dx, o.sigma_dy, o.sigma_dz])
+    ratio = np.array(o.sigma_robust) / formal
+    assert np.all((ratio > 0.6) & (ratio < 1.5)), ratio  # ~40 blocks of 10 m: a noisy estimate

@@ -49,7 +49,7 @@ per chunk and solve once.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -86,6 +86,7 @@ DEFAULT_QUALITY_LEVEL = "QL1"
 
 CELL_TARGET_POINTS = 16  # auto cell size: about this many points per strip and cell
 MIN_OFFSET_OBS = 10
+CLUSTER_SIZE = 10.0  # m: blocks of cells for the cluster-robust σ of pair offsets
 
 
 def _f(v: Any) -> float | None:
@@ -156,6 +157,10 @@ class StripOffset:
     n_obs: int
     sigma0: float  # a-posteriori σ of unit weight (≈ 1 if the weights are right)
     method: str  # "pair" (this pair alone) or "network" (whole block)
+    # σ (dx, dy, dz) from the spread of the residuals between 10 m blocks (cluster-robust);
+    # larger than the formal σ when neighbouring cells share errors (roof faces that are not
+    # planar, local strip deformation). Pairs only.
+    sigma_robust: tuple[float, float, float] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {k: getattr(self, k) for k in self.__dataclass_fields__}
@@ -530,7 +535,9 @@ def assess_swaths(
                     cgl = np.zeros((len(g), u))
                     cgl[:, :2] = -0.5 * (sb2 * qb[:, 0, 1:] - sa2 * qa[:, 0, 1:])
                     flat = ((sa <= tan_smooth**2) & (sb <= tan_smooth**2))[use]
-                    obs[(i, j)] = (g, dz_all[use], 1.0 / var, flat, cg, cgl)
+                    block = np.floor(xy / CLUSTER_SIZE).astype(np.int64)
+                    cluster = np.unique(block, axis=0, return_inverse=True)[1].ravel()
+                    obs[(i, j)] = (g, dz_all[use], 1.0 / var, flat, cg, cgl, cluster)
     if not pairs:
         raise DegenerateGeometryError(
             f"no two of the strips {', '.join(map(str, ids))} overlap (fewer than "
@@ -548,7 +555,7 @@ def assess_swaths(
     e4 = np.nan
     if estimate_offsets:
         kept = {}
-        for (i, j), (g, obs_dz, w, flat, cg, cgl) in obs.items():
+        for (i, j), (g, obs_dz, w, flat, cg, cgl, cluster) in obs.items():
             keep = _robust_keep(g, obs_dz, w)
             g, obs_dz, w, flat, cg, cgl = (
                 g[keep],
@@ -563,9 +570,9 @@ def assess_swaths(
             sol = _solve(kept[(i, j)])
             if sol is not None:
                 x, cov, s0 = sol
-                pair_offsets.append(
-                    _offset(strips[i].id, strips[j].id, x, cov, len(g), s0, rotations, "pair")
-                )
+                off = _offset(strips[i].id, strips[j].id, x, cov, len(g), s0, rotations, "pair")
+                robust = _cluster_sigma(g, obs_dz, w, x, kept[(i, j)][0], cluster[keep])
+                pair_offsets.append(replace(off, sigma_robust=robust))
         if kept:
             counts = np.array([len(s.planes.keys) for s in strips])
             if reference_strip is None:
@@ -680,6 +687,28 @@ def _solve(
     x = inv @ rhs
     s0 = float(np.sqrt(max(ll - x @ rhs, 0.0) / (m - u)))
     return x, inv * s0**2, s0
+
+
+def _cluster_sigma(
+    g: np.ndarray,
+    obs_dz: np.ndarray,
+    w: np.ndarray,
+    x: np.ndarray,
+    n_mat: np.ndarray,
+    cluster: np.ndarray,
+) -> tuple[float, float, float] | None:
+    """Cluster-robust (sandwich) σ of dx, dy, dz: residual scores summed per block."""
+    cluster = np.unique(cluster, return_inverse=True)[1].ravel()
+    n_cl = int(cluster.max()) + 1 if len(cluster) else 0
+    if n_cl < 5:
+        return None
+    score = g * (w * (obs_dz - g @ x))[:, None]
+    per = np.zeros((n_cl, g.shape[1]))
+    np.add.at(per, cluster, score)
+    bread = np.linalg.inv(n_mat)
+    cov = bread @ (per.T @ per) @ bread * n_cl / (n_cl - 1)
+    sd = np.sqrt(np.maximum(np.diag(cov)[:3], 0.0))
+    return (float(sd[0]), float(sd[1]), float(sd[2]))
 
 
 def _offset(

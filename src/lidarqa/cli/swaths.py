@@ -229,7 +229,11 @@ def swaths(
             "pairs.csv": [p.to_dict() for p in rep.pairs],
             "repeatability.csv": [r.to_dict() for r in rep.repeatability],
             "offsets.csv": [
-                {k: v for k, v in o.to_dict().items() if k not in ("rotations", "sigma_rotations")}
+                {
+                    k: v
+                    for k, v in o.to_dict().items()
+                    if k not in ("rotations", "sigma_rotations", "sigma_robust")
+                }
                 | _rot_cols(o)
                 for o in (*rep.pair_offsets, *rep.network_offsets)
             ],
@@ -292,7 +296,11 @@ def swaths(
 def _rot_cols(o: Any) -> dict[str, Any]:
     r = o.rotations or (None, None, None)
     sr = o.sigma_rotations or (None, None, None)
+    rb = o.sigma_robust or (None, None, None)
     return {
+        "sigma_robust_dx": rb[0],
+        "sigma_robust_dy": rb[1],
+        "sigma_robust_dz": rb[2],
         "rot_x_deg": r[0],
         "rot_y_deg": r[1],
         "rot_z_deg": r[2],
