@@ -97,10 +97,10 @@ def test_three_strip_network_recovers_every_strip():
 
 
 def test_sigma_calibrated_by_monte_carlo():
-    """Reported σ over the empirical spread of 300 independent scenes: within [0.9, 1.1]."""
+    """Reported σ over the empirical spread of 600 independent scenes: within [0.9, 1.1]."""
     truth = [[0.0, 0.0, 0.0], [0.03, -0.02, 0.02]]
     est, sig = [], []
-    for seed in range(300):
+    for seed in range(600):
         scene = make_strip_scene(
             2, offsets=truth, noise=0.03, length=50.0, strip_width=40.0, seed=seed
         )
