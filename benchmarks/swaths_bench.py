@@ -114,7 +114,7 @@ def speed() -> None:
 
 
 def real() -> None:
-    from lidarqa.accuracy.swaths import assess_swaths, last_return_mask
+    from lidarqa.accuracy.swaths import assess_swaths, last_return_mask, surface_class_mask
     from lidarqa.io import read
 
     files = sorted(SHARED.glob("*.laz"))
@@ -122,9 +122,7 @@ def real() -> None:
         sys.exit(f"no data in {SHARED}")
     for f in files:
         pc = read(f)
-        keep = last_return_mask(pc.fields, len(pc)) & ~np.isin(
-            pc.classification, (1, 7, 18, 64, 65, 66, 67)
-        )
+        keep = last_return_mask(pc.fields, len(pc)) & surface_class_mask(pc.classification, len(pc))
         sid = np.asarray(pc.point_source_id)
         keep &= sid != 0
         t0 = time.perf_counter()
@@ -145,7 +143,8 @@ def real() -> None:
             )
         for o in rep.pair_offsets:
             print(
-                f"  offset {o.strip_a}->{o.strip_b}: dx {o.dx:+.3f}±{o.sigma_dx:.3f} dy "
+                f"  offset {o.strip_a}->{o.strip_b} (robust σ {_cm3(o.sigma_robust)}): "
+                f"dx {o.dx:+.3f}±{o.sigma_dx:.3f} dy "
                 f"{o.dy:+.3f}±{o.sigma_dy:.3f} dz {o.dz:+.3f}±{o.sigma_dz:.3f} (n {o.n_obs})"
             )
         for r in rep.repeatability:
@@ -153,6 +152,10 @@ def real() -> None:
                 f"  strip {r.strip}: RMSE {r.rmse:.3f} median range {r.median_range:.3f} "
                 f"area {r.area:.0f}"
             )
+
+
+def _cm3(v):
+    return "n/a" if v is None else "/".join(f"{x:.3f}" for x in v)
 
 
 def main() -> None:
