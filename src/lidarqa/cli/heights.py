@@ -103,7 +103,7 @@ class _SigmaStrip(click.ParamType):
 def _measured_e4(pc: Any) -> float:
     """E4 from the overlaps of the cloud's strips (ground and buildings, last returns)."""
     from ..accuracy.swaths import assess_swaths, last_return_mask, surface_class_mask
-    from ..errors import EstimationError, InvalidPointsError
+    from ..errors import DegenerateGeometryError, EstimationError, InvalidPointsError
     from ..io.crs import z_to_metres_factor
 
     sid = pc.point_source_id
@@ -114,7 +114,10 @@ def _measured_e4(pc: Any) -> float:
     keep = last_return_mask(pc.fields, len(pc)) & surface_class_mask(pc.classification, len(pc))
     xyz = pc.xyz[keep].copy()
     xyz[:, 2] *= z_to_metres_factor(pc.crs)
-    rep = assess_swaths(xyz, np.asarray(sid)[keep].astype(np.int64), return_grids=False)
+    try:
+        rep = assess_swaths(xyz, np.asarray(sid)[keep].astype(np.int64), return_grids=False)
+    except (InvalidPointsError, DegenerateGeometryError) as exc:
+        raise type(exc)(f"--sigma-strip auto: {exc}") from exc
     if not np.isfinite(rep.e4):
         raise EstimationError(
             "--sigma-strip auto: the strip offsets could not be estimated ("
