@@ -283,6 +283,12 @@ def _write_pairs(r: Any, path: Any) -> None:
     help="With --by-source-id: only these strips, e.g. 4320,4330.",
 )
 @click.option(
+    "--pool",
+    is_flag=True,
+    help="With --by-source-id: one pass per strip across all FILES (neighbouring tiles of one "
+    "survey), so each strip pair is compared once over the whole block.",
+)
+@click.option(
     "--outlines",
     is_flag=True,
     help="Also use roof-plane outlines (stand-ins for roof-wall and step edges, which airborne "
@@ -300,6 +306,7 @@ def repeatability(
     files: tuple[str, ...],
     by_source_id: bool,
     source_id: list[int] | None,
+    pool: bool,
     outlines: bool,
     shared_threshold: bool,
     weight: float,
@@ -312,16 +319,19 @@ def repeatability(
     """Compare every pair of passes both ways: a table like Poreba & Goulette's Table 1.
 
     Passes are FILES (segment files or clouds, all compared with each other), or with
-    --by-source-id the flight strips of each cloud (compared within each file). The
-    final LHD of each pair is marked with *.
+    --by-source-id the flight strips of each cloud (compared within each file; with
+    --pool, across all files: neighbouring tiles of a survey hold too few shared edges
+    each for a stable automatic threshold). The final LHD of each pair is marked with *.
     """
-    from ..accuracy._lines_io import load_passes
+    from ..accuracy._lines_io import load_passes, pool_passes
     from ..accuracy.lines import match_segments
     from ..errors import CRSMismatchError, LidarQAError, OptionError
 
     prepare_outputs(inputs=files)
     if source_id is not None and not by_source_id:
         raise OptionError("--source-id selects strips and needs --by-source-id")
+    if pool and not by_source_id:
+        raise OptionError("--pool joins the strips of several files and needs --by-source-id")
     steps = Steps()
     with steps("Reading passes and extracting edges"):
         passes = load_passes(
@@ -331,6 +341,8 @@ def repeatability(
             source_id=source_id,
             edge_options={"outlines": True} if outlines else None,
         )
+    if pool:
+        passes = pool_passes(passes)
     groups: dict[str, list] = {}
     for group, name, seg in passes:
         groups.setdefault(group, []).append((name, seg))
@@ -353,8 +365,14 @@ def repeatability(
                 r0 = match_segments(a, b, weight=weight, sensitivity=sensitivity, rotate=rotate)
             except LidarQAError:
                 continue
-            knees += [t for t, ok in ((r0.threshold_tm, r0.threshold_found_tm),
-                                      (r0.threshold_mt, r0.threshold_found_mt)) if ok]
+            knees += [
+                t
+                for t, ok in (
+                    (r0.threshold_tm, r0.threshold_found_tm),
+                    (r0.threshold_mt, r0.threshold_found_mt),
+                )
+                if ok
+            ]
         if not knees:
             raise OptionError("--shared-threshold: no pair has an automatic threshold (no knee)")
         threshold = float(np.median(knees))
@@ -424,6 +442,7 @@ def repeatability(
         parameters={
             "by_source_id": by_source_id,
             "source_id": source_id,
+            "pool": pool,
             "weight": weight,
             "sensitivity": sensitivity,
             "threshold": threshold,
