@@ -142,7 +142,7 @@ def test_pass_fail_against_thresholds():
     scene = make_strip_scene(2, offsets=[[0, 0, 0], [0, 0, 0.12]], noise=0.01, seed=6)
     rep = assess_swaths(scene.points, scene.strip, cell_size=1.0, quality_level="QL2")
     (p,) = rep.pairs
-    assert not p.passes_rmsdz and p.passes_max is False or p.max_abs <= 0.16
+    assert not p.passes_rmsdz and p.passes_max == (p.max_abs <= 0.16)
     assert p.rmsdz > 0.08 and not rep.passed
     rep3 = assess_swaths(scene.points, scene.strip, cell_size=1.0, quality_level="QL3")
     assert rep3.pairs[0].passes_rmsdz
