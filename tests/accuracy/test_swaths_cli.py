@@ -213,3 +213,34 @@ def test_real_ign_block_every_pair_and_epsg(tmp_path):
         assert p["overlap_area"] > 10_000 and p["area"] > 0 and p["rmsdz"] < 0.08
         with rasterio.open(out / f"dz_{p['strip_a']}_{p['strip_b']}.tif") as ds:
             assert ds.crs.to_epsg() == 2154
+
+
+def test_crs_option_for_files_without_one(strips, tmp_path):
+    rasterio = pytest.importorskip("rasterio")
+    d, scene = strips
+    from lidarqa.io import read
+
+    pc = read(d / "block.laz")
+    bare = tmp_path / "bare.laz"
+    lidarqa.write(PointCloud(xyz=pc.xyz, fields=pc.fields, crs=None), bare)
+    r = run("swaths", bare, "--by-source-id", "-o", tmp_path / "a", "--no-maps", "-q")
+    assert r.exit_code == 0, r.output
+    with rasterio.open(tmp_path / "a" / "dz_52_53.tif") as src:
+        assert src.crs is None
+    r = run(
+        "swaths",
+        bare,
+        "--by-source-id",
+        "-o",
+        tmp_path / "b",
+        "--no-maps",
+        "-q",
+        "--crs",
+        "EPSG:5490",
+    )
+    assert r.exit_code == 0, r.output
+    with rasterio.open(tmp_path / "b" / "dz_52_53.tif") as src:
+        assert src.crs.to_epsg() == 5490
+    # a file that has a CRS: a different --crs is an error, raised before any output
+    r = run("swaths", d / "block.laz", "--by-source-id", "-o", tmp_path / "c", "--crs", "32632")
+    assert r.exit_code == 1 and "differs" in r.output and not (tmp_path / "c").exists()

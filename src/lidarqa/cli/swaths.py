@@ -131,6 +131,13 @@ def _cm(v: float | None) -> str:
 @click.option("--no-offsets", is_flag=True, help="Skip the strip offsets.")
 @click.option("--reference-strip", type=int, default=None, help="Strip held fixed in the network.")
 @click.option("--no-maps", is_flag=True, help="Do not write PNG maps (no matplotlib needed).")
+@click.option(
+    "--crs",
+    "crs_option",
+    default=None,
+    help="CRS of the DZ rasters for files that declare none (EPSG code or WKT); a file's own "
+    "CRS must agree with it.",
+)
 @common_options
 def swaths(
     files: tuple[str, ...],
@@ -147,6 +154,7 @@ def swaths(
     no_offsets: bool,
     reference_strip: int | None,
     no_maps: bool,
+    crs_option: str | None,
 ) -> None:
     """Relative accuracy of overlapping flight strips (swaths).
 
@@ -161,9 +169,11 @@ def swaths(
     from ..accuracy.swaths import assess_swaths
     from ..errors import InvalidPointsError, OutputExistsError, WriteError
     from ..io._atomic import atomic_path, check_output
+    from ..io.crs import ensure_same_crs, parse_crs
     from ..io.raster import write_geotiff
 
     s = settings()
+    given_crs = parse_crs(crs_option)
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise WriteError(f"output {out} exists and is not a folder")
@@ -195,6 +205,11 @@ def swaths(
         xyz, sid, crs, labels = load_strips(
             files, by_source_id=by_source_id, classes=classes, all_returns=all_returns
         )
+    if given_crs is not None:
+        if crs is not None:  # the rasters are horizontal: compare horizontal parts
+            ensure_same_crs(_horizontal(crs), _horizontal(given_crs), what=(files[0], "--crs"))
+        else:
+            crs = given_crs
     with steps(f"Comparing strips ({len(xyz):,} points, {len(np.unique(sid))} strips)"):
         rep = assess_swaths(
             xyz,
@@ -287,10 +302,20 @@ def swaths(
         "swaths",
         inputs={"files": list(files), "strips": labels},
         parameters=dict(
-            rep.parameters, by_source_id=by_source_id, classes=classes, all_returns=all_returns
+            rep.parameters,
+            by_source_id=by_source_id,
+            classes=classes,
+            all_returns=all_returns,
+            crs=crs_option,
         ),
         results=dict(rep.to_dict(), outputs=written),
     )
+
+
+def _horizontal(crs: Any) -> Any:
+    if getattr(crs, "is_compound", False) and crs.sub_crs_list:
+        return crs.sub_crs_list[0]
+    return crs
 
 
 def _rot_cols(o: Any) -> dict[str, Any]:
