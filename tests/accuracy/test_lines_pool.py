@@ -45,13 +45,13 @@ def test_pool_passes_joins_strips_across_files():
     assert out["708"][1] is err  # failed everywhere: the error is reported
 
 
-def _write_tiles(tmp_path, monkeypatch):
+def _write_tiles(tmp_path, monkeypatch, n_model=60):
     """Two strips' segments (end points as points) split into a west and an east tile."""
     import lidarqa
     from lidarqa.accuracy import _lines_io
     from lidarqa.io import PointCloud
 
-    s = make_segment_sets(n_model=60, seed=5)
+    s = make_segment_sets(n_model=n_model, seed=5)
     cut = float(np.median(0.5 * (s.model.start[:, 0] + s.model.end[:, 0])))
     paths = []
     for name, west in (("west.laz", True), ("east.laz", False)):
@@ -151,3 +151,14 @@ def test_six_ign_tiles_pooled_give_ten_line_pairs_within_half_a_metre(tmp_path):
     assert row["threshold_found_tm"] and row["threshold_found_mt"]
     assert min(row["n_pairs_tm"], row["n_pairs_mt"]) >= 10
     assert row["lhd"] <= 0.5
+
+
+def test_small_tiles_get_a_note_about_unstable_thresholds(tmp_path, monkeypatch):
+    paths, _ = _write_tiles(tmp_path, monkeypatch, n_model=40)
+    base = ["repeatability", *map(str, paths), "--by-source-id", "-q"]
+    r = CliRunner().invoke(cli, base)  # each tile holds about 20 segments per strip
+    assert r.exit_code == 0, r.output
+    assert "automatic thresholds are unstable" in r.output
+    for extra in (["--pool"], ["--threshold", "0.5"]):
+        r = CliRunner().invoke(cli, base + extra)
+        assert r.exit_code == 0 and "unstable" not in r.output, r.output

@@ -436,6 +436,15 @@ def repeatability(
         "* final modified LHD of the pair"
         + ("; ! threshold fell back (no knee found)" if fallback else "")
     )
+    few = [r for r in rows if "error" not in r and min(r["p"], r["q"]) < _FEW_SEGMENTS]
+    if threshold is None and few and not pool:
+        # A knee among a handful of nearest distances is a guess: on the IGN 50 m tiles
+        # (10-20 edges per strip) it ranged from 0.10 to 0.82 m between neighbouring tiles.
+        echo(
+            f"note: {len(few)} pair(s) with fewer than {_FEW_SEGMENTS} segments on a side: their "
+            "automatic thresholds are unstable; use --pool (tiles of one survey), "
+            "--shared-threshold or --threshold"
+        )
     finish(
         "repeatability",
         inputs={"files": list(files)},
@@ -454,6 +463,10 @@ def repeatability(
         },
         results=rows,
     )
+
+
+#: Fewer segments than this on either side of a pair: the automatic threshold is flagged.
+_FEW_SEGMENTS = 30
 
 
 def _row_name(row: dict) -> str:
