@@ -129,13 +129,50 @@ def test_repeatability_matches_noise_and_quality_level():
     scene = make_strip_scene(2, noise=0.02, seed=4)
     rep = assess_swaths(scene.points, scene.strip, cell_size=1.0, quality_level="QL0")
     assert rep.thresholds["repeatability"] == QUALITY_LEVELS["QL0"][0]
-    for r in rep.repeatability:
+    whole = assess_swaths(scene.points, scene.strip, cell_size=1.0, range_cell=1.0)
+    for r, w in zip(rep.repeatability, whole.repeatability, strict=True):
         assert r.rmse == pytest.approx(0.02, rel=0.05)
-        assert r.median_range > 2 * r.rmse  # range of ~16 normal values is about 3.5σ
+        # default range cells: ~2 point spacings, about 4 points: range ≈ 2σ (USGS practice)
+        assert r.range_cell == 0.5 and r.n_range_cells > 3 * r.n_cells
+        assert 1.4 * r.rmse < r.median_range < 2.8 * r.rmse
         assert r.passed == (r.median_range <= 0.04)
+        # whole 1 m cells: ~16 points, range ≈ 3.5σ
+        assert w.range_cell == 1.0 and w.n_range_cells == w.n_cells
+        assert 3.0 * w.rmse < w.median_range < 4.2 * w.rmse
     noisy = make_strip_scene(2, noise=0.04, seed=4)
     rep2 = assess_swaths(noisy.points, noisy.strip, cell_size=1.0, max_roughness=0.1)
-    assert all(not r.passed for r in rep2.repeatability)  # ~0.14 m cell ranges > 0.06 m
+    assert all(not r.passed for r in rep2.repeatability)  # ~0.08 m ranges > 0.06 m
+
+
+def test_sub_cell_ranges_match_a_per_sub_cell_oracle():
+    rng = np.random.default_rng(7)
+    pts = np.column_stack(
+        [rng.uniform(0, 5, 2000), rng.uniform(0, 3, 2000), rng.normal(10.0, 0.05, 2000)]
+    )
+    grid = K.grid_for(pts[:, :2], 1.0)
+    keys, sums = K.cell_sums(pts, grid, 10.0)
+    planes = K.fit_cell_planes(keys, sums, 10.0, min_points=4, min_spread=0.0)
+    selected = planes.ok.copy()
+    selected[::4] = False  # some cells left out
+    sub_keys, ranges = K.residual_ranges(pts, grid, planes, selected, split=3, min_points=3)
+    got = dict(zip(sub_keys.tolist(), ranges.tolist(), strict=True))
+    cell = grid.cell_of(pts[:, :2])
+    sel = np.flatnonzero(selected)
+    want = {}
+    for i, k in enumerate(sel):
+        cx, cy = grid.centres(planes.keys[k : k + 1])[0]
+        p = pts[cell == planes.keys[k]]
+        r = p[:, 2] - (planes.a[k] + planes.b[k] * (p[:, 0] - cx) + planes.c[k] * (p[:, 1] - cy))
+        col = np.minimum(((p[:, 0] - (cx - 0.5)) * 3).astype(int), 2)
+        row = np.minimum(((p[:, 1] - (cy - 0.5)) * 3).astype(int), 2)
+        for rr in range(3):
+            for cc in range(3):
+                m = (row == rr) & (col == cc)
+                if m.sum() >= 3:
+                    want[i * 9 + rr * 3 + cc] = float(np.ptp(r[m]))
+    assert set(got) == set(want)
+    for key, v in want.items():
+        assert got[key] == pytest.approx(v, abs=1e-12)
 
 
 def test_pass_fail_against_thresholds():

@@ -142,11 +142,22 @@ def fit_cell_planes(
 
 
 def residual_ranges(
-    points: np.ndarray, grid: Grid, planes: CellPlanes, selected: np.ndarray
+    points: np.ndarray,
+    grid: Grid,
+    planes: CellPlanes,
+    selected: np.ndarray,
+    *,
+    split: int = 1,
+    min_points: int = 3,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Max − min of the plane residuals of the points in each selected cell.
 
-    Returns ``(keys, ranges)`` for the cells of ``planes.keys[selected]``.
+    With ``split > 1`` every selected cell is divided into ``split × split``
+    sub-cells and the range is taken per sub-cell (residuals still about the
+    whole cell's plane); only sub-cells with at least `min_points` points count.
+    Returns ``(keys, ranges)``: the cell keys of ``planes.keys[selected]``, or
+    for sub-cells ``cell_index * split² + row * split + col`` with cell_index
+    into the selected cells.
     """
     sel_keys = planes.keys[selected]
     if len(sel_keys) == 0:
@@ -159,13 +170,25 @@ def residual_ranges(
     pts = points[inside]
     idx = np.flatnonzero(selected)[pos]
     centres = grid.centres(sel_keys[pos])
-    r = pts[:, 2] - (
-        planes.a[idx]
-        + planes.b[idx] * (pts[:, 0] - centres[:, 0])
-        + planes.c[idx] * (pts[:, 1] - centres[:, 1])
+    dx = pts[:, 0] - centres[:, 0]
+    dy = pts[:, 1] - centres[:, 1]
+    r = pts[:, 2] - (planes.a[idx] + planes.b[idx] * dx + planes.c[idx] * dy)
+    if split <= 1:
+        hi = np.full(len(sel_keys), -np.inf)
+        lo = np.full(len(sel_keys), np.inf)
+        np.maximum.at(hi, pos, r)
+        np.minimum.at(lo, pos, r)
+        return sel_keys, hi - lo
+    sub = grid.cell_size / split
+    h = 0.5 * grid.cell_size
+    col = np.clip(np.floor((dx + h) / sub).astype(np.int64), 0, split - 1)
+    row = np.clip(np.floor((dy + h) / sub).astype(np.int64), 0, split - 1)
+    sub_keys, inv, counts = np.unique(
+        pos * split * split + row * split + col, return_inverse=True, return_counts=True
     )
-    hi = np.full(len(sel_keys), -np.inf)
-    lo = np.full(len(sel_keys), np.inf)
-    np.maximum.at(hi, pos, r)
-    np.minimum.at(lo, pos, r)
-    return sel_keys, hi - lo
+    hi = np.full(len(sub_keys), -np.inf)
+    lo = np.full(len(sub_keys), np.inf)
+    np.maximum.at(hi, inv, r)
+    np.minimum.at(lo, inv, r)
+    keep = counts >= min_points
+    return sub_keys[keep], (hi - lo)[keep]

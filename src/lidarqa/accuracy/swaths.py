@@ -13,7 +13,8 @@ interpolation error into the figure):
   of |dz| and the area compared, with pass/fail against a quality level.
 * **Intraswath (smooth-surface) repeatability**: within one strip, the spread
   of the points about their cell's plane on smooth cells: the residual RMSE
-  and the per-cell max − min difference (median, 95th percentile, maximum).
+  and the max − min difference in cells of about two point spacings (the
+  USGS practice; median, 95th percentile, maximum).
 * **Strip offsets**: the 3-D shift (dx, dy, dz), optionally with three small
   rotations, of each strip relative to another, by weighted least squares on
   the matched cell planes: every cell where both strips fit a good plane
@@ -130,11 +131,13 @@ class StripRepeatability:
     n_cells: int
     area: float
     rmse: float  # pooled residual RMS about the cell planes
-    median_range: float  # per-cell max − min residual: median over cells
+    median_range: float  # max − min residual per range cell: median over range cells
     p95_range: float
     max_range: float
     passed: bool  # median_range within the level's smooth-surface threshold
     assessed: bool = True  # False: too little smooth surface (< min_overlap_cells cells)
+    range_cell: float = float("nan")  # side (m) of the cells the max − min is taken over
+    n_range_cells: int = 0
 
     def to_dict(self) -> dict[str, Any]:
         return {k: getattr(self, k) for k in self.__dataclass_fields__}
@@ -289,6 +292,7 @@ def assess_swaths(
     rotations: bool = False,
     reference_strip: int | None = None,
     min_overlap_cells: int = 10,
+    range_cell: float | None = None,
     return_grids: bool = True,
 ) -> SwathReport:
     """Relative accuracy of overlapping flight strips.
@@ -325,6 +329,12 @@ def assess_swaths(
         The strip held fixed in the network (default: the one with most cells).
     min_overlap_cells : int, default 10
         Pairs sharing fewer planar cells are not reported as overlapping.
+    range_cell : float, optional
+        Side (m) of the cells over which the smooth-surface max − min is taken.
+        Default: about twice the strip's nominal point spacing, the USGS practice
+        (each plane cell split into k × k sub-cells, k = round(√n̄ / 2) for n̄
+        points per smooth cell: ~4 points per range cell). Residuals are always
+        about the plane cell's plane; range cells need at least 3 points.
     return_grids : bool, default True
         Keep a dz raster per pair (:class:`DzGrid`).
 
@@ -361,6 +371,8 @@ def assess_swaths(
     if cell_size is None:
         cell_size = auto_cell_size(points, strip, target=max(CELL_TARGET_POINTS, 2 * min_points))
     check_positive(cell_size, "cell_size")
+    if range_cell is not None:
+        check_positive(range_cell, "range_cell")
     thr_rep, thr_rms, thr_max = QUALITY_LEVELS[quality_level]
 
     grid = K.grid_for(points[:, :2], cell_size)
@@ -407,7 +419,14 @@ def assess_swaths(
             )
             flags.append(f"strip {st.id}: no smooth surface, repeatability not assessed")
             continue
-        _, ranges = K.residual_ranges(pts, grid, p, smooth)
+        if range_cell is None:
+            split = max(1, round(float(np.sqrt(np.mean(p.n[smooth]))) / 2.0))
+        else:
+            split = max(1, round(cell_size / range_cell))
+        _, ranges = K.residual_ranges(pts, grid, p, smooth, split=split)
+        if len(ranges) == 0:  # no range cell with 3 points: fall back to whole cells
+            split = 1
+            _, ranges = K.residual_ranges(pts, grid, p, smooth)
         dof = np.maximum(p.n[smooth] - 3, 1)
         rmse = float(np.sqrt(np.sum(p.rms[smooth] ** 2 * dof) / np.sum(dof)))
         med = float(np.median(ranges))
@@ -422,6 +441,8 @@ def assess_swaths(
                 float(ranges.max()),
                 bool(med <= thr_rep),
                 n_c >= min_overlap_cells,
+                float(cell_size / split),
+                len(ranges),
             )
         )
         if n_c < min_overlap_cells:
@@ -600,6 +621,7 @@ def assess_swaths(
         quality_level=quality_level,
         rotations=rotations,
         min_overlap_cells=min_overlap_cells,
+        range_cell=range_cell,
     )
     return SwathReport(
         quality_level=quality_level,

@@ -107,6 +107,12 @@ def _cm(v: float | None) -> str:
 )
 @click.option("--min-points", type=int, default=8, show_default=True, help="Points per cell plane.")
 @click.option(
+    "--range-cell",
+    type=float,
+    default=None,
+    help="Cells (m) for the smooth-surface max − min; default: ~2 point spacings (USGS).",
+)
+@click.option(
     "--max-roughness",
     type=float,
     default=0.05,
@@ -146,6 +152,7 @@ def swaths(
     quality_level: str,
     cell_size: float | None,
     min_points: int,
+    range_cell: float | None,
     max_roughness: float,
     max_slope: float,
     classes: list[int] | None,
@@ -216,6 +223,7 @@ def swaths(
             sid,
             cell_size=cell_size,
             min_points=min_points,
+            range_cell=range_cell,
             max_roughness=max_roughness,
             max_slope=max_slope,
             quality_level=quality_level,
@@ -280,7 +288,8 @@ def swaths(
         if r.assessed:
             echo(
                 f"strip {r.strip}: repeatability RMSE {_cm(r.rmse)} cm, median max−min "
-                f"{_cm(r.median_range)} cm on {r.area:,.0f} m²  {'pass' if r.passed else 'FAIL'}"
+                f"{_cm(r.median_range)} cm ({r.range_cell:g} m cells) on {r.area:,.0f} m²  "
+                f"{'pass' if r.passed else 'FAIL'}"
             )
     for o in rep.network_offsets or rep.pair_offsets:
         if o.strip_a == o.strip_b:  # the reference strip itself

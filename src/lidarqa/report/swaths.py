@@ -146,12 +146,21 @@ def run_swaths(ctx: RunContext, item: AnalysisItem) -> SectionResult:
         ),
         Table(
             f"Smooth-surface repeatability (≤ {t['repeatability'] * 100:.0f} cm)",
-            ["strip", "area (m²)", "RMSE (cm)", "median max−min (cm)", "p95 (cm)", "result"],
+            [
+                "strip",
+                "area (m²)",
+                "RMSE (cm)",
+                "range cell (m)",
+                "median max−min (cm)",
+                "p95 (cm)",
+                "result",
+            ],
             [
                 [
                     r.strip,
                     round(r.area),
                     _fmt_cm(r.rmse),
+                    f"{r.range_cell:g}",
                     _fmt_cm(r.median_range),
                     _fmt_cm(r.p95_range),
                     "pass" if r.passed else "FAIL",
