@@ -96,6 +96,30 @@ def test_three_strip_network_recovers_every_strip():
     assert rep.e4 == pytest.approx(np.std(truth[:, 2], ddof=1), abs=0.005)
 
 
+def test_network_with_a_loop_adjusts_redundant_pairs():
+    # 70 % side overlap: strips 1 and 3 also meet, so the three pairs close a loop
+    truth = np.array([[0.0, 0.0, 0.0], [0.05, -0.03, 0.04], [-0.02, 0.07, -0.03]])
+    scene = make_strip_scene(3, offsets=truth, noise=0.02, overlap=0.7, length=60.0, seed=8)
+    rep = assess_swaths(scene.points, scene.strip, cell_size=1.0, reference_strip=1)
+    assert [(p.strip_a, p.strip_b) for p in rep.pairs] == [(1, 2), (1, 3), (2, 3)]
+    net = {o.strip_b: o for o in rep.network_offsets}
+    pair = {(o.strip_a, o.strip_b): o for o in rep.pair_offsets}
+    for s in (2, 3):
+        o, t = net[s], scene.offset(1, s)
+        for est, sd, true in zip(
+            (o.dx, o.dy, o.dz), (o.sigma_dx, o.sigma_dy, o.sigma_dz), t, strict=True
+        ):
+            assert abs(est - true) <= 3 * sd and abs(est - true) <= 0.01
+        # the loop adds a second path from strip 1: the network is at least as precise
+        p = pair[(1, s)]
+        assert o.sigma_dz <= p.sigma_dz * 1.0001 and o.sigma_dx <= p.sigma_dx * 1.0001
+    # the pair 2→3 measured alone agrees with the network's (1→3) − (1→2)
+    d12 = np.array([net[2].dx, net[2].dy, net[2].dz])
+    d13 = np.array([net[3].dx, net[3].dy, net[3].dz])
+    d23 = np.array([pair[(2, 3)].dx, pair[(2, 3)].dy, pair[(2, 3)].dz])
+    assert np.abs(d13 - d12 - d23).max() < 0.01
+
+
 def test_sigma_calibrated_by_monte_carlo():
     """Reported σ over the empirical spread of 600 independent scenes: within [0.9, 1.1]."""
     truth = [[0.0, 0.0, 0.0], [0.03, -0.02, 0.02]]
