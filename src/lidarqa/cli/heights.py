@@ -89,6 +89,45 @@ def _output_rows(report: Any, map_ids: np.ndarray, ref_ids: np.ndarray, crs: Any
     return PointSet(ids=_ids(map_ids, ref_ids), xyz=xyz, attributes=attrs, crs=crs)
 
 
+class _SigmaStrip(click.ParamType):
+    name = "FLOAT|auto"
+
+    def convert(self, value: Any, param: Any, ctx: Any) -> float | str:
+        if isinstance(value, float) or value == "auto":
+            return value
+        try:
+            return float(value)
+        except (TypeError, ValueError):
+            self.fail(f"expected a number (m) or 'auto', got {value!r}", param, ctx)
+
+
+def _measured_e4(pc: Any) -> float:
+    """E4 from the overlaps of the cloud's strips (ground and buildings, last returns)."""
+    from ..accuracy.swaths import assess_swaths, last_return_mask, surface_class_mask
+    from ..errors import DegenerateGeometryError, EstimationError, InvalidPointsError
+    from ..io.crs import z_to_metres_factor
+
+    sid = pc.point_source_id
+    if sid is None:
+        raise InvalidPointsError(
+            "--sigma-strip auto needs the cloud's point_source_id (flight strips); it has none"
+        )
+    keep = last_return_mask(pc.fields, len(pc)) & surface_class_mask(pc.classification, len(pc))
+    xyz = pc.xyz[keep].copy()
+    xyz[:, 2] *= z_to_metres_factor(pc.crs)
+    try:
+        rep = assess_swaths(xyz, np.asarray(sid)[keep].astype(np.int64), return_grids=False)
+    except (InvalidPointsError, DegenerateGeometryError) as exc:
+        raise type(exc)(f"--sigma-strip auto: {exc}") from exc
+    if not np.isfinite(rep.e4):
+        raise EstimationError(
+            "--sigma-strip auto: the strip offsets could not be estimated ("
+            + "; ".join(rep.flags or ("too few matched planes",))
+            + ")"
+        )
+    return float(rep.e4)
+
+
 def _fmt(v: float, scale: float = 100.0, unit: str = "cm") -> str:
     return "n/a" if v is None or not np.isfinite(v) else f"{v * scale:.1f} {unit}"
 
@@ -133,10 +172,11 @@ def _fmt(v: float, scale: float = 100.0, unit: str = "cm") -> str:
 )
 @click.option(
     "--sigma-strip",
-    type=float,
+    type=_SigmaStrip(),
     default=SIGMA_STRIP,
     show_default=True,
-    help="E4: strip adjustment noise (m).",
+    help="E4: strip adjustment noise (m), or 'auto': measured from the CLOUD's overlapping "
+    "strips (point_source_id), as in 'lidarqa swaths'.",
 )
 @click.option(
     "--sigma-ref",
@@ -220,7 +260,7 @@ def heights(
     sigma_point: float,
     sigma_gps: float,
     sigma_ins: float,
-    sigma_strip: float,
+    sigma_strip: float | str,
     sigma_ref: float,
     curvature: float,
     correlation: float,
@@ -258,17 +298,29 @@ def heights(
     prepare_outputs(output, inputs=(cloud, map_path, reference))
     steps = Steps()
     on_catalog = wants_catalog((cloud,), cat_opts)
+    sigma_strip_source = "given"
     if on_catalog:
         from ..tiling import open_catalog
 
         if largest_segment:
             raise OptionError("--largest-segment is not available on a catalog")
+        if sigma_strip == "auto":
+            raise OptionError(
+                "--sigma-strip auto measures the strip offsets of one file; on a catalog give "
+                "the value (e.g. from `lidarqa swaths`)"
+            )
         with steps("Reading the headers of " + cloud):
             cat = open_catalog([cloud], skip_bad=bool(cat_opts.get("skip_bad")))
         pc: Any = type("Header", (), {"crs": cat.crs})()
     else:
         with steps("Reading " + cloud):
             pc = read(cloud)
+        if sigma_strip == "auto":
+            with steps("Measuring E4 from the strip overlaps"):
+                sigma_strip = _measured_e4(pc)
+            sigma_strip_source = "measured (strip offsets)"
+            echo(f"E4 (σ_strip) measured from the strip overlaps: {sigma_strip * 100:.1f} cm")
+        with steps("Selecting points"):
             if classes:
                 pc = pc.select(classes=classes)
             xyz = pc.xyz.copy()
@@ -332,7 +384,7 @@ def heights(
     if report.flags:
         echo("flags             " + ", ".join(report.flags))
     params = dict(report.parameters)
-    params.update(classes=classes, spacing=spacing)
+    params.update(classes=classes, spacing=spacing, sigma_strip_source=sigma_strip_source)
     if catalog_run is not None:
         from ._catalog_jobs import _echo_run, _run_summary
 

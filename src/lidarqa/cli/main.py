@@ -48,6 +48,7 @@ COMMANDS: dict[str, str] = {
     "repeatability": "lidarqa.cli.lines:repeatability",
     "checkpoints": "lidarqa.cli.checkpoints:checkpoints",
     "heights": "lidarqa.cli.heights:heights",
+    "swaths": "lidarqa.cli.swaths:swaths",
     "assess": "lidarqa.cli.assess:assess",
     "demo": "lidarqa.cli.assess:demo",
 }

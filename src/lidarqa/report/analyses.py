@@ -1320,3 +1320,6 @@ def run_ground(ctx: RunContext, item: AnalysisItem) -> SectionResult:
             "geometry (and return numbers) only; the file's classes are used only to score it."
         ],
     )
+
+
+from . import swaths as _swaths  # noqa: E402, F401  (registers the 'swaths' analysis)

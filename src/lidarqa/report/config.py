@@ -26,7 +26,7 @@ Layout::
     target_total = 0.05
 
 Analysis kinds: ``info``, ``ground``, ``edges``, ``lines``, ``checkpoints``,
-``heights`` (see :data:`ANALYSIS_KEYS`). Options other than the
+``heights``, ``swaths`` (see :data:`ANALYSIS_KEYS`). Options other than the
 framework keys are passed to the analysis library function under the same
 name as its keyword argument (and the CLI option).
 """
@@ -321,6 +321,12 @@ ANALYSIS_TARGETS: dict[str, dict[str, Target]] = {
         Target("max_abs", ("comparison", "max_abs"), "max", "max |Δh|", "m"),
         Target("sigma_mean", ("map_points", "sigma_mean"), "max", "mean predicted σ", "m"),
     ),
+    "swaths": _targets(
+        Target("rmsdz", ("max_rmsdz",), "max", "worst pair RMSDz", "m"),
+        Target("max_abs", ("max_abs_dz",), "max", "max |dz|", "m"),
+        Target("repeatability", ("max_repeatability",), "max", "repeatability", "m"),
+        Target("e4", ("e4",), "max", "E4 strip noise", "m"),
+    ),
 }
 
 ANALYSIS_KEYS: dict[str, dict[str, Key]] = {
@@ -399,6 +405,12 @@ ANALYSIS_KEYS: dict[str, dict[str, Key]] = {
             "float", default=10.0, help="spacing of map points along polygon boundaries (m)"
         ),
         "format": _FORMAT,
+    },
+    "swaths": {
+        "cloud": Key("str", required=True, help="name of a cloud in [inputs.clouds]"),
+        "classes": Key("int_list", default=None, help="classes compared (default: 2 and 6)"),
+        "source_ids": Key("int_list", default=None, help="strips compared (default: all)"),
+        "last_returns": Key("bool", default=True, help="only last/single returns"),
     },
 }
 ANALYSIS_KINDS = tuple(ANALYSIS_KEYS)
@@ -491,6 +503,7 @@ _DEFAULT_TITLES = {
     "lines": "Line matching",
     "checkpoints": "Check points",
     "heights": "Height quality",
+    "swaths": "Flight strips",
 }
 
 
@@ -816,7 +829,7 @@ def _parse_analysis(
             raise ConfigError(f"{where}: {reason}") from exc
 
     # Input references and nested tables.
-    if kind in ("info", "ground", "edges", "heights"):
+    if kind in ("info", "ground", "edges", "heights", "swaths"):
         _need_input(inputs, opts["cloud"], ("clouds",), where, "cloud")
     if kind == "lines":
         for side in ("test", "model"):

@@ -8,6 +8,8 @@ Scenes (every maker takes ``seed=`` and returns a :class:`Scene`):
 - :func:`make_terrain_scene`: bare terrain with break lines (ground tests).
 - :func:`make_plane_pair`, :func:`make_corner`: two planes at a given angle,
   three planes at a corner.
+- :func:`make_strip_scene`: overlapping flight strips over ground and hip roofs
+  with known per-strip offsets and height noise (:class:`StripScene`).
 
 A :class:`Scene` holds ``points``, ``classification`` (ASPRS), ``is_ground``,
 ``object_id``, ``plane_id``, ``planes`` (:class:`TruePlane`), ``edges``
@@ -47,6 +49,7 @@ from .scenes import (
 )
 from .scoring import CornerScore, EdgeScore, score_corners, score_edges
 from .tiles import write_block, write_tiles
+from .strips import StripScene, make_strip_scene
 
 __all__ = [
     "Scene",
@@ -69,4 +72,6 @@ __all__ = [
     "cases",
     "write_tiles",
     "write_block",
+    "StripScene",
+    "make_strip_scene",
 ]
