@@ -345,7 +345,9 @@ def repeatability(
         from ._catalog_jobs import repeatability_on_catalog
 
         if outlines or shared_threshold:
-            raise OptionError("--outlines and --shared-threshold are not available on a catalog yet")
+            raise OptionError(
+                "--outlines and --shared-threshold are not available on a catalog yet"
+            )
 
         repeatability_on_catalog(
             files, classes=classes, source_id=source_id,

@@ -48,8 +48,8 @@ from .scenes import (
     sample_checkpoints,
 )
 from .scoring import CornerScore, EdgeScore, score_corners, score_edges
-from .tiles import write_block, write_tiles
 from .strips import StripScene, make_strip_scene
+from .tiles import write_block, write_tiles
 
 __all__ = [
     "Scene",
