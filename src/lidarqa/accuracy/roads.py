@@ -146,6 +146,19 @@ def _segments(pts: np.ndarray, cell: float, step: float, min_area: float) -> tup
     return node_label[node], node, node_xyz, node_count, edges
 
 
+def auto_cell_size(points: np.ndarray) -> float:
+    """Grid cell (m) for smooth segments: 2/√density, at least 1 m.
+
+    The density is the number of points per m² of occupied 5 m cells.
+    """
+    if len(points) == 0:
+        return 1.0
+    ij = np.floor((points[:, :2] - points[:, :2].min(axis=0)) / 5.0).astype(np.int64)
+    occupied = len(np.unique(ij[:, 0] * (int(ij[:, 1].max()) + 1) + ij[:, 1]))
+    density = len(points) / (occupied * 25.0)
+    return float(max(1.0, 2.0 / np.sqrt(density)))
+
+
 # ------------------------------------------------------------------ results
 
 
@@ -638,7 +651,7 @@ def reconstruct_roads(
     shift: Any = None,
     max_shift: float = 1.5,
     margin: float = 0.5,
-    cell_size: float = 1.0,
+    cell_size: float | None = None,
     max_step: float = 0.5,
     min_area: float = 20.0,
     tolerance: float = 0.5,
@@ -671,7 +684,10 @@ def reconstruct_roads(
         Largest map-to-laser shift searched (m); 0 = no shift.
     margin : float, default 0.5
         Points this far outside a (shifted) polygon may still join it (m).
-    cell_size, max_step, min_area : float
+    cell_size : float, optional
+        Grid cell of the smooth segments (m); by default 2/√density, at least
+        1 m, so that neighbouring cells of a surface hold points.
+    max_step, min_area : float
         Smooth segments, see :func:`smooth_segments`.
     tolerance : float, default 0.5
         Height difference (m) within which two parts continue each other (plus
@@ -705,7 +721,7 @@ def reconstruct_roads(
     ms = check_positive(max_shift, "max_shift", allow_zero=True)
     marg = check_positive(margin, "margin", allow_zero=True)
     tol = check_positive(tolerance, "tolerance")
-    cell = check_positive(cell_size, "cell_size")
+    cell = auto_cell_size(pts) if cell_size is None else check_positive(cell_size, "cell_size")
     mstep = check_positive(max_step, "max_step")
     amin = check_positive(min_area, "min_area", allow_zero=True)
     if len(pts):
@@ -979,3 +995,119 @@ def compare_road_heights(
     comp = compare_heights(best_h, best_s, ref[:, 2], sigma_ref=sigma_ref)
     wt = w_test(comp.dh, comp.sigma_dh, alpha=alpha, estimate_offset=estimate_offset)
     return RoadComparison(height=best_h, sigma=best_s, road=best_road, comparison=comp, w=wt)
+
+
+# ------------------------------------------------------------------ files
+
+
+def read_road_polygons(path: Any) -> tuple[np.ndarray, np.ndarray, Any]:
+    """Read road polygons (GeoPackage/GeoJSON Polygon or MultiPolygon layer).
+
+    Returns
+    -------
+    polygons : ndarray of shape (P,) object
+    ids : ndarray of shape (P,)
+        The ``id`` attribute, else 0..P-1.
+    crs : pyproj.CRS or None
+    """
+    from pathlib import Path
+
+    from ..errors import ReadError
+    from ..io._atomic import check_input
+    from ..io.vector import _crs_from_meta
+
+    p = check_input(path)
+    pyogrio = require("pyogrio", "vector")
+    shapely = require("shapely", "vector")
+    if Path(p).suffix.lower() not in (".gpkg", ".geojson", ".json"):
+        raise ReadError(f"cannot read polygons from {p}: use a .gpkg or .geojson file")
+    try:
+        meta, _, wkb, field_data = pyogrio.raw.read(str(p))
+    except Exception as exc:
+        raise ReadError(f"cannot read {p}: {exc}") from exc
+    geoms = shapely.from_wkb(wkb) if len(wkb) else np.empty(0, dtype=object)
+    if len(geoms) == 0:
+        raise InvalidPointsError(f"{p} holds no polygons: the map is empty")
+    kinds = set(shapely.get_type_id(geoms).tolist()) - {3, 6}
+    if kinds:
+        raise InvalidPointsError(
+            f"{p} must hold Polygon/MultiPolygon features, got {meta.get('geometry_type')}"
+        )
+    names = [n.lower() for n in meta["fields"]]
+    ids = np.asarray(field_data[names.index("id")]) if "id" in names else np.arange(len(geoms))
+    geoms = shapely.force_2d(geoms)
+    return np.asarray(geoms, dtype=object), ids, _crs_from_meta(meta)
+
+
+def write_roads(
+    recon: RoadReconstruction, path: Any, *, crs: Any = None, overwrite: bool = False
+) -> Any:
+    """Write a reconstruction as a GeoPackage, atomically.
+
+    Layers: ``map_points`` (Point Z with height, σ and its three terms, road,
+    polygon id, failed/reason), ``polygons_3d`` (Polygon Z, one per polygon at
+    its road's level, with road, status, points used and other-level points)
+    and ``tin`` (Polygon Z triangles with their road). Coordinates are those of
+    the map; the shift onto the laser data is stored on every map point.
+    """
+    import os
+    import warnings
+    from pathlib import Path
+
+    from ..errors import WriteError
+    from ..io._atomic import atomic_path
+
+    pyogrio = require("pyogrio", "vector")
+    shapely = require("shapely", "vector")
+    p = Path(path)
+    if p.suffix.lower() != ".gpkg":
+        raise WriteError(f"roads are written as a GeoPackage (.gpkg), got {p.name!r}")
+    mp = recon.map_points
+    pid = recon.polygon_ids
+    ids = np.asarray(pid).astype(str).astype(object)
+    layers = []
+    pts = shapely.points(np.column_stack([mp.xy, np.nan_to_num(mp.height, nan=0.0)]))
+    layers.append(("map_points", "Point Z", pts, {
+        "road": mp.road, "polygon": ids[mp.polygon], "height": mp.height, "sigma": mp.sigma,
+        "sigma_plane": mp.sigma_plane, "sigma_block": mp.sigma_block,
+        "sigma_model": mp.sigma_model, "distance": mp.distance, "n_points": mp.n_points,
+        "failed": mp.failed.astype(np.int32), "reason": mp.reason.astype(str).astype(object),
+        "x_laser": mp.xy_laser[:, 0], "y_laser": mp.xy_laser[:, 1],
+    }))
+    polys = recon.polygons_3d()
+    polys = [shapely.force_3d(g) if g is not None else g for g in polys]
+    keep = np.array([g is not None for g in polys])
+    layers.append(("polygons_3d", "Polygon Z", np.asarray(polys, dtype=object)[keep], {
+        "id": ids[keep], "road": recon.polygon_road[keep],
+        "status": recon.polygon_status[keep].astype(str).astype(object),
+        "level": recon.polygon_level[keep], "n_points": recon.polygon_points[keep],
+        "n_other_level": recon.polygon_other[keep],
+    }))
+    tri = recon.triangles_3d()
+    troad = mp.road[recon.triangles[:, 0]] if len(recon.triangles) else np.empty(0, np.int64)
+    layers.append(("tin", "Polygon Z", np.asarray(tri, dtype=object), {"road": troad}))
+    crs_wkt = crs.to_wkt() if crs is not None else None
+    with atomic_path(p, overwrite=overwrite) as tmp:
+        target = tmp.with_suffix(".gpkg")
+        try:
+            for i, (name, gtype, geoms, fields) in enumerate(layers):
+                names = list(fields)
+                arrays = [np.asarray(fields[n]) for n in names]
+                wkb = (shapely.to_wkb(geoms, output_dimension=3) if len(geoms)
+                       else np.empty(0, dtype=object))
+                with warnings.catch_warnings():
+                    warnings.filterwarnings("ignore", message=".*'crs' was not provided.*")
+                    pyogrio.raw.write(
+                        str(target), wkb, geometry_type=gtype, field_data=arrays, fields=names,
+                        crs=crs_wkt, driver="GPKG", layer=name, encoding="UTF-8",
+                        append=i > 0,
+                    )
+            os.replace(target, tmp)
+        except WriteError:
+            raise
+        except Exception as exc:
+            raise WriteError(f"cannot write {p}: {exc}") from exc
+        finally:
+            if target.exists():
+                target.unlink()
+    return p

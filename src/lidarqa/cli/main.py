@@ -30,6 +30,7 @@ COMMANDS: dict[str, str] = {
     "repeatability": "lidarqa.cli.lines:repeatability",
     "checkpoints": "lidarqa.cli.checkpoints:checkpoints",
     "heights": "lidarqa.cli.heights:heights",
+    "roads": "lidarqa.cli.roads:roads",
     "assess": "lidarqa.cli.assess:assess",
     "demo": "lidarqa.cli.assess:demo",
 }

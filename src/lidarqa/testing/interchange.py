@@ -4,7 +4,7 @@ Two roads cross on two levels: road A runs along x at ground level with a
 slight grade; road B runs along y over a bridge deck `deck_height` metres up,
 with smooth ramps down to ground level at both ends. Terrain lies about 1 m
 below the roads. The laser points have noise `sigma_point` plus a laser block
-offset per 100 m tile (σ `sigma_block`, common to a neighbourhood as the error
+offset per `block_size` tile (σ `sigma_block`, common to a neighbourhood as the error
 model assumes); under the deck only a few points reach road A (the scan angle).
 Cars (boxes 1.5 m high) stand on both roads. The map polygons are the true road
 outlines moved by `map_shift`, split so that polygon ``A_mid`` is mostly covered
@@ -84,6 +84,7 @@ def make_interchange(
     under_deck_density: float = 0.3,
     n_cars: int = 12,
     length: float = 150.0,
+    block_size: float = 25.0,
 ) -> InterchangeScene:
     """Make a two-level interchange with known heights, map shift and reference points.
 
@@ -105,6 +106,8 @@ def make_interchange(
     n_cars : int, default 12
     length : float, default 150.0
         Half length of road A (m); road B is 25 m longer on each side.
+    block_size : float, default 25.0
+        Side of the square tiles (m) that share one laser block offset.
 
     Examples
     --------
@@ -186,7 +189,7 @@ def make_interchange(
         np.full(len(t), 2), np.full(len(car_xy), 1),
     ]).astype(np.uint8)
     # laser block offsets per 100 m tile and point noise
-    tile = np.floor((xy + 1000.0) / 100.0).astype(np.int64)
+    tile = np.floor((xy + 1000.0) / block_size).astype(np.int64)
     tkey = tile[:, 0] * 1000 + tile[:, 1]
     ukey, tinv = np.unique(tkey, return_inverse=True)
     offs = np.random.default_rng(seed + 7919).normal(0.0, sigma_block, len(ukey))

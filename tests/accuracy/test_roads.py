@@ -1,0 +1,205 @@
+"""3D roads from a 2D map on the right height level (issue #15)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from datapaths import SHARED, needs_shared
+
+from lidarqa.accuracy.roads import (
+    compare_road_heights,
+    read_road_polygons,
+    reconstruct_roads,
+    smooth_segments,
+)
+from lidarqa.cli.main import cli
+from lidarqa.errors import DegenerateGeometryError, InvalidPointsError, OptionError
+from lidarqa.testing.interchange import make_interchange
+
+shapely = pytest.importorskip("shapely")
+
+DATA = __import__("pathlib").Path(__file__).parents[1] / "data"
+REAL = SHARED / "ign-lidarhd" / "test_semis_2023_0299_6802_LA93_IGN69.laz"
+
+
+def run(*args):
+    return CliRunner().invoke(cli, [str(a) for a in args])
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return make_interchange(seed=1, density=4.0, deck_height=8.0)
+
+
+@pytest.fixture(scope="module")
+def recon(scene):
+    return reconstruct_roads(scene.points, scene.polygons, ids=scene.polygon_ids)
+
+
+def _errors(scene, rec):
+    mp = rec.map_points
+    truth = scene.true_height(mp.xy - scene.map_shift, scene.polygon_road[mp.polygon])
+    return mp.height - truth
+
+
+def test_interchange_done_when(scene, recon):
+    # the estimated shift moves the map back onto the laser data
+    assert np.all(np.abs(recon.shift + scene.map_shift) <= 0.10)
+    mp = recon.map_points
+    assert not mp.failed.any()
+    err = _errors(scene, recon)
+    assert np.all(np.abs(err) < 1.0)  # every map point on its own level (levels are 8 m apart)
+    assert np.mean(np.abs(err) <= 3 * mp.sigma) >= 0.99
+    comp = compare_road_heights(recon, scene.reference_xyz)
+    assert np.array_equal(comp.road >= 0, np.ones(len(comp.road), bool))
+    # each reference point is compared with its own road's level
+    road_of_polygon = {int(r): int(scene.polygon_road[np.flatnonzero(recon.polygon_road == r)[0]])
+                       for r in np.unique(recon.polygon_road)}
+    assert np.all(np.array([road_of_polygon[r] for r in comp.road]) == scene.reference_road)
+    std = np.std(comp.w.w[~comp.w.outlier], ddof=1)
+    assert 0.9 <= std <= 1.1
+
+
+def test_interchange_levels_and_growing(scene, recon):
+    ids = list(scene.polygon_ids)
+    a_mid, b_deck = ids.index("A_mid"), ids.index("B_deck")
+    # A_mid is mostly covered by the deck: its deck points are another level, not used
+    assert recon.polygon_other[a_mid] > recon.polygon_points[a_mid]
+    assert recon.polygon_level[a_mid] < 1.0 and recon.polygon_level[b_deck] > 7.0
+    # polygons of one road are merged, the two roads stay apart
+    assert len(set(recon.polygon_road[scene.polygon_road == 0])) == 1
+    assert len(set(recon.polygon_road[scene.polygon_road == 1])) == 1
+    assert recon.n_roads == 2
+    # map points of A under the deck carry the lower level
+    mp = recon.map_points
+    under = (mp.polygon == a_mid) & (np.abs(mp.xy_laser[:, 0]) < 6)
+    assert under.any() and np.all(mp.height[under] < 1.0)
+    # the TIN stays within one road per triangle
+    tri = recon.triangles
+    assert len(tri) and np.all(mp.road[tri] == mp.road[tri[:, :1]])
+
+
+def test_known_shift_and_order_independence(scene):
+    rng = np.random.default_rng(5)
+    perm = rng.permutation(len(scene.points))
+    a = reconstruct_roads(scene.points, scene.polygons, shift=-scene.map_shift)
+    b = reconstruct_roads(scene.points[perm], scene.polygons, shift=-scene.map_shift)
+    assert not a.shift_estimated
+    np.testing.assert_allclose(a.map_points.height, b.map_points.height, atol=1e-9)
+    np.testing.assert_allclose(a.map_points.sigma, b.map_points.sigma, atol=1e-9)
+
+
+def test_polygon_without_points_grows_from_neighbour(scene):
+    keep = scene.points[:, 0] < 140.0 + scene.map_shift[0]
+    pts = scene.points[keep]
+    sx, sy = scene.map_shift
+    extra = [
+        shapely.box(150 + sx, -5 + sy, 170 + sx, 5 + sy),  # beyond the data, touches A_east
+        shapely.box(-60 + sx, 40 + sy, -40 + sx, 60 + sy),  # a terrain patch: its own level
+        shapely.box(400, 400, 420, 420),  # far outside the cloud
+    ]
+    polys = list(scene.polygons) + extra
+    rec = reconstruct_roads(pts, polys, shift=-scene.map_shift)
+    mp = rec.map_points
+    grown = len(scene.polygons)
+    assert rec.polygon_status[grown] == "grown_from_neighbour"
+    rows = mp.polygon == grown
+    # heights extrapolated from road A, with a model error that grows with the distance
+    assert np.all(np.isfinite(mp.height[rows])) and np.all(mp.sigma_model[rows] > 0)
+    far = rows & (mp.xy_laser[:, 0] > 165)
+    mid = rows & (mp.xy_laser[:, 0] < 162)
+    assert far.any() and mid.any()
+    assert np.all(mp.sigma_model[far] > mp.sigma_model[mid].max())
+    assert rec.polygon_status[-1] == "no_points"
+    assert np.all(mp.failed[mp.polygon == len(polys) - 1])
+    assert set(mp.reason[mp.polygon == len(polys) - 1]) == {"no_points"}
+    assert "polygons_outside_cloud" in rec.flags and "polygons_without_points" in rec.flags
+
+
+def test_bad_input(scene):
+    with pytest.raises(InvalidPointsError, match="empty"):
+        reconstruct_roads(scene.points, [])
+    bowtie = shapely.Polygon([(0, 0), (10, 10), (10, 0), (0, 10)])
+    with pytest.raises(DegenerateGeometryError, match="Self-intersection"):
+        reconstruct_roads(scene.points, [bowtie])
+    with pytest.raises(OptionError, match="no map polygon overlaps"):
+        reconstruct_roads(scene.points, [shapely.box(1e5, 1e5, 1e5 + 10, 1e5 + 10)])
+    with pytest.raises(InvalidPointsError, match="LineString"):
+        reconstruct_roads(scene.points, [shapely.LineString([(0, 0), (1, 1)])])
+
+
+def test_smooth_segments_separate_levels_and_drop_cars():
+    g = np.stack(np.meshgrid(np.arange(0, 30, 0.5), np.arange(0, 30, 0.5)), -1).reshape(-1, 2)
+    road = np.column_stack([g, 0.01 * g[:, 0]])
+    deck = np.column_stack([g[g[:, 0] < 10], np.full((g[:, 0] < 10).sum(), 7.0)])
+    roof = g[(g[:, 0] > 20) & (g[:, 0] < 22) & (g[:, 1] < 4)]
+    car = np.column_stack([roof, np.full(len(roof), 1.5)])
+    lab = smooth_segments(np.vstack([road, deck, car]), min_area=20.0)
+    n1, n2 = len(road), len(road) + len(deck)
+    assert len(set(lab[:n1])) == 1 and len(set(lab[n1:n2])) == 1 and lab[0] != lab[n1]
+    assert np.all(lab[n2:] == -1)
+
+
+@needs_shared
+def test_real_bridge_lower_level():
+    from lidarqa.io import read
+
+    pc = read(REAL).select(classes=[2, 17])
+    polys, ids, crs = read_road_polygons(DATA / "ign-bridge-roads.geojson")
+    assert crs.to_epsg() == 2154
+    rec = reconstruct_roads(pc.xyz, polys, ids=ids)
+    mp = rec.map_points
+    names = np.asarray(ids).astype(str)
+    deck_poly = polys[list(names).index("bridge_deck")]
+    lower = names[mp.polygon] == "lower_road"
+    under = lower & shapely.contains_xy(deck_poly.buffer(1.0), mp.xy[:, 0], mp.xy[:, 1])
+    deck_pts = pc.xyz[pc.classification == 17]
+    deck_pts = deck_pts[shapely.contains_xy(deck_poly, deck_pts[:, 0], deck_pts[:, 1])]
+    assert len(deck_pts) >= 20
+    deck_z = float(np.median(deck_pts[:, 2]))
+    assert under.sum() >= 2 and not mp.failed.any()
+    # every map point of the lower road under the bridge gets the lower level
+    assert np.all(mp.height[under] < deck_z - 4.0)
+    # and matches the ground of the cutting next to it
+    ground = pc.xyz[pc.classification == 2]
+    for x, y, h in zip(mp.xy_laser[under, 0], mp.xy_laser[under, 1], mp.height[under], strict=True):
+        d = np.hypot(ground[:, 0] - x, ground[:, 1] - y)
+        near = ground[(d < 12) & (np.abs(ground[:, 2] - h) < 3), 2]
+        assert near.size >= 3 and abs(np.median(near) - h) < 0.5
+    on_deck = names[mp.polygon] == "bridge_deck"
+    assert np.all(np.abs(mp.height[on_deck] - deck_z) < 0.5)
+    assert np.all(mp.sigma[~mp.failed] < 0.5)
+
+
+@needs_shared
+def test_cli_roads_real(tmp_path):
+    pyogrio = pytest.importorskip("pyogrio")
+    out, doc = tmp_path / "roads3d.gpkg", tmp_path / "roads.json"
+    r = run("roads", REAL, DATA / "ign-bridge-roads.geojson", "-o", out, "--json", doc, "-q")
+    assert r.exit_code == 0, r.output
+    layers = {name for name, _ in pyogrio.list_layers(out)}
+    assert layers == {"map_points", "polygons_3d", "tin"}
+    res = json.loads(doc.read_text())["results"]
+    assert res["n_roads"] == 2 and res["n_failed"] == 0 and res["n_triangles"] > 0
+    meta, _, wkb, fields = pyogrio.raw.read(str(out), layer="polygons_3d")
+    geoms = shapely.from_wkb(wkb)
+    assert all(shapely.has_z(geoms))
+    # refuses to overwrite
+    r = run("roads", REAL, DATA / "ign-bridge-roads.geojson", "-o", out, "-q")
+    assert r.exit_code == 1 and "exists" in r.output
+
+
+@needs_shared
+def test_cli_roads_crs_mismatch(tmp_path):
+    pyogrio = pytest.importorskip("pyogrio")
+    path = tmp_path / "wgs84.geojson"
+    pyogrio.raw.write(
+        str(path), shapely.to_wkb(np.array([shapely.box(2.1, 48.9, 2.2, 49.0)], dtype=object)),
+        geometry_type="Polygon", field_data=[np.array([1])], fields=["id"], crs="EPSG:4326",
+        driver="GeoJSON",
+    )
+    r = run("roads", REAL, path, "-o", tmp_path / "o.gpkg", "-q")
+    assert r.exit_code == 1 and "CRS" in r.output and "Traceback" not in r.output
