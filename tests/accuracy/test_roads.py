@@ -56,8 +56,10 @@ def test_interchange_done_when(scene, recon):
     comp = compare_road_heights(recon, scene.reference_xyz)
     assert np.array_equal(comp.road >= 0, np.ones(len(comp.road), bool))
     # each reference point is compared with its own road's level
-    road_of_polygon = {int(r): int(scene.polygon_road[np.flatnonzero(recon.polygon_road == r)[0]])
-                       for r in np.unique(recon.polygon_road)}
+    road_of_polygon = {
+        int(r): int(scene.polygon_road[np.flatnonzero(recon.polygon_road == r)[0]])
+        for r in np.unique(recon.polygon_road)
+    }
     assert np.all(np.array([road_of_polygon[r] for r in comp.road]) == scene.reference_road)
     std = np.std(comp.w.w[~comp.w.outlier], ddof=1)
     assert 0.9 <= std <= 1.1
@@ -77,6 +79,9 @@ def test_interchange_levels_and_growing(scene, recon):
     mp = recon.map_points
     under = (mp.polygon == a_mid) & (np.abs(mp.xy_laser[:, 0]) < 6)
     assert under.any() and np.all(mp.height[under] < 1.0)
+    # cars are small segments: never assigned to a road
+    assert np.all(recon.assigned[scene.classification == 1] == -1)
+    assert np.all(recon.labels[scene.classification == 1] == -1)
     # the TIN stays within one road per triangle
     tri = recon.triangles
     assert len(tri) and np.all(mp.road[tri] == mp.road[tri[:, :1]])
@@ -197,9 +202,137 @@ def test_cli_roads_crs_mismatch(tmp_path):
     pyogrio = pytest.importorskip("pyogrio")
     path = tmp_path / "wgs84.geojson"
     pyogrio.raw.write(
-        str(path), shapely.to_wkb(np.array([shapely.box(2.1, 48.9, 2.2, 49.0)], dtype=object)),
-        geometry_type="Polygon", field_data=[np.array([1])], fields=["id"], crs="EPSG:4326",
+        str(path),
+        shapely.to_wkb(np.array([shapely.box(2.1, 48.9, 2.2, 49.0)], dtype=object)),
+        geometry_type="Polygon",
+        field_data=[np.array([1])],
+        fields=["id"],
+        crs="EPSG:4326",
         driver="GeoJSON",
     )
     r = run("roads", REAL, path, "-o", tmp_path / "o.gpkg", "-q")
     assert r.exit_code == 1 and "CRS" in r.output and "Traceback" not in r.output
+
+
+@pytest.fixture(scope="module")
+def scene_files(tmp_path_factory):
+    """The synthetic interchange as a LAS file, a polygon GeoPackage and a reference CSV."""
+    pyogrio = pytest.importorskip("pyogrio")
+    from pyproj import CRS
+
+    import lidarqa
+    from lidarqa.io import PointCloud
+
+    d = tmp_path_factory.mktemp("roads")
+    s = make_interchange(seed=3, density=2.0)
+    off = np.array([650_000.0, 6_860_000.0, 100.0])
+    pc = PointCloud(
+        xyz=s.points + off, fields={"classification": s.classification}, crs=CRS.from_epsg(2154)
+    )
+    lidarqa.write(pc, d / "cloud.las")
+    moved = [shapely.transform(g, lambda c: c + off[:2]) for g in s.polygons]
+    pyogrio.raw.write(
+        str(d / "map.gpkg"),
+        shapely.to_wkb(np.array(moved, dtype=object)),
+        geometry_type="Polygon",
+        field_data=[s.polygon_ids.astype(str).astype(object)],
+        fields=["id"],
+        crs="EPSG:2154",
+        driver="GPKG",
+    )
+    with open(d / "ref.csv", "w") as fh:
+        fh.write("id,x,y,z\n")
+        for i, (x, y, z) in enumerate(s.reference_xyz + off):
+            fh.write(f"{i},{x:.3f},{y:.3f},{z:.3f}\n")
+    return d, s
+
+
+def test_cli_heights_with_polygons_tests_each_level(scene_files):
+    d, s = scene_files
+    out = d / "h.json"
+    r = run(
+        "heights",
+        d / "cloud.las",
+        d / "map.gpkg",
+        d / "ref.csv",
+        "--classes",
+        "2,17",
+        "--json",
+        out,
+        "-o",
+        d / "h.gpkg",
+        "-q",
+    )
+    assert r.exit_code == 0, r.output
+    res = json.loads(out.read_text())["results"]
+    assert res["comparison"]["n"] == len(s.reference_xyz)
+    assert res["roads"]["n_roads"] == 2
+    assert np.allclose(res["roads"]["shift"], -s.map_shift, atol=0.1)
+    # a reference point compared with the wrong level would be a w of ~80
+    assert res["w"]["n_outliers"] <= 2 and 0.85 <= res["w"]["std_without_outliers"] <= 1.15
+
+
+def test_cli_roads_synthetic_and_bad_input(scene_files, tmp_path):
+    d, s = scene_files
+    r = run(
+        "roads",
+        d / "cloud.las",
+        d / "map.gpkg",
+        "-o",
+        tmp_path / "r.gpkg",
+        "--json",
+        tmp_path / "r.json",
+        "-q",
+    )
+    assert r.exit_code == 0, r.output
+    res = json.loads((tmp_path / "r.json").read_text())["results"]
+    assert res["n_roads"] == 2 and res["n_failed"] == 0
+    # a self-intersecting polygon: one clear line, no traceback
+    pyogrio = pytest.importorskip("pyogrio")
+    bowtie = shapely.Polygon(
+        [(650_000, 6_860_000), (650_010, 6_860_010), (650_010, 6_860_000), (650_000, 6_860_010)]
+    )
+    bad = tmp_path / "bad.geojson"
+    pyogrio.raw.write(
+        str(bad),
+        shapely.to_wkb(np.array([bowtie], dtype=object)),
+        geometry_type="Polygon",
+        field_data=[np.array([1])],
+        fields=["id"],
+        crs="EPSG:2154",
+        driver="GeoJSON",
+    )
+    r = run("roads", d / "cloud.las", bad, "-o", tmp_path / "b.gpkg", "-q")
+    assert r.exit_code == 1 and "Self-intersection" in r.output and "Traceback" not in r.output
+    empty = tmp_path / "empty.geojson"
+    empty.write_text('{"type": "FeatureCollection", "features": []}')
+    r = run("roads", d / "cloud.las", empty, "-o", tmp_path / "e.gpkg", "-q")
+    assert r.exit_code == 1 and "empty" in r.output and "Traceback" not in r.output
+    far = tmp_path / "far.geojson"
+    pyogrio.raw.write(
+        str(far),
+        shapely.to_wkb(np.array([shapely.box(0, 0, 10, 10)], dtype=object)),
+        geometry_type="Polygon",
+        field_data=[np.array([1])],
+        fields=["id"],
+        crs="EPSG:2154",
+        driver="GeoJSON",
+    )
+    r = run("roads", d / "cloud.las", far, "-o", tmp_path / "f.gpkg", "-q")
+    assert r.exit_code == 1 and "no map polygon overlaps" in r.output
+
+
+@needs_shared
+def test_assess_roads_section(tmp_path):
+    cfg = tmp_path / "roads.toml"
+    cfg.write_text(
+        'crs = "EPSG:2154"\n[inputs.clouds]\n'
+        f'tile = "{REAL.as_posix()}"\n[inputs.polygons]\n'
+        f'bridge = "{(DATA / "ign-bridge-roads.geojson").as_posix()}"\n'
+        '[roads]\ncloud = "tile"\nmap = "bridge"\ntarget_sigma_mean = 0.2\n'
+    )
+    r = run("assess", cfg, "--out", tmp_path / "rep", "-q")
+    assert r.exit_code == 0, r.output
+    rep = json.loads((tmp_path / "rep" / "report.json").read_text())
+    text = json.dumps(rep)
+    assert '"n_roads": 2' in text and "roads3d.gpkg" in text

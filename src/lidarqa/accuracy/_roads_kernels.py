@@ -1,4 +1,6 @@
-"""Array kernels of the 3D road reconstruction (no I/O, no shapely): smooth segments, local planes, shift scores.
+"""Array kernels of the 3D road reconstruction: smooth segments, local planes, shift scores.
+
+No I/O and no shapely here.
 
 All lengths in metres. Every function is a pure function of its arrays.
 """
@@ -30,8 +32,12 @@ def grid_nodes(points: np.ndarray, *, cell_size: float, max_step: float) -> tupl
     """
     n = len(points)
     if n == 0:
-        return (np.empty(0, np.int64), np.empty((0, 2), np.int64), np.empty((0, 3)),
-                np.empty(0, np.int64))
+        return (
+            np.empty(0, np.int64),
+            np.empty((0, 2), np.int64),
+            np.empty((0, 3)),
+            np.empty(0, np.int64),
+        )
     origin = points[:, :2].min(axis=0)
     ij = np.floor((points[:, :2] - origin) / cell_size).astype(np.int64)
     # order-free: sort by cell, then z, then x, y
@@ -46,9 +52,12 @@ def grid_nodes(points: np.ndarray, *, cell_size: float, max_step: float) -> tupl
     node[order] = node_sorted
     k = int(node_sorted[-1]) + 1
     count = np.bincount(node_sorted, minlength=k)
-    xyz = np.column_stack(
-        [np.bincount(node_sorted, weights=points[order, d], minlength=k) for d in range(3)]
-    ) / count[:, None]
+    xyz = (
+        np.column_stack(
+            [np.bincount(node_sorted, weights=points[order, d], minlength=k) for d in range(3)]
+        )
+        / count[:, None]
+    )
     node_ij = sij[new_layer]
     return node, node_ij, xyz, count.astype(np.int64)
 

@@ -272,7 +272,7 @@ class RoadReconstruction:
         return int(len(np.unique(r)))
 
     def polygons_3d(self) -> list[Any]:
-        """One Polygon Z per input polygon, its boundary at the height of its road (map coordinates)."""
+        """One Polygon Z per input polygon at the height of its road (map coordinates)."""
         shapely = require("shapely", "vector")
         mp = self.map_points
         rings: dict[int, list[np.ndarray]] = {}
@@ -323,8 +323,9 @@ class RoadReconstruction:
 
 def _as_polygons(polygons: Any) -> np.ndarray:
     shapely = require("shapely", "vector")
-    geoms = np.asarray(list(polygons) if not isinstance(polygons, np.ndarray) else polygons,
-                       dtype=object).reshape(-1)
+    geoms = np.asarray(
+        list(polygons) if not isinstance(polygons, np.ndarray) else polygons, dtype=object
+    ).reshape(-1)
     if geoms.size == 0:
         raise InvalidPointsError("the map is empty: no polygons to reconstruct")
     for i, g in enumerate(geoms):
@@ -393,7 +394,7 @@ def _levels_in(
     adj: Any,
     tol: float,
 ) -> list[_Level]:
-    """Height levels of one polygon: parts of its nodes connected inside it, merged when continuous."""
+    """Height levels of one polygon: parts connected inside it, merged when continuous."""
     from scipy.sparse.csgraph import connected_components
 
     p = pidx[labels[pidx] >= 0]
@@ -453,8 +454,9 @@ def _neighbours(geoms: np.ndarray) -> list[tuple[int, int, Any]]:
 def _line_samples(line: Any, step: float = 2.0) -> np.ndarray:
     import shapely
 
-    lines = shapely.get_parts(shapely.line_merge(line) if line.geom_type == "MultiLineString"
-                              else line)
+    lines = shapely.get_parts(
+        shapely.line_merge(line) if line.geom_type == "MultiLineString" else line
+    )
     pts = []
     for ln in lines:
         if ln.geom_type not in ("LineString", "LinearRing") or ln.length <= 0:
@@ -520,7 +522,8 @@ def _grow(levels, neigh, node_xyz, node_count, tol):
                 if not levels[q]:
                     continue
                 fits = [
-                    k for k, lq in enumerate(levels[q])
+                    k
+                    for k, lq in enumerate(levels[q])
                     if _continuous(lp, lq, samples, node_xyz, node_count, tol)
                 ]
                 if fits:
@@ -747,7 +750,10 @@ def reconstruct_roads(
 
     k = len(node_xyz)
     adj = coo_matrix(
-        (np.ones(2 * len(edges)), (np.r_[edges[:, 0], edges[:, 1]], np.r_[edges[:, 1], edges[:, 0]])),
+        (
+            np.ones(2 * len(edges)),
+            (np.r_[edges[:, 0], edges[:, 1]], np.r_[edges[:, 1], edges[:, 0]]),
+        ),
         shape=(k, k),
     ).tocsr()
     index = _PointIndex(pts[:, :2])
@@ -805,7 +811,11 @@ def reconstruct_roads(
     # map points: per road, unique laser-frame locations
     rings = _rings(geoms, step)
     ring_xy = np.vstack([r[2] for r in rings]) if rings else np.empty((0, 2))
-    ring_poly = np.concatenate([np.full(len(r[2]), r[0]) for r in rings]) if rings else np.empty(0, np.int64)
+    ring_poly = (
+        np.concatenate([np.full(len(r[2]), r[0]) for r in rings])
+        if rings
+        else np.empty(0, np.int64)
+    )
     ring_road = road[ring_poly]
     key = np.column_stack([ring_road, np.round(ring_xy * 1e6).astype(np.int64)])
     _, first, row_of = np.unique(key, axis=0, return_index=True, return_inverse=True)
@@ -819,7 +829,10 @@ def reconstruct_roads(
     mroad = ring_road[first]
     mpoly = ring_poly[first]
     h = np.full(m, np.nan)
-    sig = {k_: np.full(m, np.nan) for k_ in ("sigma", "sigma_plane", "sigma_block", "sigma_model", "distance")}
+    sig = {
+        k_: np.full(m, np.nan)
+        for k_ in ("sigma", "sigma_plane", "sigma_block", "sigma_model", "distance")
+    }
     npts = np.zeros(m, dtype=np.int64)
     failed = np.ones(m, dtype=bool)
     reason = np.full(m, "no_points", dtype=object)
@@ -830,9 +843,17 @@ def reconstruct_roads(
         if rows.size == 0 or rp.size < 3:
             continue
         res = map_point_heights(
-            pts[rp], mxy[rows] + s, radius=radius, max_radius=max_radius, min_points=min(min_points, len(rp)) if len(rp) >= 3 else 3,
-            sigma_point=sigma_point, sigma_gps=sigma_gps, sigma_ins=sigma_ins,
-            sigma_strip=sigma_strip, curvature=curvature, labels=lab_seg[rp],
+            pts[rp],
+            mxy[rows] + s,
+            radius=radius,
+            max_radius=max_radius,
+            min_points=min(min_points, len(rp)) if len(rp) >= 3 else 3,
+            sigma_point=sigma_point,
+            sigma_gps=sigma_gps,
+            sigma_ins=sigma_ins,
+            sigma_strip=sigma_strip,
+            curvature=curvature,
+            labels=lab_seg[rp],
         )
         h[rows] = res.height
         sig["sigma"][rows] = res.sigma
@@ -844,14 +865,24 @@ def reconstruct_roads(
         failed[rows] = res.failed
         reason[rows] = res.reason
     mp = RoadMapPoints(
-        xy=mxy, xy_laser=mxy + s, height=h, sigma=sig["sigma"], sigma_plane=sig["sigma_plane"],
-        sigma_block=sig["sigma_block"], sigma_model=sig["sigma_model"], n_points=npts,
-        distance=sig["distance"], road=mroad, polygon=mpoly, failed=failed, reason=reason,
+        xy=mxy,
+        xy_laser=mxy + s,
+        height=h,
+        sigma=sig["sigma"],
+        sigma_plane=sig["sigma_plane"],
+        sigma_block=sig["sigma_block"],
+        sigma_model=sig["sigma_model"],
+        n_points=npts,
+        distance=sig["distance"],
+        road=mroad,
+        polygon=mpoly,
+        failed=failed,
+        reason=reason,
     )
     ring_rows = []
     start = 0
     for poly, rr, xy in rings:
-        ring_rows.append((poly, rr, row_of[start:start + len(xy)]))
+        ring_rows.append((poly, rr, row_of[start : start + len(xy)]))
         start += len(xy)
     tri = _triangulate(mp, moved, road)
     flags = []
@@ -862,17 +893,39 @@ def reconstruct_roads(
     if failed.any():
         flags.append("map_points_failed")
     params = {
-        "spacing": step, "max_shift": ms, "margin": marg, "cell_size": cell, "max_step": mstep,
-        "min_area": amin, "tolerance": tol, "radius": radius, "max_radius": max_radius,
-        "min_points": min_points, "sigma_point": sigma_point, "sigma_gps": sigma_gps,
-        "sigma_ins": sigma_ins, "sigma_strip": sigma_strip, "curvature": curvature,
+        "spacing": step,
+        "max_shift": ms,
+        "margin": marg,
+        "cell_size": cell,
+        "max_step": mstep,
+        "min_area": amin,
+        "tolerance": tol,
+        "radius": radius,
+        "max_radius": max_radius,
+        "min_points": min_points,
+        "sigma_point": sigma_point,
+        "sigma_gps": sigma_gps,
+        "sigma_ins": sigma_ins,
+        "sigma_strip": sigma_strip,
+        "curvature": curvature,
     }
     return RoadReconstruction(
-        map_points=mp, shift=np.asarray(s, dtype=np.float64), shift_estimated=estimated,
-        polygons=geoms, polygon_ids=pid, polygon_road=road, polygon_level=p_level,
-        polygon_points=p_points, polygon_other=p_other, polygon_status=status,
-        assigned=assigned, labels=lab_seg, rings=ring_rows, triangles=tri,
-        parameters=params, flags=tuple(flags),
+        map_points=mp,
+        shift=np.asarray(s, dtype=np.float64),
+        shift_estimated=estimated,
+        polygons=geoms,
+        polygon_ids=pid,
+        polygon_road=road,
+        polygon_level=p_level,
+        polygon_points=p_points,
+        polygon_other=p_other,
+        polygon_status=status,
+        assigned=assigned,
+        labels=lab_seg,
+        rings=ring_rows,
+        triangles=tri,
+        parameters=params,
+        flags=tuple(flags),
     )
 
 
@@ -926,8 +979,11 @@ class RoadComparison:
         _freeze(self)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"comparison": self.comparison.to_dict(), "w": self.w.to_dict(),
-                "n_on_road": int((self.road >= 0).sum())}
+        return {
+            "comparison": self.comparison.to_dict(),
+            "w": self.w.to_dict(),
+            "n_on_road": int((self.road >= 0).sum()),
+        }
 
 
 def compare_road_heights(
@@ -947,8 +1003,8 @@ def compare_road_heights(
     vertices as independent and the laser block term as fully correlated (it is
     common to a neighbourhood).
     """
-    from .heights import critical_value
     from .._validate import as_points as _ap
+    from .heights import critical_value
 
     ref = _ap(reference_xyz, "reference_xyz")
     critical_value(alpha)
@@ -968,14 +1024,22 @@ def compare_road_heights(
         cand = tree.query_ball_point(ref[:, :2], r=float(rad.max()) + 1e-6)
         lens = np.array([len(c) for c in cand])
         qi = np.repeat(np.arange(r), lens)
-        ti = np.concatenate([np.asarray(c, dtype=np.int64) for c in cand]) if lens.sum() else np.empty(0, np.int64)
+        ti = (
+            np.concatenate([np.asarray(c, dtype=np.int64) for c in cand])
+            if lens.sum()
+            else np.empty(0, np.int64)
+        )
         a, b, c = v[ti, 0], v[ti, 1], v[ti, 2]
         p = ref[qi, :2]
         det = (b[:, 1] - c[:, 1]) * (a[:, 0] - c[:, 0]) + (c[:, 0] - b[:, 0]) * (a[:, 1] - c[:, 1])
         good = np.abs(det) > 1e-9
         det = np.where(good, det, 1.0)
-        w1 = ((b[:, 1] - c[:, 1]) * (p[:, 0] - c[:, 0]) + (c[:, 0] - b[:, 0]) * (p[:, 1] - c[:, 1])) / det
-        w2 = ((c[:, 1] - a[:, 1]) * (p[:, 0] - c[:, 0]) + (a[:, 0] - c[:, 0]) * (p[:, 1] - c[:, 1])) / det
+        w1 = (
+            (b[:, 1] - c[:, 1]) * (p[:, 0] - c[:, 0]) + (c[:, 0] - b[:, 0]) * (p[:, 1] - c[:, 1])
+        ) / det
+        w2 = (
+            (c[:, 1] - a[:, 1]) * (p[:, 0] - c[:, 0]) + (a[:, 0] - c[:, 0]) * (p[:, 1] - c[:, 1])
+        ) / det
         w3 = 1 - w1 - w2
         wts = np.column_stack([w1, w2, w3])
         ins = good & (wts >= -1e-9).all(axis=1)
@@ -1067,22 +1131,46 @@ def write_roads(
     ids = np.asarray(pid).astype(str).astype(object)
     layers = []
     pts = shapely.points(np.column_stack([mp.xy, np.nan_to_num(mp.height, nan=0.0)]))
-    layers.append(("map_points", "Point Z", pts, {
-        "road": mp.road, "polygon": ids[mp.polygon], "height": mp.height, "sigma": mp.sigma,
-        "sigma_plane": mp.sigma_plane, "sigma_block": mp.sigma_block,
-        "sigma_model": mp.sigma_model, "distance": mp.distance, "n_points": mp.n_points,
-        "failed": mp.failed.astype(np.int32), "reason": mp.reason.astype(str).astype(object),
-        "x_laser": mp.xy_laser[:, 0], "y_laser": mp.xy_laser[:, 1],
-    }))
+    layers.append(
+        (
+            "map_points",
+            "Point Z",
+            pts,
+            {
+                "road": mp.road,
+                "polygon": ids[mp.polygon],
+                "height": mp.height,
+                "sigma": mp.sigma,
+                "sigma_plane": mp.sigma_plane,
+                "sigma_block": mp.sigma_block,
+                "sigma_model": mp.sigma_model,
+                "distance": mp.distance,
+                "n_points": mp.n_points,
+                "failed": mp.failed.astype(np.int32),
+                "reason": mp.reason.astype(str).astype(object),
+                "x_laser": mp.xy_laser[:, 0],
+                "y_laser": mp.xy_laser[:, 1],
+            },
+        )
+    )
     polys = recon.polygons_3d()
     polys = [shapely.force_3d(g) if g is not None else g for g in polys]
     keep = np.array([g is not None for g in polys])
-    layers.append(("polygons_3d", "Polygon Z", np.asarray(polys, dtype=object)[keep], {
-        "id": ids[keep], "road": recon.polygon_road[keep],
-        "status": recon.polygon_status[keep].astype(str).astype(object),
-        "level": recon.polygon_level[keep], "n_points": recon.polygon_points[keep],
-        "n_other_level": recon.polygon_other[keep],
-    }))
+    layers.append(
+        (
+            "polygons_3d",
+            "Polygon Z",
+            np.asarray(polys, dtype=object)[keep],
+            {
+                "id": ids[keep],
+                "road": recon.polygon_road[keep],
+                "status": recon.polygon_status[keep].astype(str).astype(object),
+                "level": recon.polygon_level[keep],
+                "n_points": recon.polygon_points[keep],
+                "n_other_level": recon.polygon_other[keep],
+            },
+        )
+    )
     tri = recon.triangles_3d()
     troad = mp.road[recon.triangles[:, 0]] if len(recon.triangles) else np.empty(0, np.int64)
     layers.append(("tin", "Polygon Z", np.asarray(tri, dtype=object), {"road": troad}))
@@ -1093,13 +1181,23 @@ def write_roads(
             for i, (name, gtype, geoms, fields) in enumerate(layers):
                 names = list(fields)
                 arrays = [np.asarray(fields[n]) for n in names]
-                wkb = (shapely.to_wkb(geoms, output_dimension=3) if len(geoms)
-                       else np.empty(0, dtype=object))
+                wkb = (
+                    shapely.to_wkb(geoms, output_dimension=3)
+                    if len(geoms)
+                    else np.empty(0, dtype=object)
+                )
                 with warnings.catch_warnings():
                     warnings.filterwarnings("ignore", message=".*'crs' was not provided.*")
                     pyogrio.raw.write(
-                        str(target), wkb, geometry_type=gtype, field_data=arrays, fields=names,
-                        crs=crs_wkt, driver="GPKG", layer=name, encoding="UTF-8",
+                        str(target),
+                        wkb,
+                        geometry_type=gtype,
+                        field_data=arrays,
+                        fields=names,
+                        crs=crs_wkt,
+                        driver="GPKG",
+                        layer=name,
+                        encoding="UTF-8",
                         append=i > 0,
                     )
             os.replace(target, tmp)

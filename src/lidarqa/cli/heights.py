@@ -346,7 +346,7 @@ def _heights_by_levels(
     output: str | None, *, classes: Any, spacing: float, alpha: float, sigma_ref: float,
     estimate_offset: bool, **opts: Any,
 ) -> None:
-    """``lidarqa heights`` with road polygons: reconstruct the levels, then test each reference point on its own."""
+    """``lidarqa heights`` with road polygons: test each reference point on its own level."""
     from ..accuracy.roads import compare_road_heights, read_road_polygons, reconstruct_roads
     from ..io.crs import z_to_metres_factor
     from ..io.vector import PointSet

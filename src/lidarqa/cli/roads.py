@@ -1,8 +1,9 @@
-"""``lidarqa roads``: 3D roads from 2D map polygons and laser points, each on its own height level."""
+"""``lidarqa roads``: 3D roads from 2D map polygons, each on its own height level."""
 
 from __future__ import annotations
 
 from pathlib import Path
+
 import click
 import numpy as np
 
@@ -29,30 +30,90 @@ def _fmt_cm(v: float) -> str:
 @click.command()
 @click.argument("cloud", type=click.Path())
 @click.argument("map_path", metavar="MAP", type=click.Path())
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
-              help="GeoPackage with layers map_points, polygons_3d and tin.")
-@click.option("--classes", type=INT_LIST, default="2,17",
-              show_default=True, help="Laser point classes used (ground/road and bridge deck).")
-@click.option("--spacing", type=float, default=10.0, show_default=True,
-              help="Map points every this many metres along polygon boundaries.")
-@click.option("--shift", "shift", default="auto", show_default=True,
-              help="Map-to-laser shift DX,DY (m), or 'auto' to estimate it.")
-@click.option("--max-shift", type=float, default=1.5, show_default=True,
-              help="Largest map-to-laser shift searched (m).")
-@click.option("--tolerance", type=float, default=0.5, show_default=True,
-              help="Height difference (m) within which two parts belong to one level.")
-@click.option("--min-area", type=float, default=20.0, show_default=True,
-              help="Smooth segments smaller than this (m²) are dropped (cars, signs).")
-@click.option("--radius", type=float, default=RADIUS, show_default=True,
-              help="First search radius of the plane fits (m).")
-@click.option("--max-radius", type=float, default=MAX_RADIUS, show_default=True,
-              help="Largest search radius (m).")
-@click.option("--min-points", type=int, default=MIN_POINTS, show_default=True,
-              help="Laser points needed for a plane fit.")
-@click.option("--sigma-point", type=float, default=SIGMA_POINT, show_default=True,
-              help="E1: laser point height noise (m).")
-@click.option("--curvature", type=float, default=CURVATURE, show_default=True,
-              help="Maximum road curvature (1/m) of the model term.")
+@click.option(
+    "-o",
+    "--output",
+    required=True,
+    type=click.Path(dir_okay=False),
+    help="GeoPackage with layers map_points, polygons_3d and tin.",
+)
+@click.option(
+    "--classes",
+    type=INT_LIST,
+    default="2,17",
+    show_default=True,
+    help="Laser point classes used (ground/road and bridge deck).",
+)
+@click.option(
+    "--spacing",
+    type=float,
+    default=10.0,
+    show_default=True,
+    help="Map points every this many metres along polygon boundaries.",
+)
+@click.option(
+    "--shift",
+    "shift",
+    default="auto",
+    show_default=True,
+    help="Map-to-laser shift DX,DY (m), or 'auto' to estimate it.",
+)
+@click.option(
+    "--max-shift",
+    type=float,
+    default=1.5,
+    show_default=True,
+    help="Largest map-to-laser shift searched (m).",
+)
+@click.option(
+    "--tolerance",
+    type=float,
+    default=0.5,
+    show_default=True,
+    help="Height difference (m) within which two parts belong to one level.",
+)
+@click.option(
+    "--min-area",
+    type=float,
+    default=20.0,
+    show_default=True,
+    help="Smooth segments smaller than this (m²) are dropped (cars, signs).",
+)
+@click.option(
+    "--radius",
+    type=float,
+    default=RADIUS,
+    show_default=True,
+    help="First search radius of the plane fits (m).",
+)
+@click.option(
+    "--max-radius",
+    type=float,
+    default=MAX_RADIUS,
+    show_default=True,
+    help="Largest search radius (m).",
+)
+@click.option(
+    "--min-points",
+    type=int,
+    default=MIN_POINTS,
+    show_default=True,
+    help="Laser points needed for a plane fit.",
+)
+@click.option(
+    "--sigma-point",
+    type=float,
+    default=SIGMA_POINT,
+    show_default=True,
+    help="E1: laser point height noise (m).",
+)
+@click.option(
+    "--curvature",
+    type=float,
+    default=CURVATURE,
+    show_default=True,
+    help="Maximum road curvature (1/m) of the model term.",
+)
 @common_options
 def roads(
     cloud: str,
@@ -98,9 +159,19 @@ def roads(
         _check_crs(pc.crs, crs, ("cloud", "map"))
     with steps(f"Reconstructing {len(polys):,} polygons from {len(xyz):,} points"):
         rec = reconstruct_roads(
-            xyz, polys, ids=ids, spacing=spacing, shift=given, max_shift=max_shift,
-            tolerance=tolerance, min_area=min_area, radius=radius, max_radius=max_radius,
-            min_points=min_points, sigma_point=sigma_point, curvature=curvature,
+            xyz,
+            polys,
+            ids=ids,
+            spacing=spacing,
+            shift=given,
+            max_shift=max_shift,
+            tolerance=tolerance,
+            min_area=min_area,
+            radius=radius,
+            max_radius=max_radius,
+            min_points=min_points,
+            sigma_point=sigma_point,
+            curvature=curvature,
         )
     with steps("Writing " + output):
         write_roads(rec, output, crs=pc.crs or crs, overwrite=settings().overwrite)
@@ -108,9 +179,11 @@ def roads(
     dx, dy = res["shift"]
     how = "estimated" if res["shift_estimated"] else "given"
     echo(f"map shift         dx {dx:+.3f} m, dy {dy:+.3f} m ({how})")
-    echo(f"polygons          {res['n_polygons']:,} in {res['n_roads']:,} road(s); "
-         f"{res['polygons_grown']:,} grown from a neighbour, "
-         f"{res['polygons_without_points']:,} without points")
+    echo(
+        f"polygons          {res['n_polygons']:,} in {res['n_roads']:,} road(s); "
+        f"{res['polygons_grown']:,} grown from a neighbour, "
+        f"{res['polygons_without_points']:,} without points"
+    )
     echo(f"other-level pts   {res['points_other_level']:,} (under/over the polygons, not used)")
     echo(f"map points        {res['n_map_points']:,} ({res['n_failed']:,} without height)")
     echo(f"  σ mean / p95    {_fmt_cm(res['sigma_mean'])} / {_fmt_cm(res['sigma_p95'])}")

@@ -1320,3 +1320,5 @@ def run_ground(ctx: RunContext, item: AnalysisItem) -> SectionResult:
             "geometry (and return numbers) only; the file's classes are used only to score it."
         ],
     )
+
+from . import roads_analysis as _roads_analysis  # noqa: E402,F401  (registers the 'roads' kind)

@@ -321,6 +321,7 @@ ANALYSIS_TARGETS: dict[str, dict[str, Target]] = {
         Target("max_abs", ("comparison", "max_abs"), "max", "max |Δh|", "m"),
         Target("sigma_mean", ("map_points", "sigma_mean"), "max", "mean predicted σ", "m"),
     ),
+    "roads": _targets(Target("sigma_mean", ("sigma_mean",), "max", "mean predicted σ", "m")),
 }
 
 ANALYSIS_KEYS: dict[str, dict[str, Key]] = {
@@ -398,6 +399,15 @@ ANALYSIS_KEYS: dict[str, dict[str, Key]] = {
         "map_spacing": Key(
             "float", default=10.0, help="spacing of map points along polygon boundaries (m)"
         ),
+        "format": _FORMAT,
+    },
+    "roads": {
+        "cloud": Key("str", required=True, help="name of a cloud in [inputs.clouds]"),
+        "classes": Key("int_list", default=[2, 17], help="laser-point classes (road, bridge)"),
+        "source_ids": Key("int_list", default=None, help="laser-point strips used"),
+        "map": Key("str", required=True, help="a polygons input name (road polygons)"),
+        "reference": Key("str", default=None, help="a points input tested on its road level"),
+        "map_spacing": Key("float", default=10.0, help="map points along boundaries every (m)"),
         "format": _FORMAT,
     },
 }
@@ -491,6 +501,7 @@ _DEFAULT_TITLES = {
     "lines": "Line matching",
     "checkpoints": "Check points",
     "heights": "Height quality",
+    "roads": "3D roads",
 }
 
 
@@ -745,8 +756,12 @@ def _parse_analysis(
             raise ConfigError(f"{where}: {reason}") from exc
 
     # Input references and nested tables.
-    if kind in ("info", "ground", "edges", "heights"):
+    if kind in ("info", "ground", "edges", "heights", "roads"):
         _need_input(inputs, opts["cloud"], ("clouds",), where, "cloud")
+    if kind == "roads":
+        _need_input(inputs, opts["map"], ("polygons",), where, "map")
+        if opts["reference"] is not None:
+            _need_input(inputs, opts["reference"], ("points",), where, "reference")
     if kind == "lines":
         for side in ("test", "model"):
             opts[side] = _parse_segment_source(opts[side], inputs, where, side)

@@ -123,9 +123,15 @@ def make_interchange(
     ylen = deck_half + ramp
     xlen = length
     params = {
-        "grade": grade, "deck_height": float(deck_height), "deck_half": deck_half,
-        "ramp_length": ramp, "density": density, "sigma_point": sigma_point,
-        "sigma_block": sigma_block, "sigma_ref": sigma_ref, "seed": seed,
+        "grade": grade,
+        "deck_height": float(deck_height),
+        "deck_half": deck_half,
+        "ramp_length": ramp,
+        "density": density,
+        "sigma_point": sigma_point,
+        "sigma_block": sigma_block,
+        "sigma_ref": sigma_ref,
+        "seed": seed,
     }
 
     def uniform(x0, x1, y0, y1, dens):
@@ -171,23 +177,32 @@ def make_interchange(
         car_z.append(z)
     car_xy = np.vstack(cars) if cars else np.empty((0, 2))
     car_zz = np.concatenate(car_z) if car_z else np.empty(0)
+
     # cars hide the road under them
     def hidden(xy):
         keep = np.ones(len(xy), dtype=bool)
         for c in cars:
             if len(c):
                 lo, hi = c.min(axis=0), c.max(axis=0)
-                keep &= ~((xy[:, 0] >= lo[0]) & (xy[:, 0] <= hi[0])
-                          & (xy[:, 1] >= lo[1]) & (xy[:, 1] <= hi[1]))
+                keep &= ~(
+                    (xy[:, 0] >= lo[0])
+                    & (xy[:, 0] <= hi[0])
+                    & (xy[:, 1] >= lo[1])
+                    & (xy[:, 1] <= hi[1])
+                )
         return keep
 
     ka, kb = hidden(a), hidden(b)
     xy = np.vstack([a[ka], b[kb], t, car_xy])
     z = np.concatenate([a_z[ka], b_z[kb], t_z, car_zz])
-    cls = np.concatenate([
-        np.full(ka.sum(), 2), np.where(np.abs(b[kb, 1]) <= deck_half, 17, 2),
-        np.full(len(t), 2), np.full(len(car_xy), 1),
-    ]).astype(np.uint8)
+    cls = np.concatenate(
+        [
+            np.full(ka.sum(), 2),
+            np.where(np.abs(b[kb, 1]) <= deck_half, 17, 2),
+            np.full(len(t), 2),
+            np.full(len(car_xy), 1),
+        ]
+    ).astype(np.uint8)
     # laser block offsets per 100 m tile and point noise
     tile = np.floor((xy + 1000.0) / block_size).astype(np.int64)
     tkey = tile[:, 0] * 1000 + tile[:, 1]
@@ -216,16 +231,26 @@ def make_interchange(
     ref_xy = np.vstack([ra, rb])
     ref_road = np.concatenate([np.zeros(len(ra), np.int64), np.ones(len(rb), np.int64)])
     scene_tmp = InterchangeScene(
-        points=pts, classification=cls, polygons=polys,
+        points=pts,
+        classification=cls,
+        polygons=polys,
         polygon_ids=np.array([b_[0] for b_ in boxes], dtype=object),
         polygon_road=np.array([b_[1] for b_ in boxes], dtype=np.int64),
         map_shift=np.array([sx, sy], dtype=np.float64),
-        reference_xyz=np.empty((0, 3)), reference_road=ref_road, params=params,
+        reference_xyz=np.empty((0, 3)),
+        reference_road=ref_road,
+        params=params,
     )
     ref_z = scene_tmp.true_height(ref_xy, ref_road)
     ref_z = ref_z + np.random.default_rng(seed + 104729).normal(0.0, sigma_ref, len(ref_z))
     return InterchangeScene(
-        points=pts, classification=cls, polygons=polys, polygon_ids=scene_tmp.polygon_ids,
-        polygon_road=scene_tmp.polygon_road, map_shift=scene_tmp.map_shift,
-        reference_xyz=np.column_stack([ref_xy, ref_z]), reference_road=ref_road, params=params,
+        points=pts,
+        classification=cls,
+        polygons=polys,
+        polygon_ids=scene_tmp.polygon_ids,
+        polygon_road=scene_tmp.polygon_road,
+        map_shift=scene_tmp.map_shift,
+        reference_xyz=np.column_stack([ref_xy, ref_z]),
+        reference_road=ref_road,
+        params=params,
     )
