@@ -260,10 +260,25 @@ def heights(
         xyz[:, 2] *= z_to_metres_factor(pc.crs)
     if _is_polygon_map(map_path):
         return _heights_by_levels(
-            steps, pc, xyz, cloud, map_path, reference, output, classes=classes,
-            spacing=spacing, radius=radius, max_radius=max_radius, min_points=min_points,
-            sigma_point=sigma_point, sigma_gps=sigma_gps, sigma_ins=sigma_ins,
-            sigma_strip=sigma_strip, sigma_ref=sigma_ref, curvature=curvature, alpha=alpha,
+            steps,
+            pc,
+            xyz,
+            cloud,
+            map_path,
+            reference,
+            output,
+            classes=classes,
+            spacing=spacing,
+            radius=radius,
+            max_radius=max_radius,
+            min_points=min_points,
+            sigma_point=sigma_point,
+            sigma_gps=sigma_gps,
+            sigma_ins=sigma_ins,
+            sigma_strip=sigma_strip,
+            sigma_ref=sigma_ref,
+            curvature=curvature,
+            alpha=alpha,
             estimate_offset=estimate_offset,
         )
     with steps("Reading map and reference points"):
@@ -342,9 +357,20 @@ def _is_polygon_map(path: str) -> bool:
 
 
 def _heights_by_levels(
-    steps: Any, pc: Any, xyz: np.ndarray, cloud: str, map_path: str, reference: str,
-    output: str | None, *, classes: Any, spacing: float, alpha: float, sigma_ref: float,
-    estimate_offset: bool, **opts: Any,
+    steps: Any,
+    pc: Any,
+    xyz: np.ndarray,
+    cloud: str,
+    map_path: str,
+    reference: str,
+    output: str | None,
+    *,
+    classes: Any,
+    spacing: float,
+    alpha: float,
+    sigma_ref: float,
+    estimate_offset: bool,
+    **opts: Any,
 ) -> None:
     """``lidarqa heights`` with road polygons: test each reference point on its own level."""
     from ..accuracy.roads import compare_road_heights, read_road_polygons, reconstruct_roads
@@ -391,7 +417,9 @@ def _heights_by_levels(
         }
         xyz_out = np.vstack([np.column_stack([mp.xy_laser, mp.height]), ref_xyz]).reshape(-1, 3)
         rows = PointSet(
-            ids=_ids(np.arange(m), ref.ids), xyz=xyz_out, attributes=attrs,
+            ids=_ids(np.arange(m), ref.ids),
+            xyz=xyz_out,
+            attributes=attrs,
             crs=pc.crs or crs or ref.crs,
         )
         with steps("Writing " + output):
@@ -400,8 +428,10 @@ def _heights_by_levels(
     res = comp.to_dict()
     c, w = res["comparison"], res["w"]
     dx, dy = res_roads["shift"]
-    echo(f"road levels       {res_roads['n_roads']:,} road(s) from {len(polys):,} polygons; "
-         f"map shift dx {dx:+.3f} m, dy {dy:+.3f} m")
+    echo(
+        f"road levels       {res_roads['n_roads']:,} road(s) from {len(polys):,} polygons; "
+        f"map shift dx {dx:+.3f} m, dy {dy:+.3f} m"
+    )
     echo(f"map points        {res_roads['n_map_points']:,} ({res_roads['n_failed']:,} not fitted)")
     echo(f"  σ mean / p95    {_fmt(res_roads['sigma_mean'])} / {_fmt(res_roads['sigma_p95'])}")
     echo(f"reference points  {len(ref):,} ({c['n']:,} compared on their level)")
