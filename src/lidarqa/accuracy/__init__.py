@@ -6,6 +6,8 @@
   corners vs check points, least-squares transformations, RMSE to ASPRS (2023) and NSSDA.
 - :mod:`lidarqa.accuracy.heights` — Oude Elberink & Vosselman: plane-fitted heights with error
   propagation, TIN precision, w-tests.
+- :mod:`lidarqa.accuracy.roads` — Oude Elberink & Vosselman §2: 3D roads from 2D map polygons,
+  each polygon on its own height level, with the map-point precision.
 """
 
 from .checkpoints import (

@@ -8,6 +8,9 @@ Scenes (every maker takes ``seed=`` and returns a :class:`Scene`):
 - :func:`make_terrain_scene`: bare terrain with break lines (ground tests).
 - :func:`make_plane_pair`, :func:`make_corner`: two planes at a given angle,
   three planes at a corner.
+- :func:`make_interchange`: two roads crossing on two levels (deck, ramps, cars,
+  sparse points under the deck), map polygons shifted, paint-strip references
+  (returns an :class:`InterchangeScene`).
 
 A :class:`Scene` holds ``points``, ``classification`` (ASPRS), ``is_ground``,
 ``object_id``, ``plane_id``, ``planes`` (:class:`TruePlane`), ``edges``
@@ -29,6 +32,7 @@ from __future__ import annotations
 
 from . import cases
 from ._shapes import TerrainModel
+from .interchange import InterchangeScene, make_interchange
 from .scenes import (
     BuildingSpec,
     Scene,
@@ -64,4 +68,6 @@ __all__ = [
     "EdgeScore",
     "CornerScore",
     "cases",
+    "InterchangeScene",
+    "make_interchange",
 ]
