@@ -346,3 +346,30 @@ def test_assess_roads_section(tmp_path):
     rep = json.loads((tmp_path / "rep" / "report.json").read_text())
     text = json.dumps(rep)
     assert '"n_roads": 2' in text and "roads3d.gpkg" in text
+
+
+def test_planar_partition_gives_two_heights_where_levels_cross(scene):
+    # a planar map: the area under the deck belongs to the deck polygon only, so the corners of
+    # road A at the deck edge lie on both roads' boundaries and get one height per level
+    sx, sy = scene.map_shift
+    box = [
+        shapely.box(-150 + sx, -5 + sy, -6 + sx, 5 + sy),
+        shapely.box(6 + sx, -5 + sy, 150 + sx, 5 + sy),
+        shapely.box(-6 + sx, -175 + sy, 6 + sx, -25 + sy),
+        shapely.box(-6 + sx, -25 + sy, 6 + sx, 25 + sy),
+        shapely.box(-6 + sx, 25 + sy, 6 + sx, 175 + sy),
+    ]
+    rec = reconstruct_roads(scene.points, box, shift=-scene.map_shift)
+    mp = rec.map_points
+    true_road = np.array([0, 0, 1, 1, 1])
+    # the two parts of road A are not neighbours: they are separate roads at the same level
+    assert len(set(rec.polygon_road[true_road == 1])) == 1
+    corner = np.all(np.abs(np.abs(mp.xy - [sx, sy]) - [6, 5]) < 1e-6, axis=1)
+    assert corner.sum() == 8  # 4 corners x 2 levels
+    for x, y in {(round(a, 6), round(b, 6)) for a, b in mp.xy[corner]}:
+        rows = corner & (np.abs(mp.xy[:, 0] - x) < 1e-6) & (np.abs(mp.xy[:, 1] - y) < 1e-6)
+        assert rows.sum() == 2
+        h = np.sort(mp.height[rows])
+        truth = np.sort(scene.true_height([[x - sx, y - sy]] * 2, [0, 1]))
+        assert np.all(np.abs(h - truth) <= 3 * np.sort(mp.sigma[rows])[::-1] + 0.05)
+        assert h[1] - h[0] > 6

@@ -383,6 +383,7 @@ class _PointIndex:
 class _Level:
     nodes: np.ndarray
     count: int
+    inside: int = 0  # points inside the polygon itself (not its margin)
 
 
 def _levels_in(
@@ -475,18 +476,45 @@ def _continuous(la: _Level, lb: _Level, samples: np.ndarray, node_xyz, node_coun
 
 
 def _grow(levels, neigh, node_xyz, node_count, tol):
-    """Map growing: one level per polygon, roads = polygons whose levels continue each other."""
+    """Map growing: one level per polygon, roads = polygons whose levels continue each other.
+
+    Each level of a polygon scores its own points inside the polygon plus, for
+    every neighbour, the largest of the neighbour's levels that continues it
+    across the shared boundary. A polygon mostly covered by a deck thus keeps
+    the road under it when its neighbours continue that road, while a sliver of
+    deck points in a polygon's margin never outweighs the polygon's own road.
+    Neighbours whose chosen levels continue each other are merged into one
+    road; a polygon without points joins the neighbouring road with which it
+    shares the longest boundary.
+    """
     n = len(levels)
-    nb: list[list[tuple[int, np.ndarray, float]]] = [[] for _ in range(n)]
+    nb: list[list[tuple[int, float, np.ndarray]]] = [[] for _ in range(n)]
     for i, j, line in neigh:
-        s = _line_samples(line)
-        nb[i].append((j, s, line.length))
-        nb[j].append((i, s, line.length))
+        smp = _line_samples(line)
+        # compat[a, b]: level a of i continues level b of j
+        compat = np.zeros((len(levels[i]), len(levels[j])), dtype=bool)
+        for a, la in enumerate(levels[i]):
+            for b, lb in enumerate(levels[j]):
+                compat[a, b] = _continuous(la, lb, smp, node_xyz, node_count, tol)
+        nb[i].append((j, line.length, compat))
+        nb[j].append((i, line.length, compat.T))
     chosen = [-1] * n  # level index, -2 = grown from a neighbour, -3 = nothing
-    total = [sum(lv.count for lv in lvs) for lvs in levels]
-    score = [
-        (lvs[0].count * lvs[0].count / total[i]) if lvs else 0.0 for i, lvs in enumerate(levels)
-    ]
+    for i in range(n):
+        if not levels[i]:
+            continue
+        total = sum(lv.inside for lv in levels[i])
+        best, best_score = 0, -1.0
+        for a, lv in enumerate(levels[i]):
+            if lv.inside < 0.02 * total:
+                continue  # slivers in the margin
+            score = float(lv.inside)
+            for j, _length, compat in nb[i]:
+                ok = np.flatnonzero(compat[a])
+                if ok.size:
+                    score += max(levels[j][b].inside for b in ok)
+            if score > best_score:
+                best, best_score = a, score
+        chosen[i] = best
     parent = list(range(n))
 
     def find(a: int) -> int:
@@ -500,45 +528,18 @@ def _grow(levels, neigh, node_xyz, node_count, tol):
         if ra != rb:
             parent[max(ra, rb)] = min(ra, rb)
 
-    visited = [False] * n
-    for start in sorted(range(n), key=lambda i: (-score[i], i)):
-        if visited[start] or not levels[start]:
+    for i in range(n):
+        if chosen[i] < 0:
             continue
-        chosen[start] = 0
-        visited[start] = True
-        queue = [start]
-        while queue:
-            p = queue.pop(0)
-            for q, samples, _ in nb[p]:
-                if chosen[p] < 0:
-                    continue
-                lp = levels[p][chosen[p]]
-                if visited[q]:
-                    if chosen[q] >= 0 and _continuous(
-                        lp, levels[q][chosen[q]], samples, node_xyz, node_count, tol
-                    ):
-                        union(p, q)
-                    continue
-                if not levels[q]:
-                    continue
-                fits = [
-                    k
-                    for k, lq in enumerate(levels[q])
-                    if _continuous(lp, lq, samples, node_xyz, node_count, tol)
-                ]
-                if fits:
-                    chosen[q] = fits[0]  # levels are sorted by size
-                    visited[q] = True
-                    union(p, q)
-                    queue.append(q)
+        for j, _length, compat in nb[i]:
+            if chosen[j] >= 0 and compat[chosen[i], chosen[j]]:
+                union(i, j)
     # polygons without points: join the neighbouring road with the longest shared boundary
     for i in range(n):
         if levels[i]:
-            if chosen[i] == -1:
-                chosen[i] = 0
             continue
         best = None
-        for q, _s, length in nb[i]:
+        for q, length, _c in nb[i]:
             if levels[q] and (best is None or length > best[1]):
                 best = (q, length)
         if best is not None:
@@ -758,12 +759,18 @@ def reconstruct_roads(
     ).tocsr()
     index = _PointIndex(pts[:, :2])
 
-    def levels_of(regions):
+    def levels_of(regions, strict):
         out, inside = [], []
-        for g in regions:
+        for g, g0 in zip(regions, strict, strict=True):
             idx = index.inside(g) if (g is not None and not g.is_empty) else np.empty(0, np.int64)
             inside.append(idx)
-            out.append(_levels_in(idx, node, lab_seg, node_xyz, node_count, adj, tol))
+            lvs = _levels_in(idx, node, lab_seg, node_xyz, node_count, adj, tol)
+            if lvs:
+                own = idx if g0 is g else idx[shapely.contains_xy(g0, pts[idx, 0], pts[idx, 1])]
+                own_nodes = node[own[lab_seg[own] >= 0]]
+                for lv in lvs:
+                    lv.inside = int(np.isin(own_nodes, lv.nodes).sum())
+            out.append(lvs)
         return out, inside
 
     neigh = _neighbours(geoms)
@@ -774,7 +781,7 @@ def reconstruct_roads(
         estimated = False
     elif ms > 0:
         cores = shapely.buffer(geoms, -ms)
-        lv0, _ = levels_of(cores)
+        lv0, _ = levels_of(cores, cores)
         ch0, _ = _grow(lv0, neigh, node_xyz, node_count, tol)
         s = _estimate_shift(pts, geoms, ch0, lv0, lab_seg, node_xyz, node_count, index, ms, tol)
         estimated = True
@@ -783,7 +790,7 @@ def reconstruct_roads(
         estimated = False
     moved = shapely.transform(geoms, lambda c: c + s)
     regions = shapely.buffer(moved, marg) if marg > 0 else moved
-    levels, inside = levels_of(regions)
+    levels, inside = levels_of(regions, moved)
     chosen, road = _grow(levels, neigh, node_xyz, node_count, tol)
     n_poly = len(geoms)
     assigned = np.full(len(pts), -1, dtype=np.int64)
