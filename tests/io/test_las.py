@@ -210,3 +210,37 @@ def test_evlrs_and_extra_bytes_survive(tmp_path):
     lidarqa.write(cloud, out)
     _assert_same_file(src, out)
     assert len(laspy.read(out).evlrs) == 1
+
+
+def _eb_struct(path, name):
+    header = laspy.read(path).header
+    (vlr,) = [v for v in header.vlrs if v.record_id == 4 and v.user_id == "LASF_Spec"]
+    (s,) = [s for s in vlr.extra_bytes_structs if s.format_name() == name]
+    return s
+
+
+@pytest.mark.parametrize("no_data", [None, [255.0]])
+def test_extra_bytes_statistics_are_exact_after_a_change(tmp_path, no_data):
+    # laspy >= 2.7 tracks extra-dimension min/max from one point (or not at all with a
+    # no-data value); the statistics we write must describe every point written.
+    header = laspy.LasHeader(point_format=6, version="1.4")
+    header.add_extra_dim(laspy.ExtraBytesParams(name="treeID", type=np.float64, no_data=no_data))
+    las = laspy.LasData(header)
+    rng = np.random.default_rng(7)
+    las.x, las.y, las.z = (rng.uniform(0, 10, 50) for _ in range(3))
+    tree = rng.integers(3, 40, 50).astype(float)
+    tree[0] = 255.0  # the no-data value when one is set
+    las.treeID = tree
+    src = tmp_path / "src.las"
+    las.write(src)
+
+    cloud = lidarqa.read(src)
+    cloud.fields["classification"][:] = 2
+    tree[1:] += 1  # a changed extra dimension gets new statistics
+    cloud.fields["treeID"] = tree.copy()
+    out = tmp_path / "out.laz"
+    lidarqa.write(cloud, out)
+    s = _eb_struct(out, "treeID")
+    valid = tree if no_data is None else tree[tree != no_data[0]]
+    assert s.min[0] == valid.min() and s.max[0] == valid.max()
+    np.testing.assert_array_equal(laspy.read(out).treeID, tree)

@@ -293,6 +293,98 @@ def _las_from_source(cloud: PointCloud) -> Any:
     return las
 
 
+# --- Extra Bytes VLR statistics -------------------------------------------------------------
+# laspy >= 2.7 tracks the min/max of extra dimensions while writing, but for a scalar dimension
+# it looks at one point only (and skips dimensions with a no-data value), so the VLR it writes
+# carries wrong statistics. We write the payload ourselves: the source's own bytes for a
+# dimension whose values are unchanged (lossless round trip), exact statistics otherwise.
+_EB_SIZE = 192  # bytes of one Extra Bytes descriptor (LAS 1.4 R15, Table 24)
+
+
+def _vlr_payload(header: Any, user_id: str, record_id: int) -> bytes | None:
+    for vlr in header.vlrs:
+        if vlr.user_id.strip("\x00") == user_id and vlr.record_id == record_id:
+            return bytes(vlr.record_data_bytes())
+    return None
+
+
+def _eb_long_dtype(code: int) -> np.dtype:
+    base = (code - 1) % 10 + 1
+    if base in (9, 10):
+        return np.dtype("<f8")
+    return np.dtype("<i8") if base in (2, 4, 6, 8) else np.dtype("<u8")
+
+
+def _extra_bytes_payload(records: np.ndarray, payload: bytes, source: LasSource | None) -> bytes:
+    """Extra Bytes VLR `payload` with correct min/max for the point `records` written."""
+    out = bytearray(payload)
+    src_payload = None if source is None else _vlr_payload(source.header, "LASF_Spec", 4)
+    names = records.dtype.names or ()
+    for k in range(len(out) // _EB_SIZE):
+        a = k * _EB_SIZE
+        desc = out[a : a + _EB_SIZE]
+        code, options = desc[2], desc[3]
+        name = bytes(desc[4:36]).split(b"\x00", 1)[0].decode("ascii", "replace")
+        if (
+            source is not None
+            and not source.is_subset
+            and src_payload is not None
+            and len(src_payload) == len(out)
+            and src_payload[a + 4 : a + 36] == bytes(desc[4:36])
+            and name in names
+            and name in (source.records.dtype.names or ())
+            and np.array_equal(records[name], source.records[name])
+        ):
+            out[a : a + _EB_SIZE] = src_payload[a : a + _EB_SIZE]
+            continue
+        if code == 0 or not options & 0b110 or name not in names or len(records) == 0:
+            continue
+        long_t = _eb_long_dtype(code)
+        values = np.asarray(records[name])
+        values = values.reshape(len(values), -1)
+        n_el = values.shape[1]
+        no_data = np.frombuffer(bytes(desc[40:64]), dtype=long_t)[:n_el]
+        lo = np.frombuffer(bytes(desc[64:88]), dtype=long_t).copy()
+        hi = np.frombuffer(bytes(desc[88:112]), dtype=long_t).copy()
+        for i in range(n_el):
+            col = values[:, i].astype(long_t)
+            if options & 0b1:
+                col = col[col != no_data[i]]
+            if len(col):
+                lo[i], hi[i] = col.min(), col.max()
+        if options & 0b010:
+            out[a + 64 : a + 88] = lo.tobytes()
+        if options & 0b100:
+            out[a + 88 : a + 112] = hi.tobytes()
+    return bytes(out)
+
+
+def _patch_extra_bytes(fh: Any, records: np.ndarray, source: LasSource | None) -> None:
+    """Rewrite the Extra Bytes VLR payload of the LAS/LAZ file open in `fh` (r+b) in place."""
+    import struct
+
+    fh.seek(94)
+    (header_size,) = struct.unpack("<H", fh.read(2))
+    fh.seek(100)
+    (n_vlrs,) = struct.unpack("<I", fh.read(4))
+    pos = header_size
+    for _ in range(n_vlrs):
+        fh.seek(pos)
+        head = fh.read(54)
+        if len(head) < 54:
+            return
+        user_id = head[2:18].split(b"\x00", 1)[0]
+        (record_id, length) = struct.unpack("<HH", head[18:22])
+        if user_id == b"LASF_Spec" and record_id == 4:
+            payload = fh.read(length)
+            fixed = _extra_bytes_payload(records, payload, source)
+            if fixed != payload:
+                fh.seek(pos + 54)
+                fh.write(fixed)
+            return
+        pos += 54 + length
+
+
 def write_las(
     cloud: PointCloud,
     path: str | os.PathLike,
@@ -329,8 +421,9 @@ def write_las(
             # laspy infers compression from a path's suffix (ours is ".part"); give it a stream.
             with tmp.open("wb") as fh:
                 las.write(fh, do_compress=bool(compress))
-            if unchanged:
-                with tmp.open("r+b") as fh:
+            with tmp.open("r+b") as fh:
+                _patch_extra_bytes(fh, las.points.array, src)
+                if unchanged:
                     for a, b in _RESTORE_RANGES:
                         fh.seek(a)
                         fh.write(src.raw_header[a:b])
