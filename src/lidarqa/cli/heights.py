@@ -241,7 +241,8 @@ def heights(
     Vosselman). With road polygons as MAP the 3D roads are reconstructed first
     (as by ``lidarqa roads``): each polygon gets the laser points of its own
     height level, and each reference point is tested against the level it
-    lies on, so a point on a road under a bridge is not compared with the deck.
+    lies on, so a point on a road under a bridge is not compared with the deck
+    (--correlation, --eq8, --posterior and --largest-segment apply to point maps).
     """
     from ..accuracy.heights import assess_heights, read_map_points
     from ..errors import OptionError
