@@ -97,6 +97,18 @@ def test_interchange_levels_and_growing(scene, recon):
     assert len(tri) and np.all(mp.road[tri] == mp.road[tri[:, :1]])
 
 
+def test_no_shift_is_not_invented():
+    s = make_interchange(seed=4, density=2.0, map_shift=(0.0, 0.0))
+    rec = reconstruct_roads(s.points, s.polygons)
+    assert np.all(np.abs(rec.shift) <= 0.10)
+    # a flat plane shows no edges: the map stays where it is, and says so
+    rng = np.random.default_rng(2)
+    xy = rng.uniform(0, 100, (20_000, 2))
+    pts = np.column_stack([xy, 0.01 * xy[:, 0] + rng.normal(0, 0.05, len(xy))])
+    rec = reconstruct_roads(pts, [shapely.box(20, 20, 80, 40)])
+    assert np.all(rec.shift == 0) and "shift_not_significant" in rec.flags
+
+
 def test_known_shift_and_order_independence(scene):
     rng = np.random.default_rng(5)
     perm = rng.permutation(len(scene.points))

@@ -16,7 +16,8 @@ The map polygons of a 2D topographic map get heights from airborne laser points:
 3. **Map shift.** A horizontal displacement between map and laser data (P1) is
    estimated by moving all polygons together so that the points on each
    polygon's level fall inside it and the others outside (grid search within
-   `max_shift`, refined to 1 cm).
+   `max_shift`, refined to 5 mm), using only boundary stretches where the data
+   show an edge, and kept at zero unless the gain is significant.
 4. **Map growing.** Neighbouring polygons (shared boundary, no overlap) whose
    levels continue each other across the shared boundary are merged into one
    road. Starting from the polygons with the most dominant level, each
@@ -601,11 +602,15 @@ def _boundary_samples(geom: Any, step: float = 0.1) -> tuple[np.ndarray, np.ndar
 
 def _estimate_shift(
     pts, geoms, chosen, levels, labels, node_xyz, node_count, index, max_shift, tol
-) -> np.ndarray:
+) -> np.ndarray | None:
+    """The map-to-laser shift that best separates each polygon's level from the rest.
+
+    None when the boundaries show no edges or the best shift is not significant.
+    """
     import shapely
     from scipy.spatial import cKDTree
 
-    w = max_shift + 1.0
+    w = max_shift + 2.0
     sd_all, n_all, sign_all = [], [], []
     for i, g in enumerate(geoms):
         if chosen[i] < 0:
@@ -624,14 +629,24 @@ def _estimate_shift(
         pred, _ = _k.local_plane_predict(node_xyz[lv.nodes], node_count[lv.nodes], pts[cand, :2])
         sign = np.where(np.abs(pts[cand, 2] - pred) <= tol, 1.0, -1.0)
         sign[labels[cand] < 0] = 0.0
+        # only stretches of boundary where the data show an edge count: beyond any possible
+        # shift, most points outside must be off the polygon's level (a road continuing into
+        # a neighbouring polygon or into terrain at the same height says nothing about a shift)
+        piece = j // 50  # 5 m stretches of boundary (samples every 0.1 m)
+        far_out = (sd > max_shift) & (sign != 0)
+        n_out = np.bincount(piece[far_out], minlength=piece.max() + 1)
+        n_off = np.bincount(piece[far_out & (sign < 0)], minlength=piece.max() + 1)
+        edge = (n_out >= 2) & (n_off >= 0.5 * n_out)
+        keep = edge[piece]
+        sd, j, sign = sd[keep], j[keep], sign[keep]
         sd_all.append(sd)
         n_all.append(bn[j])
         sign_all.append(sign)
     if not sd_all:
-        return np.zeros(2)
+        return None
     sd, nrm, sign = np.concatenate(sd_all), np.vstack(n_all), np.concatenate(sign_all)
-    if not (sign < 0).any():
-        return np.zeros(2)  # nothing distinguishes a polygon from its surroundings
+    if not sd.size or not (sign < 0).any():
+        return None  # nothing distinguishes a polygon from its surroundings
     best = np.zeros(2)
     for step, half in ((0.15, max_shift), (0.03, 0.15), (0.005, 0.03)):
         g1 = np.arange(-half, half + 1e-9, step)
@@ -640,6 +655,14 @@ def _estimate_shift(
         sc = _k.shift_scores(sd, nrm, sign, cand, tau=0.1)
         top = sc >= sc.max() - 1e-9 * max(1.0, abs(sc.max()))
         best = cand[top].mean(axis=0)
+    # keep the map where it is unless the shift is significant: each point that changes side
+    # adds ±1 to the score, so without a real shift the gain is a random walk of those points
+    before = sd < 0
+    after = sd - nrm @ best < 0
+    changed = before != after
+    gain = float(np.sum(sign[changed] * np.where(after[changed], 1.0, -1.0)))
+    if gain <= 3.0 * np.sqrt(max(int(changed.sum()), 1)):
+        return None
     return best
 
 
@@ -683,7 +706,11 @@ def reconstruct_roads(
     spacing : float, default 10.0
         Largest distance between map points along a boundary (m).
     shift : array_like of shape (2,), optional
-        Known map-to-laser shift (m); estimated when not given.
+        Known map-to-laser shift (m); estimated when not given. Only boundary
+        stretches where the data show an edge (points beyond `max_shift` outside
+        the polygon lie mostly off its level) take part; when the best shift
+        does not beat zero significantly (gain <= 3√(points changing side)) the
+        map stays where it is and the flag ``shift_not_significant`` is set.
     max_shift : float, default 1.5
         Largest map-to-laser shift searched (m); 0 = no shift.
     margin : float, default 0.5
@@ -774,6 +801,7 @@ def reconstruct_roads(
         return out, inside
 
     neigh = _neighbours(geoms)
+    shift_flag = None
     if shift is not None:
         s = np.asarray(shift, dtype=np.float64).reshape(-1)
         if s.shape != (2,) or not np.isfinite(s).all():
@@ -785,6 +813,9 @@ def reconstruct_roads(
         ch0, _ = _grow(lv0, neigh, node_xyz, node_count, tol)
         s = _estimate_shift(pts, geoms, ch0, lv0, lab_seg, node_xyz, node_count, index, ms, tol)
         estimated = True
+        if s is None:  # the data show no significant shift
+            s = np.zeros(2)
+            shift_flag = "shift_not_significant"
     else:
         s = np.zeros(2)
         estimated = False
@@ -892,7 +923,7 @@ def reconstruct_roads(
         ring_rows.append((poly, rr, row_of[start : start + len(xy)]))
         start += len(xy)
     tri = _triangulate(mp, moved, road)
-    flags = []
+    flags = [shift_flag] if shift_flag else []
     if outside.any():
         flags.append("polygons_outside_cloud")
     if (status == "no_points").any():
