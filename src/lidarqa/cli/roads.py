@@ -7,7 +7,16 @@ from pathlib import Path
 import click
 import numpy as np
 
-from ..accuracy.heights import CURVATURE, MAX_RADIUS, MIN_POINTS, RADIUS, SIGMA_POINT
+from ..accuracy.heights import (
+    CURVATURE,
+    MAX_RADIUS,
+    MIN_POINTS,
+    RADIUS,
+    SIGMA_GPS,
+    SIGMA_INS,
+    SIGMA_POINT,
+    SIGMA_STRIP,
+)
 from ._common import INT_LIST, Steps, common_options, echo, finish, prepare_outputs, settings
 
 
@@ -108,6 +117,19 @@ def _fmt_cm(v: float) -> str:
     help="E1: laser point height noise (m).",
 )
 @click.option(
+    "--sigma-gps", type=float, default=SIGMA_GPS, show_default=True, help="E2: GPS noise (m)."
+)
+@click.option(
+    "--sigma-ins", type=float, default=SIGMA_INS, show_default=True, help="E3: INS noise (m)."
+)
+@click.option(
+    "--sigma-strip",
+    type=float,
+    default=SIGMA_STRIP,
+    show_default=True,
+    help="E4: strip adjustment noise (m).",
+)
+@click.option(
     "--curvature",
     type=float,
     default=CURVATURE,
@@ -129,6 +151,9 @@ def roads(
     max_radius: float,
     min_points: int,
     sigma_point: float,
+    sigma_gps: float,
+    sigma_ins: float,
+    sigma_strip: float,
     curvature: float,
 ) -> None:
     """Reconstruct 3D roads: heights for the map polygons of MAP from the CLOUD.
@@ -171,6 +196,9 @@ def roads(
             max_radius=max_radius,
             min_points=min_points,
             sigma_point=sigma_point,
+            sigma_gps=sigma_gps,
+            sigma_ins=sigma_ins,
+            sigma_strip=sigma_strip,
             curvature=curvature,
         )
     with steps("Writing " + output):
@@ -178,6 +206,8 @@ def roads(
     res = rec.to_dict()
     dx, dy = res["shift"]
     how = "estimated" if res["shift_estimated"] else "given"
+    if "shift_not_significant" in rec.flags:
+        how = "no significant shift in the data: map kept"
     echo(f"map shift         dx {dx:+.3f} m, dy {dy:+.3f} m ({how})")
     echo(
         f"polygons          {res['n_polygons']:,} in {res['n_roads']:,} road(s); "
