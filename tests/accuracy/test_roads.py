@@ -75,6 +75,25 @@ def test_interchange_deck_heights(deck_height, seed):
     assert np.mean(np.abs(err) <= 3 * rec.map_points.sigma) >= 0.99
 
 
+def test_three_levels():
+    s = make_interchange(seed=2, density=3.0, third_level=True, map_shift=(0.4, 0.7))
+    rec = reconstruct_roads(s.points, s.polygons, ids=s.polygon_ids)
+    assert np.all(np.abs(rec.shift + s.map_shift) <= 0.10)
+    # three roads, each polygon on its own level (A at 0 m, B at 8 m, C at 14 m over the crossing)
+    for truth in range(3):
+        assert len(set(rec.polygon_road[s.polygon_road == truth])) == 1
+    assert rec.n_roads == 3
+    err = _errors(s, rec)
+    assert np.all(np.abs(err) < 1.0)
+    assert np.mean(np.abs(err) <= 3 * rec.map_points.sigma) >= 0.98
+    comp = compare_road_heights(rec, s.reference_xyz)
+    road_truth = {
+        int(r): int(s.polygon_road[np.flatnonzero(rec.polygon_road == r)[0]])
+        for r in np.unique(rec.polygon_road)
+    }
+    assert np.all(np.array([road_truth[r] for r in comp.road]) == s.reference_road)
+
+
 def test_interchange_levels_and_growing(scene, recon):
     ids = list(scene.polygon_ids)
     a_mid, b_deck = ids.index("A_mid"), ids.index("B_deck")

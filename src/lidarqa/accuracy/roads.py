@@ -562,6 +562,22 @@ def _grow(levels, neigh, node_xyz, node_count, tol):
     return chosen, road
 
 
+def _fits_level(p: np.ndarray, max_residual: float, k: int = 15) -> np.ndarray:
+    """Points within `max_residual` of the median height of their `k` nearest level points.
+
+    Drops the odd point of another surface that a level picked up where two
+    surfaces touch (a road end running into lower terrain).
+    """
+    from scipy.spatial import cKDTree
+
+    if len(p) < 4:
+        return np.ones(len(p), dtype=bool)
+    kk = min(k, len(p))
+    _, idx = cKDTree(p[:, :2]).query(p[:, :2], k=kk)
+    med = np.median(p[idx, 2], axis=1)
+    return np.abs(p[:, 2] - med) <= max_residual
+
+
 def _rings(geoms: np.ndarray, spacing: float) -> list[tuple[int, int, np.ndarray]]:
     import shapely
 
@@ -677,7 +693,7 @@ def reconstruct_roads(
     spacing: float = 10.0,
     shift: Any = None,
     max_shift: float = 1.5,
-    margin: float = 0.5,
+    margin: float = 0.0,
     cell_size: float | None = None,
     max_step: float = 0.5,
     min_area: float = 20.0,
@@ -713,8 +729,9 @@ def reconstruct_roads(
         map stays where it is and the flag ``shift_not_significant`` is set.
     max_shift : float, default 1.5
         Largest map-to-laser shift searched (m); 0 = no shift.
-    margin : float, default 0.5
-        Points this far outside a (shifted) polygon may still join it (m).
+    margin : float, default 0.0
+        Points this far outside a (shifted) polygon may still join it (m); a
+        margin lets terrain points join where a road ends at lower ground.
     cell_size : float, optional
         Grid cell of the smooth segments (m); by default 2/√density, at least
         1 m, so that neighbouring cells of a surface hold points.
@@ -834,6 +851,7 @@ def reconstruct_roads(
         idx = inside[i]
         if chosen[i] >= 0:
             mine = np.isin(node[idx], levels[i][chosen[i]].nodes) & (lab_seg[idx] >= 0)
+            mine[mine] = _fits_level(pts[idx[mine]], 0.6 * tol)
             own.append(idx[mine])
             p_points[i] = mine.sum()
             p_other[i] = int((~mine & (lab_seg[idx] >= 0)).sum())

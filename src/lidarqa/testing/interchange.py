@@ -64,7 +64,9 @@ class InterchangeScene:
         p = self.params
         za = p["grade"] * xy[:, 0]
         zb = _deck_profile(xy[:, 1], p["deck_height"], p["deck_half"], p["ramp_length"])
-        return np.where(road == 0, za, zb)
+        u = (xy[:, 0] + xy[:, 1]) / np.sqrt(2.0)
+        zc = _deck_profile(u, p.get("third_height", 0.0), p["deck_half"], p["ramp_length"])
+        return np.where(road == 0, za, np.where(road == 1, zb, zc))
 
 
 def _deck_profile(y: np.ndarray, height: float, half: float, ramp: float) -> np.ndarray:
@@ -85,8 +87,10 @@ def make_interchange(
     n_cars: int = 12,
     length: float = 150.0,
     block_size: float = 25.0,
+    third_level: bool = False,
+    third_height: float = 14.0,
 ) -> InterchangeScene:
-    """Make a two-level interchange with known heights, map shift and reference points.
+    """Make a two- or three-level interchange with known heights, map shift and references.
 
     Parameters
     ----------
@@ -108,6 +112,12 @@ def make_interchange(
         Half length of road A (m); road B is 25 m longer on each side.
     block_size : float, default 25.0
         Side of the square tiles (m) that share one laser block offset.
+    third_level : bool, default False
+        Add road C (truth road 2) on the diagonal x = y, 10 m wide, on a deck
+        `third_height` m up over the crossing of A and B, with ramps down to
+        ground level; A, B and terrain under it get few points.
+    third_height : float, default 14.0
+        Height of road C's deck (m).
 
     Examples
     --------
@@ -132,6 +142,8 @@ def make_interchange(
         "sigma_block": sigma_block,
         "sigma_ref": sigma_ref,
         "seed": seed,
+        "third_level": bool(third_level),
+        "third_height": float(third_height) if third_level else 0.0,
     }
 
     def uniform(x0, x1, y0, y1, dens):
@@ -193,14 +205,35 @@ def make_interchange(
         return keep
 
     ka, kb = hidden(a), hidden(b)
-    xy = np.vstack([a[ka], b[kb], t, car_xy])
-    z = np.concatenate([a_z[ka], b_z[kb], t_z, car_zz])
+    c_xy, c_z, c_cls = np.empty((0, 2)), np.empty(0), np.empty(0, dtype=np.uint8)
+    if third_level:
+        r2 = np.sqrt(2.0)
+        uv = uniform(-ylen, ylen, -5.0, 5.0, density)
+        c_xy = np.column_stack([(uv[:, 0] - uv[:, 1]) / r2, (uv[:, 0] + uv[:, 1]) / r2])
+        c_z = _deck_profile(uv[:, 0], third_height, deck_half, ramp)
+        c_cls = np.where(np.abs(uv[:, 0]) <= deck_half, 17, 2).astype(np.uint8)
+
+        def under_c(xy_, z_):
+            u_ = (xy_[:, 0] + xy_[:, 1]) / r2
+            v_ = (xy_[:, 1] - xy_[:, 0]) / r2
+            inside = (np.abs(v_) <= 5.0) & (np.abs(u_) <= ylen)
+            gap = _deck_profile(u_, third_height, deck_half, ramp) - z_
+            thin = rng.uniform(size=len(z_)) > under_deck_density / max(density, 1e-9)
+            return ~(inside & ((gap < 3.0) | thin))  # buried under the embankment, or shadowed
+
+        ka &= under_c(a, a_z)
+        kb &= under_c(b, b_z)
+        kt = under_c(t, t_z)
+        t, t_z = t[kt], t_z[kt]
+    xy = np.vstack([a[ka], b[kb], t, car_xy, c_xy])
+    z = np.concatenate([a_z[ka], b_z[kb], t_z, car_zz, c_z])
     cls = np.concatenate(
         [
             np.full(ka.sum(), 2),
             np.where(np.abs(b[kb, 1]) <= deck_half, 17, 2),
             np.full(len(t), 2),
             np.full(len(car_xy), 1),
+            c_cls,
         ]
     ).astype(np.uint8)
     # laser block offsets per 100 m tile and point noise
@@ -223,6 +256,17 @@ def make_interchange(
         ("B_north", 1, (-half_b, deck_half, half_b, ylen)),
     ]
     polys = [shapely.box(x0 + sx, y0 + sy, x1 + sx, y1 + sy) for _, _, (x0, y0, x1, y1) in boxes]
+    if third_level:
+        r2 = np.sqrt(2.0)
+        for name, (u0, u1) in (
+            ("C_sw", (-ylen, -deck_half)),
+            ("C_mid", (-deck_half, deck_half)),
+            ("C_ne", (deck_half, ylen)),
+        ):
+            uv = np.array([(u0, -5.0), (u1, -5.0), (u1, 5.0), (u0, 5.0)])
+            xy_c = np.column_stack([(uv[:, 0] - uv[:, 1]) / r2, (uv[:, 0] + uv[:, 1]) / r2])
+            boxes.append((name, 2, None))
+            polys.append(shapely.Polygon(xy_c + [sx, sy]))
     # paint strips every 2 m: centre line and lane lines, 1 m inside the ends
     ra_x = np.arange(-xlen + 1.0, xlen - 1.0 + 1e-9, 2.0)
     ra = np.column_stack([np.tile(ra_x, 3), np.repeat([-2.5, 0.0, 2.5], len(ra_x))])
@@ -230,6 +274,14 @@ def make_interchange(
     rb = np.column_stack([np.repeat([-3.0, 0.0, 3.0], len(rb_y)), np.tile(rb_y, 3)])
     ref_xy = np.vstack([ra, rb])
     ref_road = np.concatenate([np.zeros(len(ra), np.int64), np.ones(len(rb), np.int64)])
+    if third_level:
+        rc_u = np.arange(-ylen + 1.0, ylen - 1.0 + 1e-9, 2.0)
+        uv = np.column_stack([np.tile(rc_u, 3), np.repeat([-2.5, 0.0, 2.5], len(rc_u))])
+        rc = np.column_stack(
+            [(uv[:, 0] - uv[:, 1]) / np.sqrt(2.0), (uv[:, 0] + uv[:, 1]) / np.sqrt(2.0)]
+        )
+        ref_xy = np.vstack([ref_xy, rc])
+        ref_road = np.concatenate([ref_road, np.full(len(rc), 2, dtype=np.int64)])
     scene_tmp = InterchangeScene(
         points=pts,
         classification=cls,
