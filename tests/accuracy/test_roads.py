@@ -165,6 +165,23 @@ def test_polygon_without_points_grows_from_neighbour(scene):
     assert "polygons_outside_cloud" in rec.flags and "polygons_without_points" in rec.flags
 
 
+def test_multipolygon_feature(scene, tmp_path):
+    pytest.importorskip("pyogrio")
+    from lidarqa.accuracy.roads import write_roads
+
+    polys = list(scene.polygons)
+    both = shapely.MultiPolygon([polys[0], polys[2]])  # A_west and A_east as one feature
+    rec = reconstruct_roads(scene.points, [both, *polys[1:2], *polys[3:]], shift=-scene.map_shift)
+    # split into its parts, which keep the feature's id and each get their level
+    assert len(rec.polygons) == len(polys) and list(rec.polygon_ids[:2]) == [0, 0]
+    p3 = rec.polygons_3d()
+    assert all(g.has_z for g in p3)
+    z = shapely.get_coordinates(p3[:2], include_z=True)[:, 2]
+    assert np.all(np.abs(z) < 1.0)  # road A's level
+    write_roads(rec, tmp_path / "m.gpkg")
+    assert (tmp_path / "m.gpkg").stat().st_size > 0
+
+
 def test_bad_input(scene):
     with pytest.raises(InvalidPointsError, match="empty"):
         reconstruct_roads(scene.points, [])

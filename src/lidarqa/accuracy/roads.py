@@ -239,7 +239,7 @@ class RoadReconstruction:
         Polygon of each laser point (-1: none).
     labels : ndarray of shape (N,) int64
         Smooth segment of each laser point (-1: dropped).
-    rings : list of (polygon, ring, indices)
+    rings : list of (polygon, (part, ring), indices)
         Map point rows of each polygon ring, in ring order (ring 0 = exterior).
     triangles : ndarray of shape (T, 3) int64
         TIN triangles (rows of `map_points`), each within one road.
@@ -273,17 +273,20 @@ class RoadReconstruction:
         return int(len(np.unique(r)))
 
     def polygons_3d(self) -> list[Any]:
-        """One Polygon Z per input polygon at the height of its road (map coordinates)."""
+        """One Polygon Z (MultiPolygon Z for multipart input) per input polygon at its road's level.
+
+        Map coordinates; the boundary carries the heights of the map points.
+        """
         shapely = require("shapely", "vector")
         mp = self.map_points
-        rings: dict[int, list[np.ndarray]] = {}
-        for poly, _ring, rows in self.rings:
+        parts: dict[int, dict[int, list[np.ndarray]]] = {}
+        for poly, (part, _ring), rows in self.rings:
             xyz = np.column_stack([mp.xy[rows], mp.height[rows]])
-            rings.setdefault(poly, []).append(np.vstack([xyz, xyz[:1]]))
+            parts.setdefault(poly, {}).setdefault(part, []).append(np.vstack([xyz, xyz[:1]]))
         out = []
         for i in range(len(self.polygons)):
-            rr = rings.get(i)
-            out.append(shapely.Polygon(rr[0], rr[1:]) if rr else None)
+            pp = [shapely.Polygon(rr[0], rr[1:]) for _, rr in sorted(parts.get(i, {}).items())]
+            out.append(None if not pp else pp[0] if len(pp) == 1 else shapely.MultiPolygon(pp))
         return out
 
     def triangles_3d(self) -> list[Any]:
@@ -578,17 +581,17 @@ def _fits_level(p: np.ndarray, max_residual: float, k: int = 15) -> np.ndarray:
     return np.abs(p[:, 2] - med) <= max_residual
 
 
-def _rings(geoms: np.ndarray, spacing: float) -> list[tuple[int, int, np.ndarray]]:
+def _rings(geoms: np.ndarray, spacing: float) -> list[tuple[int, tuple[int, int], np.ndarray]]:
     import shapely
 
     out = []
     for i, g in enumerate(geoms):
-        for part in shapely.get_parts(g):
+        for k, part in enumerate(shapely.get_parts(g)):
             part = shapely.segmentize(part, spacing)
             rings = [part.exterior, *part.interiors]
             for r, ring in enumerate(rings):
                 xy = shapely.get_coordinates(ring)[:-1]
-                out.append((i, r, xy))
+                out.append((i, (k, r), xy))
     return out
 
 
@@ -716,7 +719,8 @@ def reconstruct_roads(
         Laser points x, y, z (m): typically ground, road and bridge classes.
     polygons : sequence of shapely Polygon/MultiPolygon
         Road polygons of the 2D map (same projected CRS). They may overlap (a road
-        polygon passing under a deck polygon) or tile the plane.
+        polygon passing under a deck polygon) or tile the plane. A MultiPolygon
+        is split into its parts, which keep the feature's id.
     ids : sequence, optional
         Polygon ids (default 0..P-1).
     spacing : float, default 10.0
@@ -765,6 +769,10 @@ def reconstruct_roads(
     pid = np.arange(len(geoms)) if ids is None else np.asarray(ids).reshape(-1)
     if len(pid) != len(geoms):
         raise InvalidPointsError(f"ids must have {len(geoms)} entries, got {len(pid)}")
+    # a multipart feature may lie on several levels: each part is a polygon of its own
+    parts, part_of = shapely.get_parts(geoms, return_index=True)
+    if len(parts) != len(geoms):
+        geoms, pid = np.asarray(parts, dtype=object), pid[part_of]
     step = check_positive(spacing, "spacing")
     ms = check_positive(max_shift, "max_shift", allow_zero=True)
     marg = check_positive(margin, "margin", allow_zero=True)
@@ -1212,10 +1220,16 @@ def write_roads(
     polys = recon.polygons_3d()
     polys = [shapely.force_3d(g) if g is not None else g for g in polys]
     keep = np.array([g is not None for g in polys])
+    multi = any(g is not None and g.geom_type == "MultiPolygon" for g in polys)
+    if multi:  # one geometry type per layer
+        polys = [
+            shapely.multipolygons([g]) if g is not None and g.geom_type == "Polygon" else g
+            for g in polys
+        ]
     layers.append(
         (
             "polygons_3d",
-            "Polygon Z",
+            "MultiPolygon Z" if multi else "Polygon Z",
             np.asarray(polys, dtype=object)[keep],
             {
                 "id": ids[keep],
