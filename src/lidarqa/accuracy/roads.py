@@ -863,7 +863,7 @@ def reconstruct_roads(
             own.append(idx[mine])
             p_points[i] = mine.sum()
             p_other[i] = int((~mine & (lab_seg[idx] >= 0)).sum())
-            p_level[i] = float(np.median(pts[idx[mine], 2]))
+            p_level[i] = float(np.median(pts[idx[mine], 2])) if mine.any() else np.nan
             status[i] = "ok"
         else:
             own.append(np.empty(0, dtype=np.int64))
