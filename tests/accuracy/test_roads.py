@@ -138,6 +138,30 @@ def test_known_shift_and_order_independence(scene):
     np.testing.assert_allclose(a.map_points.sigma, b.map_points.sigma, atol=1e-9)
 
 
+def test_polygon_order_does_not_matter(scene, recon):
+    order = np.arange(len(scene.polygons))[::-1]
+    rev = reconstruct_roads(
+        scene.points, [scene.polygons[i] for i in order], ids=scene.polygon_ids[order]
+    )
+    np.testing.assert_allclose(rev.shift, recon.shift, atol=1e-9)
+
+    def table(rec):
+        mp = rec.map_points
+        truth = (
+            scene.polygon_road[np.argsort(order)][mp.polygon]
+            if rec is rev
+            else (scene.polygon_road[mp.polygon])
+        )
+        key = np.round(mp.xy, 6)
+        rows = np.lexsort((truth, key[:, 1], key[:, 0]))
+        return key[rows], mp.height[rows], mp.sigma[rows]
+
+    a, b = table(recon), table(rev)
+    np.testing.assert_array_equal(a[0], b[0])
+    np.testing.assert_allclose(a[1], b[1], atol=1e-9)
+    np.testing.assert_allclose(a[2], b[2], atol=1e-9)
+
+
 def test_polygon_without_points_grows_from_neighbour(scene):
     keep = scene.points[:, 0] < 140.0 + scene.map_shift[0]
     pts = scene.points[keep]
