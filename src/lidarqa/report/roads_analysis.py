@@ -67,11 +67,23 @@ def run_roads(ctx: Any, item: Any) -> SectionResult:
         ref_xyz = ctx.points(opts["reference"]).xyz
         comp = mod.compare_road_heights(rec, ref_xyz)
         res["reference"] = comp.to_dict()
+    lo, hi = mp.xy_laser.min(axis=0) - 20.0, mp.xy_laser.max(axis=0) + 20.0
+    near = np.all((sel.xyz[:, :2] >= lo) & (sel.xyz[:, :2] <= hi), axis=1)
+    background = sel.xyz[near, :2]
+    for flag in rec.flags:
+        notes.append(
+            {
+                "shift_not_significant": "no significant map–laser shift in the data: map kept",
+                "polygons_outside_cloud": "some polygons lie outside the laser points",
+                "polygons_without_points": "some polygons have no laser points on any road",
+                "map_points_failed": "some map points have no height (see the map_points layer)",
+            }.get(flag, flag)
+        )
     figures = [
         Figure(
             "Map-point σ",
             plots.plot_sigma_classes(
-                mp.xy_laser, np.where(mp.failed, np.nan, mp.sigma), background=sel.xyz[:, :2]
+                mp.xy_laser, np.where(mp.failed, np.nan, mp.sigma), background=background
             ),
             "predicted σ of the 3D map points (< 20 cm, 20–50 cm, > 50 cm)",
         ),
