@@ -4,8 +4,9 @@ Two roads cross on two levels: road A runs along x at ground level with a
 slight grade; road B runs along y over a bridge deck `deck_height` metres up,
 with smooth ramps down to ground level at both ends. Terrain lies about 1 m
 below the roads. The laser points have noise `sigma_point` plus a laser block
-offset per `block_size` tile (σ `sigma_block`, common to a neighbourhood as the error
-model assumes); under the deck only a few points reach road A (the scan angle).
+offset (σ `sigma_block`) that varies smoothly over the scene: it is common to a
+neighbourhood, as the error model assumes, and points `block_size` metres apart
+still share 61 % of it; under the deck only a few points reach road A (the scan angle).
 Cars (boxes 1.5 m high) stand on both roads. The map polygons are the true road
 outlines moved by `map_shift`, split so that polygon ``A_mid`` is mostly covered
 by the deck (most of its points are deck points) and ``B_deck`` lies over it.
@@ -74,6 +75,24 @@ def _deck_profile(y: np.ndarray, height: float, half: float, ramp: float) -> np.
     return height * (1.0 + np.cos(np.pi * t)) / 2.0
 
 
+def _block_field(xy: np.ndarray, sigma: float, length: float, seed: int) -> np.ndarray:
+    """Smooth Gaussian random field with σ `sigma` and correlation exp(-d²/(2·length²)) at `xy`."""
+    from scipy.ndimage import gaussian_filter, map_coordinates
+
+    if len(xy) == 0 or sigma <= 0:
+        return np.zeros(len(xy))
+    cell = min(5.0, length / 4.0)
+    pad = 4.0 * length
+    lo = xy.min(axis=0) - pad
+    shape = tuple(np.ceil((xy.max(axis=0) + pad - lo) / cell).astype(int) + 2)
+    noise = np.random.default_rng(seed).normal(0.0, 1.0, shape)
+    s = length / np.sqrt(2.0) / cell  # kernel σ (cells): correlation exp(-d²/(4 s²))
+    field = gaussian_filter(noise, s, mode="constant", truncate=4.0)
+    field *= sigma * np.sqrt(4.0 * np.pi) * s  # white noise through the kernel: var 1/(4π s²)
+    ij = ((xy - lo) / cell).T
+    return map_coordinates(field, ij, order=1, mode="nearest")
+
+
 def make_interchange(
     *,
     seed: int = 0,
@@ -111,7 +130,10 @@ def make_interchange(
     length : float, default 150.0
         Half length of road A (m); road B is 25 m longer on each side.
     block_size : float, default 25.0
-        Side of the square tiles (m) that share one laser block offset.
+        Correlation length L (m) of the laser block offset: offsets at points d
+        metres apart correlate by exp(-d²/(2L²)) (0.92 at 10 m, 0.61 at 25 m).
+        Tiles with independent offsets would put jumps inside plane fits and
+        TIN triangles that the error model treats as one offset.
     third_level : bool, default False
         Add road C (truth road 2) on the diagonal x = y, 10 m wide, on a deck
         `third_height` m up over the crossing of A and B, with ramps down to
@@ -236,12 +258,14 @@ def make_interchange(
             c_cls,
         ]
     ).astype(np.uint8)
-    # laser block offsets per 100 m tile and point noise
-    tile = np.floor((xy + 1000.0) / block_size).astype(np.int64)
-    tkey = tile[:, 0] * 1000 + tile[:, 1]
-    ukey, tinv = np.unique(tkey, return_inverse=True)
-    offs = np.random.default_rng(seed + 7919).normal(0.0, sigma_block, len(ukey))
-    z = z + offs[tinv] + rng.normal(0.0, sigma_point, len(z))
+    # laser block offsets: a smooth random field (a laser block's offset is common to a
+    # neighbourhood, as the error model assumes) with correlation exp(-d²/(2·block_size²)),
+    # plus point noise
+    z = (
+        z
+        + _block_field(xy, sigma_block, block_size, seed + 7919)
+        + rng.normal(0.0, sigma_point, len(z))
+    )
     pts = np.column_stack([xy, z])
     order = rng.permutation(len(pts))
     pts, cls = pts[order], cls[order]
