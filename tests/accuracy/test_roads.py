@@ -45,24 +45,42 @@ def _errors(scene, rec):
     return mp.height - truth
 
 
-def test_interchange_done_when(scene, recon):
+def _done_when_scene(scene, rec):
+    """Per-scene checks of issue #15; returns (|err| <= 3σ per map point, w without outliers)."""
     # the estimated shift moves the map back onto the laser data
-    assert np.all(np.abs(recon.shift + scene.map_shift) <= 0.10)
-    mp = recon.map_points
+    assert np.all(np.abs(rec.shift + scene.map_shift) <= 0.10)
+    mp = rec.map_points
     assert not mp.failed.any()
-    err = _errors(scene, recon)
-    assert np.all(np.abs(err) < 1.0)  # every map point on its own level (levels are 8 m apart)
-    assert np.mean(np.abs(err) <= 3 * mp.sigma) >= 0.99
-    comp = compare_road_heights(recon, scene.reference_xyz)
-    assert np.array_equal(comp.road >= 0, np.ones(len(comp.road), bool))
+    err = _errors(scene, rec)
+    assert np.all(np.abs(err) < 1.0)  # every map point on its own level (levels >= 6 m apart)
+    comp = compare_road_heights(rec, scene.reference_xyz)
+    assert np.all(comp.road >= 0)
     # each reference point is compared with its own road's level
     road_of_polygon = {
-        int(r): int(scene.polygon_road[np.flatnonzero(recon.polygon_road == r)[0]])
-        for r in np.unique(recon.polygon_road)
+        int(r): int(scene.polygon_road[np.flatnonzero(rec.polygon_road == r)[0]])
+        for r in np.unique(rec.polygon_road)
     }
     assert np.all(np.array([road_of_polygon[r] for r in comp.road]) == scene.reference_road)
-    std = np.std(comp.w.w[~comp.w.outlier], ddof=1)
-    assert 0.9 <= std <= 1.1
+    return np.abs(err) <= 3 * mp.sigma, comp.w.w[~comp.w.outlier]
+
+
+def test_interchange_done_when(scene, recon):
+    # The laser block offset is common to tens of metres, so one scene's 138 map points
+    # and 975 w-values hold only a few independent block offsets: the fractions are
+    # checked over three scenes (8, 6 and 14 m decks) together, each scene on its own
+    # for levels and shift (benchmarks/roads_speed.py shows the spread over 20 scenes).
+    within, ws = [], []
+    for s in (
+        scene,
+        make_interchange(seed=21, density=3.0, deck_height=6.0),
+        make_interchange(seed=22, density=3.0, deck_height=14.0, map_shift=(-0.9, 0.3)),
+    ):
+        rec = recon if s is scene else reconstruct_roads(s.points, s.polygons)
+        a, w = _done_when_scene(s, rec)
+        within.append(a)
+        ws.append(w)
+    assert np.mean(np.concatenate(within)) >= 0.99
+    assert 0.9 <= np.std(np.concatenate(ws), ddof=1) <= 1.1
 
 
 @pytest.mark.parametrize(("deck_height", "seed"), [(6.0, 11), (14.0, 12)])
