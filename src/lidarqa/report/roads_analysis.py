@@ -26,6 +26,7 @@ def _roads_params(options: dict) -> dict[str, Any]:
 @register("roads", _roads_params)
 def run_roads(ctx: Any, item: Any) -> SectionResult:
     """Reconstruct the 3D roads, write them, and w-test reference points on their levels."""
+    from ..errors import MissingDependencyError
     from ..io.vector import PointSet
     from . import plots
 
@@ -44,7 +45,7 @@ def run_roads(ctx: Any, item: Any) -> SectionResult:
     path = ctx.output_path(item, "roads3d.gpkg")
     try:
         mod.write_roads(rec, path, crs=ctx.crs, overwrite=True)
-    except Exception as exc:  # the vector extra may be missing: keep the map points as CSV
+    except MissingDependencyError as exc:  # no 'vector' extra: keep the map points as CSV
         ctx.outputs[item.id].pop()
         notes.append(f"roads3d.gpkg not written ({exc}); map points as CSV instead")
         pts = PointSet(
