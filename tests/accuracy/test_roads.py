@@ -463,3 +463,27 @@ def test_planar_partition_gives_two_heights_where_levels_cross(scene):
         truth = np.sort(scene.true_height([[x - sx, y - sy]] * 2, [0, 1]))
         assert np.all(np.abs(h - truth) <= 3 * np.sort(mp.sigma[rows])[::-1] + 0.05)
         assert h[1] - h[0] > 6
+
+
+def test_cli_projected_geojson_without_crs(scene_files, tmp_path):
+    # a GeoJSON without a 'crs' member is WGS 84 by definition: a map digitised in
+    # Lambert-93 and saved that way must be refused with a message that says why
+    d, s = scene_files
+    feats = [
+        {"type": "Feature", "properties": {"id": i}, "geometry": json.loads(shapely.to_geojson(g))}
+        for i, g in enumerate(s.polygons)
+    ]
+    off = np.array([650_000.0, 6_860_000.0])
+    for f in feats:
+        f["geometry"]["coordinates"] = [
+            (np.asarray(ring) + off).tolist() for ring in f["geometry"]["coordinates"]
+        ]
+    path = tmp_path / "nocrs.geojson"
+    path.write_text(json.dumps({"type": "FeatureCollection", "features": feats}))
+    for cmd in (
+        ["roads", d / "cloud.las", path, "-o", tmp_path / "o.gpkg", "-q"],
+        ["heights", d / "cloud.las", path, d / "ref.csv", "-q"],
+    ):
+        r = run(*cmd)
+        assert r.exit_code == 1 and "Traceback" not in r.output
+        assert "not longitude/latitude" in r.output and "'crs' member" in r.output

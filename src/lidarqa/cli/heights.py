@@ -377,11 +377,12 @@ def _heights_by_levels(
     from ..accuracy.roads import compare_road_heights, read_road_polygons, reconstruct_roads
     from ..io.crs import z_to_metres_factor
     from ..io.vector import PointSet
+    from .roads import check_map_crs
 
     with steps("Reading road polygons and reference points"):
         polys, ids, crs = read_road_polygons(map_path)
         ref = _read_reference(reference)
-        _check_crs(pc.crs, crs, ("cloud", "map"))
+        check_map_crs(pc.crs, crs, polys, map_path)
         _check_crs(pc.crs, ref.crs, ("cloud", "reference"))
         ref_xyz = ref.xyz.copy()
         ref_xyz[:, 2] *= z_to_metres_factor(ref.crs if ref.crs is not None else pc.crs)

@@ -32,6 +32,31 @@ def _parse_shift(value: str | None) -> tuple[float, float] | None:
     return dx, dy
 
 
+def check_map_crs(cloud_crs: object, map_crs: object, polygons: np.ndarray, path: str) -> None:
+    """Cloud and map CRS must agree; say so when a projected map was read as WGS 84.
+
+    A GeoJSON file without a ``crs`` member is WGS 84 by definition, so a map
+    digitised in a projected CRS and saved that way reads as longitude/latitude.
+    """
+    import shapely
+
+    from ..errors import CRSMismatchError
+    from .heights import _check_crs
+
+    try:
+        _check_crs(cloud_crs, map_crs, ("cloud", "map"))
+    except CRSMismatchError as exc:
+        x0, y0, x1, y1 = shapely.total_bounds(polygons)
+        geographic = bool(getattr(map_crs, "is_geographic", False))
+        if geographic and not (-180 <= x0 <= x1 <= 180 and -90 <= y0 <= y1 <= 90):
+            raise CRSMismatchError(
+                f"{exc}. The map's coordinates are not longitude/latitude: {Path(path).name} "
+                "has no CRS of its own (a GeoJSON file without a 'crs' member is WGS 84 by "
+                "definition); store the map with its CRS, e.g. as a GeoPackage"
+            ) from exc
+        raise
+
+
 def _fmt_cm(v: float) -> str:
     return "n/a" if v is None or not np.isfinite(v) else f"{v * 100:.1f} cm"
 
@@ -168,7 +193,6 @@ def roads(
     from ..accuracy.roads import read_road_polygons, reconstruct_roads, write_roads
     from ..io import read
     from ..io.crs import z_to_metres_factor
-    from .heights import _check_crs
 
     prepare_outputs(output, inputs=(cloud, map_path))
     given = _parse_shift(shift)
@@ -181,7 +205,7 @@ def roads(
         xyz[:, 2] *= z_to_metres_factor(pc.crs)
     with steps("Reading map polygons"):
         polys, ids, crs = read_road_polygons(map_path)
-        _check_crs(pc.crs, crs, ("cloud", "map"))
+        check_map_crs(pc.crs, crs, polys, map_path)
     with steps(f"Reconstructing {len(polys):,} polygons from {len(xyz):,} points"):
         rec = reconstruct_roads(
             xyz,
