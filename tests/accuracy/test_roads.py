@@ -487,3 +487,16 @@ def test_cli_projected_geojson_without_crs(scene_files, tmp_path):
         r = run(*cmd)
         assert r.exit_code == 1 and "Traceback" not in r.output
         assert "not longitude/latitude" in r.output and "'crs' member" in r.output
+
+
+def test_seed_density_no_failed_map_points():
+    # about one point per 9 m² as in the seed's interchange: the grid segments get small,
+    # so map points fall back to all of their road's points instead of failing
+    s = make_interchange(seed=1, density=0.11, under_deck_density=0.11 / 3)
+    rec = reconstruct_roads(s.points, s.polygons)
+    mp = rec.map_points
+    assert not mp.failed.any()
+    err = _errors(s, rec)
+    assert np.all(np.abs(err) < 1.0)
+    assert np.mean(np.abs(err) <= 3 * mp.sigma) >= 0.98
+    assert np.all(np.abs(rec.shift + s.map_shift) <= 0.15)

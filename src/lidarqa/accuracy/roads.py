@@ -29,7 +29,8 @@ The map polygons of a 2D topographic map get heights from airborne laser points:
 5. **3D map.** Map points every `spacing` metres along each polygon boundary get
    the height of a least-squares plane through the points of their road only
    (the largest smooth segment within a radius that grows until `min_points`
-   are found), with σ = √(σ_plane² + σ_laser_block² + σ_model²) as in
+   are found; all of the road's points there where sparse data leave that
+   segment too small), with σ = √(σ_plane² + σ_laser_block² + σ_model²) as in
    :func:`lidarqa.accuracy.heights.map_point_heights`. A location on the
    boundaries of roads on different levels gets one height per road. The 3D
    boundaries are triangulated per road into a TIN surface.
@@ -906,9 +907,7 @@ def reconstruct_roads(
         rp = np.unique(np.concatenate([own[i] for i in members]))
         if rows.size == 0 or rp.size < 3:
             continue
-        res = map_point_heights(
-            pts[rp],
-            mxy[rows] + s,
+        fit = dict(
             radius=radius,
             max_radius=max_radius,
             min_points=min(min_points, len(rp)) if len(rp) >= 3 else 3,
@@ -917,17 +916,25 @@ def reconstruct_roads(
             sigma_ins=sigma_ins,
             sigma_strip=sigma_strip,
             curvature=curvature,
-            labels=lab_seg[rp],
         )
-        h[rows] = res.height
-        sig["sigma"][rows] = res.sigma
-        sig["sigma_plane"][rows] = res.sigma_plane
-        sig["sigma_block"][rows] = res.sigma_block
-        sig["sigma_model"][rows] = res.sigma_model
-        sig["distance"][rows] = res.distance
-        npts[rows] = res.n_points
-        failed[rows] = res.failed
-        reason[rows] = res.reason
+        res = map_point_heights(pts[rp], mxy[rows] + s, labels=lab_seg[rp], **fit)
+        # Where the largest segment near a map point is too small (sparse data cut the
+        # road into small grid segments), fit all of the road's points there: they are
+        # on the road's level already, and small segments (cars) are not among them.
+        retry = np.flatnonzero(res.reason.astype(str) == "too_few_segment_points")
+        parts = [(rows, res)]
+        if retry.size:
+            parts.append((rows[retry], map_point_heights(pts[rp], mxy[rows[retry]] + s, **fit)))
+        for rr, rs in parts:
+            h[rr] = rs.height
+            sig["sigma"][rr] = rs.sigma
+            sig["sigma_plane"][rr] = rs.sigma_plane
+            sig["sigma_block"][rr] = rs.sigma_block
+            sig["sigma_model"][rr] = rs.sigma_model
+            sig["distance"][rr] = rs.distance
+            npts[rr] = rs.n_points
+            failed[rr] = rs.failed
+            reason[rr] = rs.reason
     mp = RoadMapPoints(
         xy=mxy,
         xy_laser=mxy + s,
