@@ -8,6 +8,8 @@
   propagation, TIN precision, w-tests.
 - :mod:`lidarqa.accuracy.swaths` — relative accuracy of flight strips: swath-overlap differences,
   smooth-surface repeatability, strip offsets and the measured strip noise E4.
+- :mod:`lidarqa.accuracy.roads` — Oude Elberink & Vosselman §2: 3D roads from 2D map polygons,
+  each polygon on its own height level, with the map-point precision.
 """
 
 from .checkpoints import (

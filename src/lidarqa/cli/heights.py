@@ -281,7 +281,11 @@ def heights(
     CLOUD's laser points around it and a predicted σ (plane + laser block +
     model). Heights and σ are interpolated in a TIN of the map points to the
     REFERENCE points (id,x,y,z), and Δh/σ_Δh is w-tested (Oude Elberink &
-    Vosselman).
+    Vosselman). With road polygons as MAP the 3D roads are reconstructed first
+    (as by ``lidarqa roads``): each polygon gets the laser points of its own
+    height level, and each reference point is tested against the level it
+    lies on, so a point on a road under a bridge is not compared with the deck
+    (--correlation, --eq8, --posterior and --largest-segment apply to point maps).
 
     CLOUD may be a catalog (a folder, a glob, a .vpc): each map point is
     fitted, and each reference point interpolated, in the chunk whose core
@@ -325,6 +329,32 @@ def heights(
                 pc = pc.select(classes=classes)
             xyz = pc.xyz.copy()
             xyz[:, 2] *= z_to_metres_factor(pc.crs)
+    if _is_polygon_map(map_path) and on_catalog:
+        echo("note: on a catalog, polygons are tested as boundary points on one level "
+             "(road levels need one cloud: `lidarqa roads`)")
+    elif _is_polygon_map(map_path):
+        return _heights_by_levels(
+            steps,
+            pc,
+            xyz,
+            cloud,
+            map_path,
+            reference,
+            output,
+            classes=classes,
+            spacing=spacing,
+            radius=radius,
+            max_radius=max_radius,
+            min_points=min_points,
+            sigma_point=sigma_point,
+            sigma_gps=sigma_gps,
+            sigma_ins=sigma_ins,
+            sigma_strip=sigma_strip,
+            sigma_ref=sigma_ref,
+            curvature=curvature,
+            alpha=alpha,
+            estimate_offset=estimate_offset,
+        )
     with steps("Reading map and reference points"):
         mp = read_map_points(map_path, spacing=spacing)
         ref = _read_reference(reference)
@@ -401,3 +431,110 @@ def heights(
         from ._catalog_jobs import _failed_exit
 
         _failed_exit(catalog_run)
+
+
+def _is_polygon_map(path: str) -> bool:
+    p = Path(path)
+    if p.suffix.lower() not in (".gpkg", ".geojson", ".json") or not p.is_file():
+        return False
+    try:
+        import pyogrio
+
+        return "polygon" in str(pyogrio.read_info(str(p)).get("geometry_type") or "").lower()
+    except Exception:
+        return False
+
+
+def _heights_by_levels(
+    steps: Any,
+    pc: Any,
+    xyz: np.ndarray,
+    cloud: str,
+    map_path: str,
+    reference: str,
+    output: str | None,
+    *,
+    classes: Any,
+    spacing: float,
+    alpha: float,
+    sigma_ref: float,
+    estimate_offset: bool,
+    **opts: Any,
+) -> None:
+    """``lidarqa heights`` with road polygons: test each reference point on its own level."""
+    from ..accuracy.roads import compare_road_heights, read_road_polygons, reconstruct_roads
+    from ..io.crs import z_to_metres_factor
+    from ..io.vector import PointSet
+    from .roads import check_map_crs
+
+    with steps("Reading road polygons and reference points"):
+        polys, ids, crs = read_road_polygons(map_path)
+        ref = _read_reference(reference)
+        check_map_crs(pc.crs, crs, polys, map_path)
+        _check_crs(pc.crs, ref.crs, ("cloud", "reference"))
+        ref_xyz = ref.xyz.copy()
+        ref_xyz[:, 2] *= z_to_metres_factor(ref.crs if ref.crs is not None else pc.crs)
+    with steps(f"Reconstructing {len(polys):,} road polygons on their height levels"):
+        rec = reconstruct_roads(xyz, polys, ids=ids, spacing=spacing, **opts)
+    with steps(f"Testing {len(ref):,} reference points on their levels"):
+        comp = compare_road_heights(
+            rec, ref_xyz, sigma_ref=sigma_ref, alpha=alpha, estimate_offset=estimate_offset
+        )
+    mp = rec.map_points
+    if output is not None:
+        from ..io.vector import write_points
+
+        m, r = len(mp), len(ref_xyz)
+        nan_m, nan_r = np.full(m, np.nan), np.full(r, np.nan)
+        zero_m, zero_r = np.zeros(m, dtype=np.int64), np.zeros(r, dtype=np.int64)
+        attrs = {
+            "kind": np.array(["map"] * m + ["reference"] * r, dtype=object),
+            "road": np.concatenate([mp.road, comp.road]),
+            "height": np.concatenate([mp.height, nan_r]),
+            "sigma": np.concatenate([mp.sigma, nan_r]),
+            "sigma_plane": np.concatenate([mp.sigma_plane, nan_r]),
+            "sigma_block": np.concatenate([mp.sigma_block, nan_r]),
+            "sigma_model": np.concatenate([mp.sigma_model, nan_r]),
+            "n_points": np.concatenate([mp.n_points, zero_r]),
+            "failed": np.concatenate([mp.failed.astype(np.int64), zero_r]),
+            "reason": np.concatenate([mp.reason.astype(str), np.full(r, "")]).astype(object),
+            "model_height": np.concatenate([nan_m, comp.height]),
+            "model_sigma": np.concatenate([nan_m, comp.sigma]),
+            "dh": np.concatenate([nan_m, comp.comparison.dh]),
+            "sigma_dh": np.concatenate([nan_m, comp.comparison.sigma_dh]),
+            "w": np.concatenate([nan_m, comp.w.w]),
+            "outlier": np.concatenate([zero_m, comp.w.outlier.astype(np.int64)]),
+        }
+        xyz_out = np.vstack([np.column_stack([mp.xy_laser, mp.height]), ref_xyz]).reshape(-1, 3)
+        rows = PointSet(
+            ids=_ids(np.arange(m), ref.ids),
+            xyz=xyz_out,
+            attributes=attrs,
+            crs=pc.crs or crs or ref.crs,
+        )
+        with steps("Writing " + output):
+            write_points(rows, output, overwrite=settings().overwrite, layer="heights")
+    res_roads = rec.to_dict()
+    res = comp.to_dict()
+    c, w = res["comparison"], res["w"]
+    dx, dy = res_roads["shift"]
+    echo(
+        f"road levels       {res_roads['n_roads']:,} road(s) from {len(polys):,} polygons; "
+        f"map shift dx {dx:+.3f} m, dy {dy:+.3f} m"
+    )
+    echo(f"map points        {res_roads['n_map_points']:,} ({res_roads['n_failed']:,} not fitted)")
+    echo(f"  σ mean / p95    {_fmt(res_roads['sigma_mean'])} / {_fmt(res_roads['sigma_p95'])}")
+    echo(f"reference points  {len(ref):,} ({c['n']:,} compared on their level)")
+    echo(f"  Δh mean / std   {_fmt(c['mean'])} / {_fmt(c['std'])}")
+    echo(f"  RMS / max |Δh|  {_fmt(c['rms'])} / {_fmt(c['max_abs'])}")
+    echo(f"w-tests           k = {w['critical']:.4f}, {w['n_outliers']:,} outlier(s)")
+    std = w["std"]
+    echo(f"  std(w)          {'n/a' if not np.isfinite(std) else f'{std:.3f}'}")
+    params = dict(rec.parameters)
+    params.update(classes=classes, sigma_ref=sigma_ref, alpha=alpha, levels=True)
+    finish(
+        "heights",
+        inputs={"cloud": cloud, "map": map_path, "reference": reference, "output": output},
+        parameters=params,
+        results={"roads": res_roads, **res},
+    )

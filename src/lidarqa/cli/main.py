@@ -49,6 +49,7 @@ COMMANDS: dict[str, str] = {
     "checkpoints": "lidarqa.cli.checkpoints:checkpoints",
     "heights": "lidarqa.cli.heights:heights",
     "swaths": "lidarqa.cli.swaths:swaths",
+    "roads": "lidarqa.cli.roads:roads",
     "assess": "lidarqa.cli.assess:assess",
     "demo": "lidarqa.cli.assess:demo",
 }

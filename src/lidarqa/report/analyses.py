@@ -1322,4 +1322,5 @@ def run_ground(ctx: RunContext, item: AnalysisItem) -> SectionResult:
     )
 
 
+from . import roads_analysis as _roads_analysis  # noqa: E402,F401  (registers the 'roads' kind)
 from . import swaths as _swaths  # noqa: E402, F401  (registers the 'swaths' analysis)

@@ -327,6 +327,7 @@ ANALYSIS_TARGETS: dict[str, dict[str, Target]] = {
         Target("repeatability", ("max_repeatability",), "max", "repeatability", "m"),
         Target("e4", ("e4",), "max", "E4 strip noise", "m"),
     ),
+    "roads": _targets(Target("sigma_mean", ("sigma_mean",), "max", "mean predicted σ", "m")),
 }
 
 ANALYSIS_KEYS: dict[str, dict[str, Key]] = {
@@ -411,6 +412,15 @@ ANALYSIS_KEYS: dict[str, dict[str, Key]] = {
         "classes": Key("int_list", default=None, help="classes compared (default: 2 and 6)"),
         "source_ids": Key("int_list", default=None, help="strips compared (default: all)"),
         "last_returns": Key("bool", default=True, help="only last/single returns"),
+    },
+    "roads": {
+        "cloud": Key("str", required=True, help="name of a cloud in [inputs.clouds]"),
+        "classes": Key("int_list", default=[2, 17], help="laser-point classes (road, bridge)"),
+        "source_ids": Key("int_list", default=None, help="laser-point strips used"),
+        "map": Key("str", required=True, help="a polygons input name (road polygons)"),
+        "reference": Key("str", default=None, help="a points input tested on its road level"),
+        "map_spacing": Key("float", default=10.0, help="map points along boundaries every (m)"),
+        "format": _FORMAT,
     },
 }
 ANALYSIS_KINDS = tuple(ANALYSIS_KEYS)
@@ -504,6 +514,7 @@ _DEFAULT_TITLES = {
     "checkpoints": "Check points",
     "heights": "Height quality",
     "swaths": "Flight strips",
+    "roads": "3D roads",
 }
 
 
@@ -829,8 +840,12 @@ def _parse_analysis(
             raise ConfigError(f"{where}: {reason}") from exc
 
     # Input references and nested tables.
-    if kind in ("info", "ground", "edges", "heights", "swaths"):
+    if kind in ("info", "ground", "edges", "heights", "swaths", "roads"):
         _need_input(inputs, opts["cloud"], ("clouds",), where, "cloud")
+    if kind == "roads":
+        _need_input(inputs, opts["map"], ("polygons",), where, "map")
+        if opts["reference"] is not None:
+            _need_input(inputs, opts["reference"], ("points",), where, "reference")
     if kind == "lines":
         for side in ("test", "model"):
             opts[side] = _parse_segment_source(opts[side], inputs, where, side)

@@ -10,6 +10,9 @@ Scenes (every maker takes ``seed=`` and returns a :class:`Scene`):
   three planes at a corner.
 - :func:`make_strip_scene`: overlapping flight strips over ground and hip roofs
   with known per-strip offsets and height noise (:class:`StripScene`).
+- :func:`make_interchange`: two roads crossing on two levels (deck, ramps, cars,
+  sparse points under the deck), map polygons shifted, paint-strip references
+  (returns an :class:`InterchangeScene`).
 
 A :class:`Scene` holds ``points``, ``classification`` (ASPRS), ``is_ground``,
 ``object_id``, ``plane_id``, ``planes`` (:class:`TruePlane`), ``edges``
@@ -33,6 +36,7 @@ from __future__ import annotations
 
 from . import cases
 from ._shapes import TerrainModel
+from .interchange import InterchangeScene, make_interchange
 from .scenes import (
     BuildingSpec,
     Scene,
@@ -74,4 +78,6 @@ __all__ = [
     "write_block",
     "StripScene",
     "make_strip_scene",
+    "InterchangeScene",
+    "make_interchange",
 ]
