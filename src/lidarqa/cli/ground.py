@@ -27,10 +27,18 @@ from ._common import INT_LIST, Steps, common_options, echo, finish, prepare_outp
 )
 @click.option(
     "--preset",
-    type=click.Choice(["als", "mls"]),
-    default=None,
-    help="Parameter set: als (airborne, ~1 pt/m2) or mls (Lin & Zhang Table 1, the default); "
-    "explicit options override it.",
+    type=click.Choice(["auto", "als", "mls"]),
+    default="auto",
+    show_default=True,
+    help="Parameter set: auto (measured from the cloud: density, returns, sensor), "
+    "als (airborne, ~1 pt/m2) or mls (Lin & Zhang Table 1); explicit options override it.",
+)
+@click.option(
+    "--sensor",
+    type=click.Choice(["auto", "als", "mls"]),
+    default="auto",
+    show_default=True,
+    help="With --preset auto: airborne (als) or mobile (mls) scan, if known; auto measures it.",
 )
 @click.option("--cell-size", type=float, default=None, help="Seed grid cell, m (default 60).")
 @click.option(
@@ -128,6 +136,7 @@ def ground(
     output,
     method,
     preset,
+    sensor,
     cell_size,
     max_terrain_angle,
     iter_angle,
@@ -242,6 +251,14 @@ def ground(
     steps = Steps()
     with steps("Reading " + path):
         cloud = read(path)
+    from ..ground import kernels_cached
+
+    if not kernels_cached():
+        click.echo(
+            "First run: compiling the ground filter's kernels (about 20-30 s, once; "
+            "they are cached for later runs)",
+            err=True,
+        )
     with (
         steps(f"Filtering ({method}, {len(cloud):,} points)"),
         warnings.catch_warnings(record=True) as caught,
@@ -255,6 +272,7 @@ def ground(
             evaluate=evaluate,
             ignore_classes=ignore_classes,
             preset=preset,
+            sensor=sensor,
             **params,
         )
     for w in caught:
@@ -267,7 +285,24 @@ def ground(
         write(cloud, output, overwrite=True)
     res = result.to_dict()
     echo(f"{path} -> {output}")
-    echo(f"  method          {method}")
+    echo(f"  method          {method} (preset {preset})")
+    m = result.measures
+    if m is not None:
+        echo(
+            f"  measured        {m.density:.2f} pts/m2 (spacing {m.spacing:.2f} m), "
+            f"sensor {m.sensor}, multi-return share "
+            + (f"{m.multi_return_share:.2f}" if m.has_returns else "n/a")
+            + f", slope median/p90 {m.slope_median:.1f}/{m.slope_p90:.1f} deg, "
+            f"largest object {m.largest_object_diameter:.0f} m"
+        )
+        echo(f"  regime          {result.regime}")
+    src = result.parameter_sources
+    shown = {k: v for k, v in result.parameters.items() if src.get(k) != "default"}
+    if shown:
+        echo(
+            "  parameters      "
+            + ", ".join(f"{k}={v} ({result.parameter_sources[k]})" for k, v in shown.items())
+        )
     echo(
         f"  points          {res['n_points']:,} ({res['n_candidates']:,} candidates, "
         f"returns: {res['return_handling']})"
@@ -289,6 +324,10 @@ def ground(
         parameters={
             "method": method,
             "preset": preset,
+            "sensor": sensor,
+            "regime": result.regime,
+            "measured": res["measured"],
+            "parameter_sources": result.parameter_sources,
             "last_returns_only": not all_returns,
             "exclude_classes": list(exclude_classes or []),
             "ignore_classes": list(ignore_classes or []),
