@@ -59,7 +59,12 @@ from typing import Any
 import numpy as np
 
 from .._validate import as_points, check_choice, check_positive
-from ..errors import DegenerateGeometryError, InvalidPointsError, OptionError
+from ..errors import (
+    DegenerateGeometryError,
+    InvalidPointsError,
+    NothingToMeasureError,
+    OptionError,
+)
 from ..io.vector import PointSet
 from .transforms import TRANSFORMS, TransformFit, estimate_transform
 
@@ -1113,6 +1118,8 @@ def vertical_check(
         NaN coordinates, duplicate check ids, classification of the wrong length.
     DegenerateGeometryError
         Fewer than 3 ground points, or ground points all collinear in XY.
+    NothingToMeasureError
+        No check point could be compared (all outside the TIN or in sparse ground).
 
     Notes
     -----
@@ -1241,13 +1248,16 @@ def vertical_check(
             f"{n_flag} of {m} check point(s) flagged (outside the TIN or in sparse ground) "
             "and left out"
         )
+    if n_ok == 0:
+        # Nothing to measure is an error, never an RMSE of NaN over 0 check points.
+        kinds, counts = np.unique(flag, return_counts=True)
+        why = ", ".join(f"{c} {k}" for k, c in zip(kinds.tolist(), counts.tolist(), strict=True))
+        raise NothingToMeasureError(
+            f"none of the {m} check point(s) could be compared with the ground TIN ({why}); "
+            "do the check points lie inside the cloud, in the same CRS?"
+        )
     res = np.column_stack([np.full(n_ok, np.nan), np.full(n_ok, np.nan), dz[order][ok]])
-    if n_ok:
-        stats = residual_statistics(res)
-    else:
-        nan3 = np.full(3, np.nan)
-        stats = ResidualStats(0, nan3, nan3, nan3, nan3, math.nan, math.nan)
-        warn.append("no check point could be compared with the ground TIN")
+    stats = residual_statistics(res)
     nssda = nssda_accuracy(math.nan, math.nan, float(stats.rmse[2]), n_check=n_ok)
     asprs = asprs2023_accuracy(
         math.nan, math.nan, float(stats.rmse[2]), n_check=n_ok, checkpoint_rmse_v=checkpoint_rmse_v

@@ -646,10 +646,11 @@ def match_segments(
     ii, jj, comp, dmt = evaluate(c0)
 
     # exact nearest distances, both directions
+    # (no pair within the cutoff leaves ii/jj empty: every index is then -1)
     near_tm, karg = _k.group_min(ii, comp[:, 3], p)
-    arg_tm = np.where(karg >= 0, jj[np.maximum(karg, 0)], -1)
+    arg_tm = np.where(karg >= 0, jj[np.maximum(karg, 0)] if len(jj) else -1, -1)
     near_mt, karg = _k.group_min(jj, dmt, q)
-    arg_mt = np.where(karg >= 0, ii[np.maximum(karg, 0)], -1)
+    arg_mt = np.where(karg >= 0, ii[np.maximum(karg, 0)] if len(ii) else -1, -1)
     todo_t = np.flatnonzero(~(near_tm <= c0))
     if len(todo_t):
         b, a = _nearest_exact(

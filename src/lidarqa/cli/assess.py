@@ -56,6 +56,15 @@ def _run(
             + "; ".join(f"{k}: {v}" for k, v in run.errors.items())
             + f" (details in {run.html_path})"
         )
+    failed = [r.analysis for r in run.summary if r.verdict == "fail"]
+    if failed:
+        # Complete run, report written: exit status 4 lets CI pipelines gate on the targets.
+        from ..errors import TargetNotMetError
+
+        raise TargetNotMetError(
+            f"{len(failed)} analysis(es) missed their target: {', '.join(failed)} "
+            f"(details in {run.html_path})"
+        )
 
 
 @click.command()

@@ -83,6 +83,7 @@ def default_grow_radius(points: np.ndarray, *, factor: float = 2.5, floor: float
     divided by the cell area (robust to scan-line patterns and to empty areas).
     Never below `floor`.
     """
+    points = as_points(points)
     n = points.shape[0]
     if n < 2:
         return floor
@@ -372,11 +373,55 @@ def _argmin_per_group(
     group number of point i (groups numbered in ascending key order). One stable
     integer sort and a linear numba scan; independent of the input order.
     """
+    value = np.ascontiguousarray(value, dtype=np.float64)
+    n_keys = int(key.max()) + 1 if key.size else 0
+    if 0 < n_keys <= 4 * key.size + 1024:  # small key range: one linear pass, no sort
+        return _group_argmin_dense(
+            np.ascontiguousarray(key, dtype=np.int64), value,
+            np.ascontiguousarray(p, dtype=np.float64), n_keys,
+        )
     order = np.argsort(key, kind="stable")
     return _group_argmin_scan(
         key[order], order, np.ascontiguousarray(value, dtype=np.float64),
         np.ascontiguousarray(p, dtype=np.float64),
     )
+
+
+@njit(cache=True)
+def _group_argmin_dense(key, value, p, n_keys):  # pragma: no cover - numba
+    # same winners as the sorted scan: smallest value, then x, y, z; full ties keep
+    # the smallest index (points are visited in index order)
+    n = key.size
+    best = np.full(n_keys, -1, np.int64)
+    for i in range(n):
+        k = key[i]
+        b = best[k]
+        if b < 0:
+            best[k] = i
+            continue
+        vi, vb = value[i], value[b]
+        if vi < vb or (
+            vi == vb
+            and (
+                p[i, 0] < p[b, 0]
+                or (p[i, 0] == p[b, 0] and (
+                    p[i, 1] < p[b, 1] or (p[i, 1] == p[b, 1] and p[i, 2] < p[b, 2])
+                ))
+            )
+        ):
+            best[k] = i
+    rank = np.full(n_keys, -1, np.int64)
+    winners = np.empty(n_keys, np.int64)
+    g = 0
+    for k in range(n_keys):
+        if best[k] >= 0:
+            rank[k] = g
+            winners[g] = best[k]
+            g += 1
+    inv = np.empty(n, np.int64)
+    for i in range(n):
+        inv[i] = rank[key[i]]
+    return winners[:g], inv
 
 
 @njit(cache=True)

@@ -152,14 +152,39 @@ def load_config(
     import tomllib
 
     p = Path(path)
-    if not p.is_file():
+    try:
+        is_file = p.is_file()
+        exists = p.exists()
+    except (OSError, ValueError) as exc:
+        raise ConfigError(f"config {path} cannot be accessed: {exc}") from None
+    if not is_file:
         raise ConfigError(
-            f"config file {p} does not exist" if not p.exists() else f"config {p} is not a file"
+            f"config file {p} does not exist" if not exists else f"config {p} is not a file"
         )
     try:
-        raw = tomllib.loads(p.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        with p.open("rb") as fh:
+            data = fh.read(MAX_CONFIG_BYTES + 1)
+    except OSError as exc:
+        raise ConfigError(f"config {p} cannot be read: {exc.strerror or exc}") from None
+    if len(data) > MAX_CONFIG_BYTES:
+        raise ConfigError(f"config {p} is larger than {MAX_CONFIG_BYTES // 1000} kB; not a config")
+    if data[:2] in (b"\xff\xfe", b"\xfe\xff"):
+        raise ConfigError(f"config {p} is UTF-16 text; save it as UTF-8")
+    try:
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise ConfigError(
+            f"config {p} is not UTF-8 text (byte {exc.start}: {data[exc.start : exc.start + 1]!r})"
+        ) from None
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"config {p} is not valid TOML: {exc}") from exc
+    except (RecursionError, ValueError, MemoryError) as exc:  # deep nesting, 5,000-digit ints
+        raise ConfigError(
+            f"config {p} is not a usable TOML file: {' '.join(str(exc).split())[:160]}"
+        ) from None
+    _check_sane(raw, str(p))
     return parse_config(
         raw,
         base_dir=p.resolve().parent,
@@ -168,6 +193,35 @@ def load_config(
         check_crs=check_crs,
         skip_unavailable=skip_unavailable,
     )
+
+
+MAX_CONFIG_BYTES = 1_000_000
+MAX_CONFIG_DEPTH = 16
+MAX_CONFIG_INT = 2**53  # larger integers are not meaningful settings (nor exact as floats)
+
+
+def _check_sane(raw: Any, where: str) -> None:
+    """Refuse absurd structure before validation: deep nesting, huge numbers, NaN."""
+    import math
+
+    stack: list[tuple[Any, int, str]] = [(raw, 0, "")]
+    while stack:
+        value, depth, key = stack.pop()
+        if depth > MAX_CONFIG_DEPTH:
+            raise ConfigError(
+                f"config {where}: {key or 'value'} is nested more than "
+                f"{MAX_CONFIG_DEPTH} levels deep"
+            )
+        if isinstance(value, bool):
+            continue
+        if isinstance(value, int) and abs(value) > MAX_CONFIG_INT:
+            raise ConfigError(f"config {where}: {key or 'value'} is an absurdly large integer")
+        if isinstance(value, float) and not math.isfinite(value):
+            raise ConfigError(f"config {where}: {key or 'value'} is {value} (not a finite number)")
+        if isinstance(value, Mapping):
+            stack.extend((v, depth + 1, f"{key}.{k}" if key else str(k)) for k, v in value.items())
+        elif isinstance(value, list):
+            stack.extend((v, depth + 1, f"{key}[{i}]") for i, v in enumerate(value))
 
 
 def parse_config(
@@ -180,6 +234,9 @@ def parse_config(
     skip_unavailable: bool = False,
 ) -> AssessmentConfig:
     """Validate a configuration already parsed into a dict (see :func:`load_config`)."""
+    if not isinstance(raw, Mapping):
+        raise ConfigError(f"a config must be a table (dict), got {type(raw).__name__}")
+    _check_sane(raw, str(path) if path is not None else "(in memory)")
     specs = _registry.specs()
     if library_params is None:
         library_params = _registry.library_params
@@ -274,6 +331,12 @@ def _parse_crs(value: Any, where: str) -> Any:
 _NAME_RE = re.compile(r"^[A-Za-z0-9_.-]+$")
 
 
+def _is_catalog_path(p: Path) -> bool:
+    from .catalog_analyses import is_catalog_path
+
+    return is_catalog_path(p)
+
+
 def _parse_inputs(table: Any, base: Path) -> dict[str, InputSpec]:
     groups = check_table(table, {k: Key("table", default={}) for k in INPUT_KINDS}, "[inputs]")
     out: dict[str, InputSpec] = {}
@@ -301,6 +364,10 @@ def _parse_inputs(table: Any, base: Path) -> dict[str, InputSpec]:
             p = Path(os.path.expanduser(entry["path"]))
             if not p.is_absolute():
                 p = base / p
+            if kind == "clouds" and _is_catalog_path(p):  # a folder, glob or .vpc of tiles
+                crs = _parse_crs(entry["crs"], where) if entry["crs"] is not None else None
+                out[name] = InputSpec(name=name, kind=kind, path=p, crs=crs)
+                continue
             if not p.exists():
                 raise ConfigError(f"input {name!r} ([inputs.{kind}]): file {p} does not exist")
             if not p.is_file():
@@ -342,6 +409,10 @@ def _parse_analysis(
         return None
     params_defaults = library_params(kind, opts)
     opts = check_table(table, framework, where, extra=params_defaults)
+    for name in target_keys:  # every target is a size, a rate or an error: >= 0
+        value = opts.get(name)
+        if value is not None and not value >= 0:
+            raise ConfigError(f"key {name!r} in {where} must be >= 0, got {value!r}")
     params = check_params(
         {k: v for k, v in table.items() if k not in framework}, params_defaults, where
     )
@@ -411,6 +482,10 @@ def read_header_crs(spec: InputSpec) -> Any:
     """The CRS declared by an input file's header (cheap: no points are read)."""
     suffix = spec.path.suffix.lower()
     try:
+        if spec.kind == "clouds" and _is_catalog_path(spec.path):
+            from .catalog_analyses import catalog_crs
+
+            return catalog_crs(spec.path)
         if spec.kind == "clouds" and suffix in {".las", ".laz"}:
             from ..io.las import LasReader
 

@@ -124,6 +124,8 @@ LABELS: dict[str, Label] = {
     "seed_support": _l("seed check: supporting points needed"),
     "seed_radius": _l("seed check: radius", M),
     "seed_dz": _l("seed check: height tolerance", M),
+    "sensor": _l("kind of acquisition (auto preset; measured when empty)"),
+    "outlines": _l("also roof-plane outline sides as edges"),
     "low_outlier_distance": _l("low-outlier pre-filter: depth below the neighbours (0 = off)", M),
     "low_outlier_radius": _l("low-outlier pre-filter: neighbourhood radius", M),
     "seed_support_ratio": _l("seed check: share of supporting points", PCT, 100.0),

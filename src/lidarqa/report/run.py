@@ -80,9 +80,18 @@ def check_out_dir(out_dir: str | os.PathLike, *, overwrite: bool = False) -> Pat
     ``outputs/`` exist and `overwrite` is false, and :class:`WriteError` when
     the path is a file.
     """
+    if str(out_dir).strip() == "":
+        raise WriteError("the output folder name is empty")
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise WriteError(f"output {out} exists and is not a folder")
+    # the nearest existing ancestor must be a writable folder (the rest is created)
+    from ..io._atomic import check_output_dir
+
+    anc = out
+    while not anc.exists() and anc != anc.parent:
+        anc = anc.parent
+    check_output_dir(anc if anc.exists() else Path("."))
     if not overwrite:
         for name in (REPORT_HTML, REPORT_JSON, OUTPUTS_DIR):
             if (out / name).exists():
@@ -144,6 +153,7 @@ def _verdict(item: AnalysisItem, results: dict[str, Any]) -> tuple[str, str, lis
     specs = {t.metric: t for t in _registry.specs()[item.kind].targets.values()}
     records = []
     texts = []
+    missing: list[str] = []
     ok_all = True
     for metric, target in item.targets.items():
         t = specs[metric]
@@ -155,6 +165,8 @@ def _verdict(item: AnalysisItem, results: dict[str, Any]) -> tuple[str, str, lis
         if metric == "mean_z" and value_f is not None:
             value_f = abs(value_f)
         if value_f is None or value_f != value_f:
+            # Nothing to measure (0 check points, no matched pair): an error, not a NaN verdict.
+            missing.append(t.label)
             ok = False
         elif t.direction == "max":
             ok = value_f <= target
@@ -177,16 +189,26 @@ def _verdict(item: AnalysisItem, results: dict[str, Any]) -> tuple[str, str, lis
                 "passed": ok,
             }
         )
+    if missing:
+        return (
+            "error",
+            f"nothing to measure: {', '.join(missing)} could not be computed",
+            records,
+        )
     return ("pass" if ok_all else "fail"), "; ".join(texts), records
 
 
 def _input_records(config: AssessmentConfig, progress: _Progress) -> dict[str, dict[str, Any]]:
     from ..io.crs import crs_epsg, crs_name
     from ._context import sha256_file
+    from .catalog_analyses import catalog_record, is_catalog_path
 
     out = {}
     with progress("Hashing inputs"):
         for name, spec in config.inputs.items():
+            if spec.kind == "clouds" and is_catalog_path(spec.path):
+                out[name] = catalog_record(name, spec)
+                continue
             crs = spec.effective_crs
             out[name] = {
                 "name": name,
@@ -250,6 +272,7 @@ def run_assessment(
     from .. import show_versions
     from ._context import RunContext
     from ._registry import ANALYSES, specs
+    from .catalog_analyses import catalog_analysis
 
     specs()  # load the analysis modules
 
@@ -258,10 +281,15 @@ def run_assessment(
     out = check_out_dir(out_dir, overwrite=overwrite)
     created = not out.exists()
     out.mkdir(parents=True, exist_ok=True)
+    from ..io._atomic import note_created, register_temp, unregister_temp
+
+    if created:
+        note_created(out)  # removed with everything in it if the command fails or is stopped
     progress = _Progress(steps)
     started = _dt.datetime.now(_dt.UTC)
     t0 = time.perf_counter()
     work = Path(tempfile.mkdtemp(prefix=".lidarqa-run-", dir=out))
+    register_temp(work)  # removed by the signal handler too
     try:
         inputs = _input_records(config, progress)
         ctx = RunContext(config, work, step=progress)
@@ -280,7 +308,7 @@ def run_assessment(
             section = Section(id=item.id, title=item.title, kind=item.kind)
             try:
                 with progress(item.title):
-                    res = ANALYSES[item.kind](ctx, item)
+                    res = (catalog_analysis(ctx, item) or ANALYSES[item.kind])(ctx, item)
             except (KeyboardInterrupt, SystemExit):
                 raise
             except Exception as exc:  # one failing analysis must not lose the others
@@ -304,6 +332,9 @@ def run_assessment(
                 section.notes = res.notes
                 section.outputs = ctx.outputs.get(item.id, [])
                 verdict, detail, records = _verdict(item, res.results)
+                if verdict == "error":
+                    errors[item.id] = detail
+                    section.error = detail
                 section.verdict = verdict
                 section.caveats = list(res.caveats)
                 if res.caveats:
@@ -421,6 +452,7 @@ def run_assessment(
         raise
     finally:
         shutil.rmtree(work, ignore_errors=True)
+        unregister_temp(work)
     return AssessmentRun(
         out_dir=out,
         html_path=out / REPORT_HTML,

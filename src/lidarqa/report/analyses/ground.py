@@ -40,7 +40,8 @@ def _ground_params(options: dict) -> dict[str, Any]:
     def validate(params: dict[str, Any]) -> None:
         # Building the filter checks every parameter's range (its __post_init__).
         filter_cls(**{k: v for k, v in params.items() if k not in own})
-        presets = getattr(import_module("lidarqa.ground", "ground"), "PRESETS", None)
+        mod = import_module("lidarqa.ground", "ground")
+        presets = getattr(mod, "PRESET_CHOICES", None) or getattr(mod, "PRESETS", None)
         if (
             params.get("preset") is not None
             and presets is not None
