@@ -12,8 +12,6 @@
 Dask is imported only when a non-serial engine starts.
 """
 
-from __future__ import annotations
-
 from .catalog import Catalog, CatalogError, TileInfo, open_catalog
 from .chunks import DEFAULT_BUFFER, Chunk, default_chunk_size, make_chunks
 from .engine import ChunkFailedError, ChunkOutcome, Engine, run_chunks
