@@ -60,6 +60,7 @@ def ground_on_catalog(
     method: str,
     preset: str | None,
     params: dict[str, Any],
+    sensor: str = "auto",
     all_returns: bool,
     exclude_classes: Any,
     evaluate: bool,
@@ -89,6 +90,7 @@ def ground_on_catalog(
             output,
             method=method,
             preset=preset,
+            sensor=sensor,
             last_returns_only=not all_returns,
             exclude_classes=exclude_classes or (),
             evaluate=evaluate,
@@ -108,6 +110,9 @@ def ground_on_catalog(
         click.echo(f"Warning: {w}", err=True)
     echo(f"{len(catalog.tiles)} tile(s) -> {output}  ({result.vpc})")
     echo(f"  method          {method}")
+    auto = result.parameters.get("auto")
+    if auto:
+        echo(f"  parameters      auto: {auto['regime']} (measured once on a sample of whole tiles)")
     echo(
         f"  chunks          {result.n_chunks} of {result.chunk_size:g} m, "
         f"buffer {result.buffer:g} m"
@@ -133,6 +138,7 @@ def ground_on_catalog(
         parameters={
             "method": method,
             "preset": preset,
+            "sensor": sensor,
             "last_returns_only": not all_returns,
             "exclude_classes": list(exclude_classes or []),
             "ignore_classes": list(ignore_classes or []),
@@ -141,6 +147,7 @@ def ground_on_catalog(
             "workers": workers,
             "scheduler": scheduler,
             **result.parameters.get("filter", {}),
+            **({"auto": result.parameters["auto"]} if "auto" in result.parameters else {}),
         },
         results=res,
     )

@@ -191,6 +191,7 @@ def ground(
             output,
             method=method,
             preset=preset,
+            sensor=sensor,
             params={
                 k: v
                 for k, v in {

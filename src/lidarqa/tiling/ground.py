@@ -239,27 +239,24 @@ def _load_chunk(work: Path, chunk_id: str) -> ChunkGround | None:
     return ChunkGround(chunk_id, tiles, n_core, ground, counts=counts)
 
 
-def catalog_grow_radius(
+_AUTO_FIELDS = ("return_number", "number_of_returns", "scan_angle", "scan_angle_rank")
+
+
+def _catalog_sample(
     catalog: Any,
     *,
     last_returns_only: bool = True,
     exclude_classes: Any = (7, 18),
-    factor: float = 2.5,
     max_points: int = 4_000_000,
-) -> float:
-    """The segment-PTD surface-growing radius of a catalog, estimated once for all chunks.
+) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Ground candidates (xyz and the fields the auto preset measures) of whole tiles.
 
-    :func:`~lidarqa.ground.default_grow_radius` (``factor`` x the mean point spacing,
-    from the median point count of grid cells) on the ground candidates of whole
-    tiles: all tiles when they hold at most `max_points` points together, else tiles
-    spread evenly over the catalog (by index in path order) up to that many points.
-    Per-chunk estimates differ by a few per cent from chunk to chunk and from a whole
-    run, and the radius changes segments far from chunk borders; one value for the
-    catalog keeps chunks consistent (on a catalog small enough to be sampled entirely
-    it is exactly the whole-area value).
+    All tiles when they hold at most `max_points` points together, else tiles spread
+    evenly over the catalog (by index in path order) up to that many points: a
+    deterministic sample that does not depend on the chunking or the workers.
     """
     from ..errors import DataQualityWarning
-    from ..ground import default_grow_radius, ground_candidates
+    from ..ground import ground_candidates
     from ..io.las import LasReader
 
     n = len(catalog.tiles)
@@ -269,7 +266,8 @@ def catalog_grow_radius(
     else:
         k = max(1, int(n * max_points / total))
         picks = sorted({int(round(v)) for v in np.linspace(0, n - 1, k)})
-    parts = []
+    parts: list[np.ndarray] = []
+    fields: dict[str, list[np.ndarray]] = {}
     budget = max_points
     for t in picks:
         tile = catalog.tiles[t]
@@ -285,12 +283,77 @@ def catalog_grow_radius(
                         exclude_classes=exclude_classes,
                     )
                 parts.append(piece.xyz[cand])
+                for k, v in piece.fields.items():
+                    if k in _AUTO_FIELDS:
+                        fields.setdefault(k, []).append(np.asarray(v)[cand])
         budget -= tile.n_points
     xyz = np.concatenate(parts) if parts else np.empty((0, 3))
+    joined = {k: np.concatenate(v) for k, v in fields.items() if len(v) == len(parts)}
+    return xyz, joined
+
+
+def catalog_grow_radius(
+    catalog: Any,
+    *,
+    last_returns_only: bool = True,
+    exclude_classes: Any = (7, 18),
+    factor: float = 2.5,
+    max_points: int = 4_000_000,
+    sample: np.ndarray | None = None,
+) -> float:
+    """The segment-PTD surface-growing radius of a catalog, estimated once for all chunks.
+
+    :func:`~lidarqa.ground.default_grow_radius` (``factor`` x the mean point spacing,
+    from the median point count of grid cells) on the ground candidates of whole
+    tiles (:func:`_catalog_sample`, or the candidates given as `sample`).
+    Per-chunk estimates differ by a few per cent from chunk to chunk and from a whole
+    run, and the radius changes segments far from chunk borders; one value for the
+    catalog keeps chunks consistent (on a catalog small enough to be sampled entirely
+    it is exactly the whole-area value).
+    """
+    from ..ground import default_grow_radius
+
+    xyz = sample
+    if xyz is None:
+        xyz, _ = _catalog_sample(
+            catalog,
+            last_returns_only=last_returns_only,
+            exclude_classes=exclude_classes,
+            max_points=max_points,
+        )
     if len(xyz) < 3:
         return 0.3
     r0 = default_grow_radius(xyz - xyz.min(axis=0), factor=factor, floor=0.0)
     return float(max(0.3, r0))
+
+
+def catalog_auto_parameters(
+    catalog: Any,
+    method: str = "segment-ptd",
+    *,
+    sensor: str = "auto",
+    last_returns_only: bool = True,
+    exclude_classes: Any = (7, 18),
+    sample: tuple[np.ndarray, dict[str, np.ndarray]] | None = None,
+) -> tuple[dict[str, Any], Any, str]:
+    """``preset="auto"`` for a catalog: measure once, choose once, for every chunk.
+
+    :func:`~lidarqa.ground.measure_cloud` on the catalog sample (:func:`_catalog_sample`)
+    and :func:`~lidarqa.ground.auto_parameters` on its figures. Measuring chunk by
+    chunk would let neighbouring chunks pick different parameter sets (a sparse
+    chunk of trees beside a dense one of roofs) and break the seams; one choice
+    keeps the catalog run equal to one in-memory run of the same cloud.
+
+    Returns the chosen parameters, the measures and the regime.
+    """
+    from ..ground.auto import auto_parameters, measure_cloud
+
+    xyz, fields = sample if sample is not None else _catalog_sample(
+        catalog, last_returns_only=last_returns_only, exclude_classes=exclude_classes
+    )
+    measures = measure_cloud(xyz, fields=fields)
+    chosen, _, regime = auto_parameters(measures, method, sensor=sensor)
+    return chosen, measures, regime
 
 
 def _output_names(catalog: Any, output_dir: Path) -> list[Path]:
@@ -308,7 +371,8 @@ def ground_catalog(
     output_dir: str | os.PathLike,
     *,
     method: str = "segment-ptd",
-    preset: str | None = None,
+    preset: str | None = "auto",
+    sensor: str = "auto",
     last_returns_only: bool = True,
     exclude_classes: Any = (7, 18),
     evaluate: bool = False,
@@ -356,7 +420,9 @@ def ground_catalog(
     -------
     CatalogGroundResult
     """
+    from .._validate import check_choice
     from ..ground import METHODS, PRESETS, filter_errors_from_counts, relabel_classification
+    from ..ground.auto import SENSORS
     from ..io.las import rewrite_las_classification
     from .catalog import Catalog, open_catalog
     from .chunks import DEFAULT_BUFFER, make_chunks
@@ -364,11 +430,28 @@ def ground_catalog(
 
     if method not in METHODS:
         raise OptionError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    check_choice(sensor, SENSORS, "sensor")
+    if preset is not None and preset != "auto" and preset not in PRESETS:
+        raise OptionError(
+            f"preset must be one of auto, {', '.join(PRESETS)}, got {preset!r}"
+        )
     catalog = sources if isinstance(sources, Catalog) else open_catalog(sources, skip_bad=skip_bad)
     full_params = dict(params)
-    if preset is not None:
-        if preset not in PRESETS:
-            raise OptionError(f"preset must be one of {', '.join(PRESETS)}, got {preset!r}")
+    sample = None
+    auto = None
+    if preset == "auto":
+        # measured once on a sample of whole tiles, then fixed for every chunk
+        sample = _catalog_sample(
+            catalog,
+            last_returns_only=bool(last_returns_only),
+            exclude_classes=tuple(exclude_classes or ()),
+        )
+        chosen, measures, regime = catalog_auto_parameters(
+            catalog, method, sensor=sensor, sample=sample
+        )
+        auto = {"regime": regime, "measured": measures.to_dict(), "chosen": dict(chosen)}
+        full_params = {**chosen, **full_params}
+        preset = None
     # validate the parameters once, here, before any work
     from ..ground import PTD, SegmentPTD
 
@@ -387,6 +470,7 @@ def ground_catalog(
             last_returns_only=bool(last_returns_only),
             exclude_classes=tuple(exclude_classes or ()),
             factor=float(filt.grow_radius_factor),
+            sample=None if sample is None else sample[0],
         )
     # Seed cells are laid from the south-west corner of the filter's input: snap every
     # buffered box to the seed grid of the whole catalog (see make_chunks).
@@ -569,7 +653,11 @@ def ground_catalog(
         buffer=float(buffer),
         bad=catalog.bad,
         evaluation=evaluation,
-        parameters={**task.to_dict(), "filter": filt.to_dict()},
+        parameters={
+            **task.to_dict(),
+            "filter": filt.to_dict(),
+            **({"auto": auto} if auto is not None else {}),
+        },
         chunks=tuple(
             {"id": c.id, "core": list(c.core), "status": "resumed" if c.id in done else "done"}
             for c in chunks
