@@ -58,6 +58,20 @@ def world(tmp_path_factory) -> dict:
     end = start + np.column_stack([rng.uniform(-6, 6, (12, 2)), rng.uniform(-1, 1, 12)])
     write_segments(Segments(np.arange(12), start, end), d / "model.csv")
     write_segments(Segments(np.arange(12), start + 0.03, end + 0.03), d / "test.csv")
+    import pyogrio
+    import shapely
+
+    (x0, y0), (x1, y1) = lo, hi
+    road = shapely.box(x0, y0, x0 + 0.5 * (x1 - x0), y1)
+    pyogrio.raw.write(
+        str(d / "roads.gpkg"),
+        np.array([shapely.to_wkb(road)], dtype=object),
+        geometry_type="Polygon",
+        field_data=[np.array([1])],
+        fields=["id"],
+        crs="EPSG:2154",
+        driver="GPKG",
+    )
     (d / "obs.csv").write_text("id,distance,azimuth,elevation\n1,10,90,0\n2,10,0,30\n3,5,45,10\n")
     (d / "config.toml").write_text(
         '[inputs.clouds]\ntile = "scene.las"\n'
@@ -90,6 +104,8 @@ def _baseline(world: dict, out: Path) -> dict[str, list]:
         "heights": ["heights", d / "scene.las", d / "map.csv", d / "reference.csv",
                     "-o", out / "h.csv"],
         "assess": ["assess", d / "config.toml", "-o", out / "report"],
+        "swaths": ["swaths", d / "scene.las", "--by-source-id", "-o", out / "swaths"],
+        "roads": ["roads", d / "scene.las", d / "roads.gpkg", "-o", out / "roads.gpkg"],
     }
 
 
