@@ -111,6 +111,7 @@ def test_one_file_per_strip(strips, tmp_path):
         ("one.laz", ["--by-source-id"], "one flight strip"),
         ("apart.laz", ["--by-source-id"], "overlap"),
         ("noid.csv", ["--by-source-id"], "point_source_id"),
+        ("strip52.laz", ["--by-source-id"], "point_source_id is 0 for every point"),
         ("block.laz", [], "one file is one flight strip"),
     ],
 )

@@ -293,7 +293,8 @@ def _write_pairs(r: Any, path: Any) -> None:
     "--outlines",
     is_flag=True,
     help="Also use roof-plane outlines (stand-ins for roof-wall and step edges, which airborne "
-    "scans leave without a wall plane): many more lines per strip pair.",
+    "scans leave without a wall plane): many more lines per strip pair on small tiles; on dense "
+    "strips they can blur the automatic threshold.",
 )
 @click.option(
     "--shared-threshold",

@@ -63,7 +63,14 @@ def load_strips(
         p[:, 2] *= z_to_metres_factor(pc.crs)
         xyz.append(p)
         ids.append(sid[keep])
-    return np.vstack(xyz), np.concatenate(ids), crs, labels
+    all_ids = np.concatenate(ids)
+    if by_source_id and len(all_ids) and not all_ids.any():
+        # LAS always has the field; 0 everywhere means the strips were never recorded
+        raise InvalidPointsError(
+            "point_source_id is 0 for every point: the file(s) do not record flight strips "
+            "(give one file per strip instead of --by-source-id)"
+        )
+    return np.vstack(xyz), all_ids, crs, labels
 
 
 def _csv(rows: list[dict[str, Any]]) -> str:
