@@ -22,13 +22,15 @@ def write_tiles(
     prefix: str = "tile",
     suffix: str = ".laz",
     overwrite: bool = False,
+    clip: Sequence[float] | None = None,
 ) -> list[Path]:
     """Cut `scene` into square tiles of `tile_size` m (grid through `origin`) and write them.
 
     Each tile holds the scene points whose ``floor((x - ox) / tile_size)`` (and y) is the
     tile's, in scene order, with ``classification``, ``point_source_id`` and, when the
     scene has them, return numbers. Tiles are named ``{prefix}_{xmin}_{ymin}{suffix}``
-    (integer metres). Returns the paths sorted by name.
+    (integer metres). Points outside `clip` ``(xmin, ymin, xmax, ymax)`` (half-open),
+    if given, are left out. Returns the paths sorted by name.
     """
     from ..io import PointCloud, write
     from ..io.crs import parse_crs
@@ -39,6 +41,14 @@ def write_tiles(
     xyz = np.asarray(scene.points, dtype=np.float64)
     # Round to the LAS scale first so that tile membership is decided on stored values.
     xyz = np.round(xyz, 3)
+    keep = np.ones(len(xyz), dtype=bool)
+    if clip is not None:
+        keep = (
+            (xyz[:, 0] >= clip[0])
+            & (xyz[:, 0] < clip[2])
+            & (xyz[:, 1] >= clip[1])
+            & (xyz[:, 1] < clip[3])
+        )
     gi = np.floor((xyz[:, 0] - ox) / tile_size).astype(np.int64)
     gj = np.floor((xyz[:, 1] - oy) / tile_size).astype(np.int64)
     fields = {
@@ -49,12 +59,12 @@ def write_tiles(
     paths = []
     keys = np.unique(np.column_stack([gi, gj]), axis=0)
     for i, j in keys.tolist():
-        sel = np.nonzero((gi == i) & (gj == j))[0]
+        sel = np.nonzero((gi == i) & (gj == j) & keep)[0]
+        if len(sel) == 0:
+            continue
         x0, y0 = ox + i * tile_size, oy + j * tile_size
         name = f"{prefix}_{int(round(x0))}_{int(round(y0))}{suffix}"
-        cloud = PointCloud(
-            xyz=xyz[sel], fields={k: v[sel] for k, v in fields.items()}, crs=crs_obj
-        )
+        cloud = PointCloud(xyz=xyz[sel], fields={k: v[sel] for k, v in fields.items()}, crs=crs_obj)
         paths.append(write(cloud, folder / name, overwrite=overwrite))
     return sorted(paths)
 
@@ -74,10 +84,10 @@ def write_block(
 ) -> list[Path]:
     """A block of ``nx * ny`` tiles, each a separate seeded :func:`make_scene` of one tile.
 
-    Neighbouring tiles are independent scenes (terrain is not continuous across tile
-    borders), which is fine for throughput benchmarks but not for tiled-vs-untiled
-    comparisons (use :func:`write_tiles` on one scene for those). Memory holds one
-    tile at a time. Returns the paths.
+    Points of a scene outside its tile are dropped. Neighbouring tiles are independent
+    scenes (terrain is not continuous across tile borders), which is fine for throughput
+    benchmarks but not for tiled-vs-untiled comparisons (use :func:`write_tiles` on one
+    scene for those). Memory holds one tile at a time. Returns the paths.
     """
     from .scenes import make_scene
 
@@ -103,6 +113,7 @@ def write_block(
                     crs=crs,
                     prefix="block",
                     suffix=suffix,
+                    clip=(x0, y0, x0 + tile_size, y0 + tile_size),
                 )
             )
             del scene

@@ -64,6 +64,9 @@ class ChunkOutcome:
         }
 
 
+_THREAD_VARS = ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+
 def _dask():
     try:
         import dask  # noqa: F401
@@ -153,6 +156,9 @@ class Engine:
                 dashboard_address=":0",
                 host="127.0.0.1",
                 silence_logs=40,
+                # one single-threaded worker per core: compiled kernels must not start
+                # one thread per core in every worker
+                env={k: "1" for k in _THREAD_VARS},
             )
         self.client = distributed.Client(self.cluster)
         return self
