@@ -134,6 +134,30 @@ def test_ign_edges_crossing_chunk_borders_are_reported_once():
     assert (counts == 1).all()
 
 
+@needs_shared
+@pytest.mark.slow
+def test_ign_corners_on_a_catalog_are_reported_once():
+    from scipy.spatial import cKDTree
+
+    from lidarqa.tiling.jobs_vector import dedupe_points
+
+    files = sorted((SHARED / "ign-lidarhd").glob("test_data_770*.laz"))
+    cat = open_catalog(files)
+    run = catalog_features(cat, kind="corners", classes=(6,), chunk_size=50.0, buffer=30.0,
+                           tolerance=0.0)  # no near-duplicate removal: the anchor rule alone
+    m = run.value
+    assert not run.failed and len(run.chunks) >= 6
+    assert len(dedupe_points(m, tolerance=0.3)) == len(m) > 10  # no corner kept twice
+    assert len(np.unique(_chunk_of(run, m.xyz))) >= 3  # corners kept by several chunks
+    pts = np.concatenate([c.xyz[c.classification == 6] for c in map(read, files)])
+    ref = vector_features(pts, kind="corners", segment_options=run.extra["segment_options"],
+                          options=run.extra["options"])
+    found = np.array([len(n) for n in cKDTree(m.xyz).query_ball_point(ref.xyz, r=0.05)])
+    assert (found <= 1).all()  # no in-memory corner found twice
+    # nearly all: a chunk may segment a roof by a point differently
+    assert (found == 1).mean() >= 0.9
+
+
 # ------------------------------------------------------------------ command line
 
 
