@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -161,3 +162,24 @@ def test_cli_ground_on_a_folder(scene_tiles, tmp_path):
     )
     assert r.exit_code == 0, r.output
     assert len(list((tmp_path / "two").glob("*.laz"))) == 2
+    # a corrupt tile: refused naming it before any work; --skip-bad processes the others
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    for q in paths[:2]:
+        shutil.copy(q, bad / q.name)
+    (bad / "broken.laz").write_bytes(b"not a las file" * 30)
+    args = ["ground", str(bad), "--workers", "1", "--buffer", "10", "--cell-size", "20"]
+    r = CliRunner().invoke(cli, [*args, "-o", str(tmp_path / "b1")])
+    assert r.exit_code == 1 and "broken.laz" in r.output
+    assert not (tmp_path / "b1").exists() or not any((tmp_path / "b1").glob("*.laz"))
+    doc = tmp_path / "b2.json"
+    r = CliRunner().invoke(
+        cli, [*args, "-o", str(tmp_path / "b2"), "--skip-bad", "--json", str(doc)]
+    )
+    assert r.exit_code == 0, r.output
+    assert "broken.laz" in r.output
+    d = json.loads(doc.read_text())["results"]
+    assert [Path(b["path"]).name for b in d["bad_tiles"]] == ["broken.laz"]
+    assert sorted(p.name for p in (tmp_path / "b2").glob("*.laz")) == sorted(
+        q.name for q in paths[:2]
+    )
