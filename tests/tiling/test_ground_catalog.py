@@ -89,14 +89,14 @@ def test_evaluation_counts_from_chunks_equal_whole_area_counts(scene_tiles, seri
     assert e.kappa == whole.kappa and e.total == whole.total
 
 
-def test_byte_identical_for_shuffled_order_and_two_workers(scene_tiles, tmp_path):
-    pytest.importorskip("distributed")
+def test_byte_identical_for_shuffled_order_and_two_workers(scene_tiles, small_runs, tmp_path):
+
     _, paths = scene_tiles
-    opts = {"chunk_size": 60.0, "buffer": 15.0, "evaluate": True, "cell_size": 20.0}
-    ref = ground_catalog(paths, tmp_path / "serial", workers=1, **opts)
-    shuffled = ground_catalog(paths, tmp_path / "shuffled", workers=1, order_seed=3, **opts)
+    ref, two = small_runs["serial"], small_runs["two"]
+    shuffled = ground_catalog(
+        paths, tmp_path / "shuffled", workers=1, order_seed=3, **small_runs["opts"]
+    )
     assert _digests(shuffled.outputs) == _digests(ref.outputs)
-    two = ground_catalog(paths, tmp_path / "two", workers=2, **opts)
     assert _digests(two.outputs) == _digests(ref.outputs)
     assert two.evaluation == ref.evaluation
     vpc = Path(two.vpc).read_text().replace("two", "X")
