@@ -47,7 +47,6 @@ def test_folder_glob_list_and_vpc_give_the_same_catalog(scene_tiles, tmp_path):
 def test_vpc_structure_is_a_stac_item_collection(scene_tiles, tmp_path):
     _, paths = scene_tiles
     cat = open_catalog(paths)
-    vpc = cat.write_vpc(tmp_path / "sub" / "x.vpc") if False else None
     (tmp_path / "sub").mkdir()
     vpc = cat.write_vpc(tmp_path / "sub" / "x.vpc")
     doc = json.loads(vpc.read_text())
