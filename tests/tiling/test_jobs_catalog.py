@@ -190,6 +190,11 @@ def test_cli_edges_on_a_folder_writes_each_edge_once(tiles, edges_run, tmp_path)
     # an existing output is refused before any work
     r2 = _cli(args)
     assert r2.exit_code == 1
+    # a rerun gives the same bytes (the GeoPackage carries no writing time)
+    again = tmp_path / "again.gpkg"
+    r3 = _cli([again if a == out else a for a in args if a not in ("--json", js)])
+    assert r3.exit_code == 0, r3.output
+    assert again.read_bytes() == out.read_bytes()
 
 
 def test_cli_vertical_check_and_repeatability_on_a_catalog(tiles, tmp_path):
