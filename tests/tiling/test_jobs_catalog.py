@@ -277,12 +277,19 @@ def test_assess_with_a_catalog_input_shows_the_overview_and_chunk_status(tiles, 
     import json
 
     pytest.importorskip("matplotlib")
-    from lidarqa.io.vector import write_points
+    from lidarqa.accuracy.heights import assess_heights
+    from lidarqa.io.vector import PointSet, write_points
     from lidarqa.report import run_assessment
 
     scene, folder, whole = tiles
     check = sample_checkpoints(scene, 20, seed=12)
     write_points(check, tmp_path / "check.csv")
+    rng = np.random.default_rng(4)
+    lo, hi = whole.xyz[:, :2].min(0) + 3, whole.xyz[:, :2].max(0) - 3
+    mxy = lo + rng.random((40, 2)) * (hi - lo)
+    write_points(PointSet(np.arange(40), np.c_[mxy, np.zeros(40)]), tmp_path / "map.csv")
+    href = sample_checkpoints(scene, 25, seed=13)
+    write_points(href, tmp_path / "href.csv")
     cfg = tmp_path / "a.toml"
     cfg.write_text(f"""
 title = "catalog"
@@ -290,6 +297,8 @@ title = "catalog"
 block = "{folder.as_posix()}"
 [inputs.points]
 check = "check.csv"
+map = "map.csv"
+href = "href.csv"
 [info]
 cloud = "block"
 [checkpoints]
@@ -298,6 +307,10 @@ vertical = true
 check = "check"
 [ground]
 cloud = "block"
+[heights]
+cloud = "block"
+map = "map"
+reference = "href"
 """)
     run = run_assessment(cfg, tmp_path / "out")
     doc = json.loads((tmp_path / "out" / "report.json").read_text())
@@ -308,6 +321,13 @@ cloud = "block"
     assert cp["rmse_z"] == ref["rmse_z"]
     assert cp["catalog"]["chunk_status"]["ok"] >= 1
     assert cp["catalog"]["chunk_status"]["failed"] == 0
+    h = doc["results"]["heights"]
+    g = whole.classification == 2
+    mem = assess_heights(whole.xyz[g], mxy, href.xyz).to_dict()
+    assert h["comparison"]["n"] == mem["comparison"]["n"] > 10
+    assert h["comparison"]["rms"] == mem["comparison"]["rms"]  # bit for bit
+    assert h["w"]["n_outliers"] == mem["w"]["n_outliers"]
+    assert h["catalog"]["chunk_status"]["failed"] == 0
     # ground on a catalog is not an assess analysis yet: a clear error, the rest still ran
     assert "cannot run on the catalog input" in doc["errors"]["ground"]
     assert run.results["info"]["n_tiles"] == info["n_tiles"]
