@@ -51,10 +51,8 @@ def run_speed(n_points: int, repeat: int) -> None:
     sc = _scene(n_points)
     pts = sc.points
     base = _rss_mb()
-    print(
-        f"scene: {len(pts):,} points, {len(sc.planes)} true planes, {len(sc.edges)} true edges; "
-        f"peak RSS before the run {base:.0f} MB"
-    )
+    print(f"scene: {len(pts):,} points, {len(sc.planes)} true planes, {len(sc.edges)} true edges; "
+          f"peak RSS before the run {base:.0f} MB")
     print(f"{'step':34s} {'wall s':>8s} {'cpu s':>8s}")
     rows = []
     for _ in range(repeat):
@@ -74,23 +72,19 @@ def run_speed(n_points: int, repeat: int) -> None:
     for method in ("pca", "ransac", "hough"):
         t0, c0 = time.perf_counter(), time.process_time()
         surface_growing(pts, seed_method=method)
-        print(
-            f"{'surface_growing seed=' + method:34s} {time.perf_counter() - t0:8.2f} "
-            f"{time.process_time() - c0:8.2f}"
-        )
+        print(f"{'surface_growing seed=' + method:34s} {time.perf_counter() - t0:8.2f} "
+              f"{time.process_time() - c0:8.2f}")
     score = score_edges(edges, sc.edges)
     print(f"peak RSS {_rss_mb():.0f} MB (process; {_rss_mb() - base:.0f} MB above the scene)")
-    print(
-        f"{seg.n_segments} planes, {len(edges)} edges, {len(corners)} corners; "
-        f"true edges >= 2 m found within 3 cm / 70 %: {score.n_matched}/{score.n_true} "
-        f"({score.recall:.1%}), worst RMS {np.nanmax(score.rms) * 1000:.1f} mm"
-    )
+    print(f"{seg.n_segments} planes, {len(edges)} edges, {len(corners)} corners; "
+          f"true edges >= 2 m found within 3 cm / 70 %: {score.n_matched}/{score.n_true} "
+          f"({score.recall:.1%}), worst RMS {np.nanmax(score.rms) * 1000:.1f} mm")
 
 
 def run_open3d(python: str, n_points: int) -> None:
     code = f"""
 import time, numpy as np, open3d as o3d, sys
-sys.path.insert(0, {str(Path(__file__).resolve().parents[1] / "src")!r})
+sys.path.insert(0, {str(Path(__file__).resolve().parents[1] / 'src')!r})
 pts = np.load(sys.argv[1])
 pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
 o3d.utility.random.seed(0)
@@ -138,14 +132,8 @@ def _ridges(e, seg):
     ca = seg.centroid[e.attributes["plane_a"]] - mid
     cb = seg.centroid[e.attributes["plane_b"]] - mid
     convex = (ca[:, 2] < 0) & (cb[:, 2] < 0) & (np.einsum("ij,ij->i", ca[:, :2], cb[:, :2]) < 0)
-    keep = (
-        (np.abs(d[:, 2]) < 0.1)
-        & (tilt_a > 10)
-        & (tilt_a < 70)
-        & (tilt_b > 10)
-        & (tilt_b < 70)
-        & convex
-    )
+    keep = ((np.abs(d[:, 2]) < 0.1) & (tilt_a > 10) & (tilt_a < 70) & (tilt_b > 10) & (tilt_b < 70)
+            & convex)
     return e.subset(keep)
 
 
@@ -154,22 +142,11 @@ def run_strips() -> None:
     from lidarqa.geometry.edges import edges_from_segmentation
     from lidarqa.geometry.segmentation import segment_planes
 
-    files = sorted(
-        glob.glob(
-            str(
-                Path(__file__).resolve().parents[2]
-                / "shared"
-                / "lidar-data"
-                / "ign-lidarhd"
-                / "test_data_*.laz"
-            )
-        )
-    )
-    print(
-        f"{'tile':14s} {'pts706':>7s} {'pts707':>7s} {'edges706':>8s} {'edges707':>8s} "
-        f"{'horiz706':>8s} {'horiz707':>8s} {'matched':>7s} {'median_d_m':>10s} "
-        f"{'rdg706':>7s} {'rdg707':>7s} {'rdg_mat':>7s} {'rdg_med_m':>10s}"
-    )
+    files = sorted(glob.glob(str(Path(__file__).resolve().parents[2] / "shared" / "lidar-data"
+                                 / "ign-lidarhd" / "test_data_*.laz")))
+    print(f"{'tile':14s} {'pts706':>7s} {'pts707':>7s} {'edges706':>8s} {'edges707':>8s} "
+          f"{'horiz706':>8s} {'horiz707':>8s} {'matched':>7s} {'median_d_m':>10s} "
+          f"{'rdg706':>7s} {'rdg707':>7s} {'rdg_mat':>7s} {'rdg_med_m':>10s}")
     for f in files:
         cloud = lidarqa.read(f)
         res = {}
@@ -188,32 +165,22 @@ def run_strips() -> None:
                 return 0
             return int((np.abs((e.end - e.start)[:, 2]) / e.lengths < 0.1).sum())
 
-        d = (
-            _match_distance(e6, e7)
-            if e6 is not None and e7 is not None and len(e6) and len(e7)
+        d = _match_distance(e6, e7) if e6 is not None and e7 is not None and len(e6) and len(e7) \
             else np.zeros(0)
-        )
         r6, r7 = res[706][2], res[707][2]
-        dr = (
-            _match_distance(r6, r7)
-            if r6 is not None and r7 is not None and len(r6) and len(r7)
+        dr = _match_distance(r6, r7) if r6 is not None and r7 is not None and len(r6) and len(r7) \
             else np.zeros(0)
-        )
         tile = Path(f).stem.replace("test_data_", "").replace("_LA93_IGN69", "")
-        print(
-            f"{tile:14s} {res[706][0]:7d} {res[707][0]:7d} "
-            f"{len(e6) if e6 is not None else 0:8d} {len(e7) if e7 is not None else 0:8d} "
-            f"{n_h(e6):8d} {n_h(e7):8d} {len(d):7d} "
-            f"{np.median(d) if len(d) else float('nan'):10.3f} "
-            f"{len(r6) if r6 is not None else 0:7d} {len(r7) if r7 is not None else 0:7d} "
-            f"{len(dr):7d} {np.median(dr) if len(dr) else float('nan'):10.3f}"
-        )
-    print(
-        "matched: edges of 706 with an edge of 707 within 5 degrees, overlapping, midpoint "
-        "within 1 m of its line; median_d_m: median perpendicular distance (m).\n"
-        "ridges: horizontal edges (|dz|/length < 0.1) between two roof planes tilted 10-70 "
-        "degrees whose normals point away from each other (convex)."
-    )
+        print(f"{tile:14s} {res[706][0]:7d} {res[707][0]:7d} "
+              f"{len(e6) if e6 is not None else 0:8d} {len(e7) if e7 is not None else 0:8d} "
+              f"{n_h(e6):8d} {n_h(e7):8d} {len(d):7d} "
+              f"{np.median(d) if len(d) else float('nan'):10.3f} "
+              f"{len(r6) if r6 is not None else 0:7d} {len(r7) if r7 is not None else 0:7d} "
+              f"{len(dr):7d} {np.median(dr) if len(dr) else float('nan'):10.3f}")
+    print("matched: edges of 706 with an edge of 707 within 5 degrees, overlapping, midpoint "
+          "within 1 m of its line; median_d_m: median perpendicular distance (m).\n"
+          "ridges: horizontal edges (|dz|/length < 0.1) between two roof planes tilted 10-70 "
+          "degrees whose normals point away from each other (convex).")
 
 
 def main(argv: list[str] | None = None) -> None:

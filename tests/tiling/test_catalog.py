@@ -47,7 +47,6 @@ def test_folder_glob_list_and_vpc_give_the_same_catalog(scene_tiles, tmp_path):
 def test_vpc_structure_is_a_stac_item_collection(scene_tiles, tmp_path):
     _, paths = scene_tiles
     cat = open_catalog(paths)
-    vpc = cat.write_vpc(tmp_path / "sub" / "x.vpc") if False else None
     (tmp_path / "sub").mkdir()
     vpc = cat.write_vpc(tmp_path / "sub" / "x.vpc")
     doc = json.loads(vpc.read_text())
@@ -139,6 +138,7 @@ def test_gaps_and_duplicate_overlaps(scene_tiles, tmp_path):
     _, paths = scene_tiles
     full = open_catalog(paths)
     assert full.overlaps() == []
+    assert full.gaps() == []  # 2 x 2 tiles whose data extents are a little under 60 m
     # a 3 x 3 block of 100 m tiles without its centre tile: one gap, where the centre was
     tiles = tuple(
         TileInfo(
@@ -179,3 +179,15 @@ def test_cli_info_on_a_catalog(scene_tiles, tmp_path):
     assert doc["results"]["n_points"] == sum(len(lidarqa.read(p)) for p in paths)
     r = CliRunner().invoke(cli, ["info", str(tmp_path / "nothing" / "*.laz")])
     assert r.exit_code == 1 and "matches no" in r.output
+    # --strips: points per point source id, streamed from the tiles
+    r = CliRunner().invoke(
+        cli, ["info", str(paths[0].parent), "--strips", "--json", str(tmp_path / "s.json")]
+    )
+    assert r.exit_code == 0, r.output
+    strips = json.loads((tmp_path / "s.json").read_text())["results"]["strips"]
+    ids = np.concatenate([np.asarray(lidarqa.read(p).fields["point_source_id"]) for p in paths])
+    u, c = np.unique(ids, return_counts=True)
+    assert {int(k): int(v) for k, v in strips.items()} == dict(
+        zip(u.tolist(), c.tolist(), strict=True)
+    )
+    assert f"{u[0]}: {c[0]:,}" in r.output

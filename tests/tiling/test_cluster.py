@@ -25,8 +25,6 @@ from lidarqa.tiling.ground import WORK_DIR, ground_catalog
 
 pytest.importorskip("distributed")
 
-OPTS = {"chunk_size": 60.0, "buffer": 10.0, "cell_size": 20.0}
-
 
 def _free_port() -> int:
     with socket.socket() as s:
@@ -120,13 +118,12 @@ def _digests(paths) -> list[str]:
 
 
 def test_cluster_outputs_equal_local_runs_and_survive_a_killed_worker(
-    scene_tiles, cluster, tmp_path
+    scene_tiles, small_runs, cluster, tmp_path
 ):
     _, paths = scene_tiles
     address, procs = cluster
-    serial = ground_catalog(paths, tmp_path / "serial", workers=1, **OPTS)
-    local = ground_catalog(paths, tmp_path / "local", workers=2, **OPTS)
-    remote = ground_catalog(paths, tmp_path / "remote", scheduler=address, **OPTS)
+    serial, local = small_runs["serial"], small_runs["two"]  # LocalCluster: 2 workers
+    remote = ground_catalog(paths, tmp_path / "remote", scheduler=address, **small_runs["opts"])
     assert _digests(remote.outputs) == _digests(local.outputs) == _digests(serial.outputs)
 
     # the command line against the cluster, one worker killed as soon as a chunk is done

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -88,14 +89,14 @@ def test_evaluation_counts_from_chunks_equal_whole_area_counts(scene_tiles, seri
     assert e.kappa == whole.kappa and e.total == whole.total
 
 
-def test_byte_identical_for_shuffled_order_and_two_workers(scene_tiles, tmp_path):
-    pytest.importorskip("distributed")
+def test_byte_identical_for_shuffled_order_and_two_workers(scene_tiles, small_runs, tmp_path):
+
     _, paths = scene_tiles
-    opts = {"chunk_size": 60.0, "buffer": 15.0, "evaluate": True, "cell_size": 20.0}
-    ref = ground_catalog(paths, tmp_path / "serial", workers=1, **opts)
-    shuffled = ground_catalog(paths, tmp_path / "shuffled", workers=1, order_seed=3, **opts)
+    ref, two = small_runs["serial"], small_runs["two"]
+    shuffled = ground_catalog(
+        paths, tmp_path / "shuffled", workers=1, order_seed=3, **small_runs["opts"]
+    )
     assert _digests(shuffled.outputs) == _digests(ref.outputs)
-    two = ground_catalog(paths, tmp_path / "two", workers=2, **opts)
     assert _digests(two.outputs) == _digests(ref.outputs)
     assert two.evaluation == ref.evaluation
     vpc = Path(two.vpc).read_text().replace("two", "X")
@@ -161,3 +162,24 @@ def test_cli_ground_on_a_folder(scene_tiles, tmp_path):
     )
     assert r.exit_code == 0, r.output
     assert len(list((tmp_path / "two").glob("*.laz"))) == 2
+    # a corrupt tile: refused naming it before any work; --skip-bad processes the others
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    for q in paths[:2]:
+        shutil.copy(q, bad / q.name)
+    (bad / "broken.laz").write_bytes(b"not a las file" * 30)
+    args = ["ground", str(bad), "--workers", "1", "--buffer", "10", "--cell-size", "20"]
+    r = CliRunner().invoke(cli, [*args, "-o", str(tmp_path / "b1")])
+    assert r.exit_code == 1 and "broken.laz" in r.output
+    assert not (tmp_path / "b1").exists() or not any((tmp_path / "b1").glob("*.laz"))
+    doc = tmp_path / "b2.json"
+    r = CliRunner().invoke(
+        cli, [*args, "-o", str(tmp_path / "b2"), "--skip-bad", "--json", str(doc)]
+    )
+    assert r.exit_code == 0, r.output
+    assert "broken.laz" in r.output
+    d = json.loads(doc.read_text())["results"]
+    assert [Path(b["path"]).name for b in d["bad_tiles"]] == ["broken.laz"]
+    assert sorted(p.name for p in (tmp_path / "b2").glob("*.laz")) == sorted(
+        q.name for q in paths[:2]
+    )

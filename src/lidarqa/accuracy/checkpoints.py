@@ -929,6 +929,21 @@ def _barycentric(tri_xy: np.ndarray, p: np.ndarray) -> np.ndarray:
     return w
 
 
+def _xy_ordered(simplices: np.ndarray, vxy: np.ndarray) -> np.ndarray:
+    """Each triangle's vertex indices sorted by the vertices' (x, y).
+
+    The arithmetic on a triangle (weights relative to its first vertex, the sum
+    of weighted heights) then does not depend on the order Qhull listed the
+    vertices in, which changes with the point subset that was triangulated.
+    """
+    s = np.asarray(simplices)
+    if s.size == 0:
+        return s
+    xy = vxy[s]
+    order = np.lexsort((xy[..., 1], xy[..., 0]), axis=-1)
+    return np.take_along_axis(s, order, axis=-1)
+
+
 def _locate(
     simplices: np.ndarray, vxy: np.ndarray, pxy: np.ndarray, k: int = 12
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -1203,10 +1218,13 @@ def vertical_check(
                 ) from None
             tri = None
         if tri is not None:
-            simp, w = _locate(tri.simplices, gs[:, :2], c[:, :2])
+            # each triangle's vertices in XY order: the weights and the interpolated height are
+            # then the same bits whatever subset (chunk) was triangulated or its origin
+            simplices = _xy_ordered(tri.simplices, gs[:, :2])
+            simp, w = _locate(simplices, gs[:, :2], c[:, :2])
             inside = simp >= 0
             if inside.any():
-                verts = tri.simplices[simp[inside]]
+                verts = simplices[simp[inside]]
                 tin_z[inside] = np.sum(w[inside] * gs[verts, 2], axis=1)
                 vxy = gs[verts, :2]
                 edges = np.stack(

@@ -519,6 +519,12 @@ def map_point_heights(
         tree, mxy[q_order] - origin, radius=r, max_radius=rmax, min_points=k, growth=growth
     )
     group, index = q_order[q_group], order[q_index]
+    if len(index):
+        # entries by map point, then by the laser point's (x, y, z): the sums of each fit run in
+        # the same order whatever subset of the cloud (a chunk of a catalog) was searched
+        p = pts[index]
+        canon = np.lexsort((p[:, 2], p[:, 1], p[:, 0], group))
+        group, index = group[canon], index[canon]
     r_used, n_found = np.empty(m), np.empty(m, dtype=np.int64)
     r_used[q_order], n_found[q_order] = q_r, q_n
     enough_before = np.bincount(group, minlength=m) >= k

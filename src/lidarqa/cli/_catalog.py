@@ -153,7 +153,30 @@ def ground_on_catalog(
     )
 
 
-def info_on_catalog(paths: Sequence[str], *, skip_bad: bool = False) -> None:
+def _strip_counts(catalog: Any) -> tuple[dict[int, int], dict[str, list[int]]]:
+    """Points per point source id over the catalog, and the ids of each tile (streamed)."""
+    import numpy as np
+
+    from ..io.las import LasReader
+
+    total: dict[int, int] = {}
+    per_tile: dict[str, list[int]] = {}
+    for t in catalog.tiles:
+        ids: set[int] = set()
+        with LasReader(t.path) as r:
+            for piece in r.chunks(1_000_000):
+                psid = piece.fields.get("point_source_id")
+                if psid is None:
+                    continue
+                u, c = np.unique(np.asarray(psid), return_counts=True)
+                for k, n in zip(u.tolist(), c.tolist(), strict=True):
+                    total[int(k)] = total.get(int(k), 0) + int(n)
+                ids.update(int(k) for k in u.tolist())
+        per_tile[t.path] = sorted(ids)
+    return dict(sorted(total.items())), per_tile
+
+
+def info_on_catalog(paths: Sequence[str], *, skip_bad: bool = False, strips: bool = False) -> None:
     from ..tiling import make_chunks, open_catalog
 
     with Steps()(f"Reading the headers of {', '.join(paths)}"):
@@ -166,6 +189,9 @@ def info_on_catalog(paths: Sequence[str], *, skip_bad: bool = False) -> None:
         "chunk_size": chunks[0].size if chunks else None,
         "buffer": float(chunks[0].buffered[2] - chunks[0].core[2]) if chunks else None,
     }
+    if strips:
+        with Steps()(f"Reading the point source ids of {len(catalog.tiles)} tile(s)"):
+            d["strips"], d["strips_per_tile"] = _strip_counts(catalog)
     b = d["bounds"]
     echo(", ".join(paths))
     echo(f"  tiles           {d['n_tiles']:,}" + (f" ({d['n_copc']} COPC)" if d["n_copc"] else ""))
@@ -180,12 +206,18 @@ def info_on_catalog(paths: Sequence[str], *, skip_bad: bool = False) -> None:
     echo(f"  density         {d['density_per_m2']:.1f} pts/m² (points / tile area)")
     echo(f"  tile size       {d['tile_size']:g} m (median)")
     echo("  point formats   " + ", ".join(str(f) for f in d["point_formats"]))
-    if d["source_ids"]:
+    if strips:
+        echo(
+            "  strips          "
+            + (", ".join(f"{k}: {v:,}" for k, v in d["strips"].items()) or "none")
+            + " (point source ids: points)"
+        )
+    elif d["source_ids"]:
         echo(
             "  strips          " + ", ".join(str(i) for i in d["source_ids"]) + " (file source ids)"
         )
     else:
-        echo("  strips          not recorded in the headers")
+        echo("  strips          not recorded in the headers (--strips reads them)")
     echo(f"  gaps            {len(d['gaps'])} missing tile cell(s)")
     echo(f"  overlaps        {len(d['overlaps'])} duplicate overlap(s)")
     for o in d["overlaps"][:10]:

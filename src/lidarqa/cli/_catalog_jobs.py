@@ -22,6 +22,7 @@ __all__ = [
     "catalog_options",
     "features_on_catalog",
     "heights_on_catalog",
+    "reproducible_vectors",
     "repeatability_on_catalog",
     "vertical_on_catalog",
     "wants_catalog",
@@ -123,6 +124,28 @@ def _failed_exit(run: Any) -> None:
 # ------------------------------------------------------------------ planes / edges / corners
 
 
+# The GeoPackage driver stamps the writing time into the file (gpkg_contents.last_change); a
+# catalog run's outputs must be byte-identical for any number of workers and any rerun, so its
+# vector outputs carry this fixed time instead (the run's time is in the --json record).
+FIXED_GPKG_TIME = "2000-01-01T00:00:00.000Z"
+
+
+@contextlib.contextmanager
+def reproducible_vectors() -> Iterator[None]:
+    """Write GeoPackages with :data:`FIXED_GPKG_TIME` inside the block (restored after)."""
+    try:
+        import pyogrio
+    except ImportError:  # no GIS extra: only CSV can be written, which has no time stamp
+        yield
+        return
+    before = pyogrio.get_gdal_config_option("OGR_CURRENT_DATE")
+    pyogrio.set_gdal_config_options({"OGR_CURRENT_DATE": FIXED_GPKG_TIME})
+    try:
+        yield
+    finally:
+        pyogrio.set_gdal_config_options({"OGR_CURRENT_DATE": before})
+
+
 def features_on_catalog(
     kind: str,
     paths: Sequence[str],
@@ -146,7 +169,7 @@ def features_on_catalog(
                                segment_options=segment_options, options=options,
                                **_common(cat_opts, eng))
     f = run.value
-    with steps(f"Writing {output}"):
+    with steps(f"Writing {output}"), reproducible_vectors():
         if kind == "edges":
             write_segments(f, output, overwrite=settings().overwrite, layer=kind)
         else:
@@ -208,7 +231,7 @@ def vertical_on_catalog(
                                      **_common(cat_opts, eng))
     report = run.value
     if output is not None:
-        with steps("Writing " + output):
+        with steps("Writing " + output), reproducible_vectors():
             res = report.residual_points()
             res.crs = chk.crs or crs
             write_points(res, output, overwrite=settings().overwrite)

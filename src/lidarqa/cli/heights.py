@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
 from typing import Any
 
@@ -391,8 +392,10 @@ def heights(
                                     **options)
     if output is not None:
         from ..io.vector import write_points
+        from ._catalog_jobs import reproducible_vectors
 
-        with steps("Writing " + output):
+        stamp = reproducible_vectors() if on_catalog else contextlib.nullcontext()
+        with steps("Writing " + output), stamp:
             rows = _output_rows(report, mp.ids, ref.ids, pc.crs or mp.crs or ref.crs)
             write_points(rows, output, overwrite=settings().overwrite, layer="heights")
     res = report.to_dict()

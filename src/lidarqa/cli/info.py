@@ -12,8 +12,13 @@ from ._common import Steps, common_options, echo, finish, prepare_outputs, setti
 @click.option(
     "--skip-bad", is_flag=True, help="Catalog: leave out bad tiles (listed) instead of failing."
 )
+@click.option(
+    "--strips",
+    is_flag=True,
+    help="Catalog: also count the points of each strip (point source id); reads every point.",
+)
 @common_options
-def info(paths: tuple[str, ...], skip_bad: bool) -> None:
+def info(paths: tuple[str, ...], skip_bad: bool, strips: bool) -> None:
     """Describe a point cloud: points, bounds, CRS, classes, strips, density, returns.
 
     With a catalog (a folder, glob pattern, .vpc or several files): a summary from the
@@ -22,8 +27,8 @@ def info(paths: tuple[str, ...], skip_bad: bool) -> None:
     from ..io.info import describe
     from ._catalog import info_on_catalog, is_catalog
 
-    if is_catalog(paths) or skip_bad:
-        info_on_catalog(paths, skip_bad=skip_bad)
+    if is_catalog(paths) or skip_bad or strips:
+        info_on_catalog(paths, skip_bad=skip_bad, strips=strips)
         return
     path = paths[0]
     prepare_outputs(inputs=(path,))

@@ -23,8 +23,8 @@ together; :func:`score_edges` / :func:`score_corners` score detections against
 the truth; :func:`sample_checkpoints` gives true ground check points;
 :mod:`lidarqa.testing.cases` has edge-case arrays; :func:`write_tiles` /
 :func:`write_block` write scenes as tiled deliveries (catalog tests, benchmarks).
-Hypothesis strategies live in
-``lidarqa.testing.strategies`` (needs the ``test`` extra; not imported here).
+Hypothesis strategies live in ``lidarqa.testing.strategies`` (needs the ``test``
+extra; not imported here).
 
 >>> from lidarqa.testing import make_building_scene
 >>> scene = make_building_scene(seed=1)

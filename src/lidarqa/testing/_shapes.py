@@ -117,9 +117,8 @@ class TerrainModel:
         t = np.asarray(translation, dtype=np.float64)
         new_rot = rotation2 @ self.rotation
         new_off = np.array([*(rotation2 @ self.offset[:2] + t[:2]), self.offset[2] + t[2]])
-        return TerrainModel(
-            self.z0, self.gx, self.gy, self.waves, self.roads, self.embankments, new_rot, new_off
-        )
+        return TerrainModel(self.z0, self.gx, self.gy, self.waves, self.roads, self.embankments,
+                            new_rot, new_off)
 
     def breaklines(self, extent: tuple[float, float]) -> list[tuple[np.ndarray, np.ndarray, str]]:
         """Break lines clipped to the local extent, as (start_uv, end_uv, kind)."""
@@ -137,9 +136,8 @@ class TerrainModel:
         return out
 
 
-def _clip_line(
-    p: np.ndarray, u: np.ndarray, shift: float, extent: tuple[float, float]
-) -> tuple[np.ndarray, np.ndarray] | None:
+def _clip_line(p: np.ndarray, u: np.ndarray, shift: float,
+               extent: tuple[float, float]) -> tuple[np.ndarray, np.ndarray] | None:
     """Clip the line p + shift*n + t*u (n = u rotated +90 deg) to [0, W] x [0, H]."""
     n = np.array([-u[1], u[0]])
     q = p + shift * n
@@ -198,9 +196,8 @@ def sample_polygon(rng: np.random.Generator, vertices: np.ndarray, density: floa
     return v0 + r[:, :1] * e1[tri] + r[:, 1:] * e2[tri]
 
 
-def _jittered_grid(
-    rng: np.random.Generator, lo: np.ndarray, hi: np.ndarray, spacing: float
-) -> np.ndarray:
+def _jittered_grid(rng: np.random.Generator, lo: np.ndarray, hi: np.ndarray,
+                   spacing: float) -> np.ndarray:
     """One uniform point per `spacing` cell of a randomly shifted grid covering [lo, hi]."""
     shift = rng.random(2) * spacing
     start = lo - shift
@@ -214,20 +211,14 @@ def _jittered_grid(
 def _inside_convex(p: np.ndarray, poly: np.ndarray) -> np.ndarray:
     """Mask of 2D points inside a convex polygon (either orientation)."""
     q = np.roll(poly, -1, axis=0)
-    cross = (q[:, 0] - poly[:, 0])[None] * (p[:, 1:2] - poly[:, 1][None]) - (q[:, 1] - poly[:, 1])[
-        None
-    ] * (p[:, 0:1] - poly[:, 0][None])
+    cross = ((q[:, 0] - poly[:, 0])[None] * (p[:, 1:2] - poly[:, 1][None])
+             - (q[:, 1] - poly[:, 1])[None] * (p[:, 0:1] - poly[:, 0][None]))
     area2 = np.sum(poly[:, 0] * q[:, 1] - q[:, 0] * poly[:, 1])
     return np.all(cross * np.sign(area2) >= 0, axis=1)
 
 
-def sample_polygon_jittered(
-    rng: np.random.Generator,
-    vertices: np.ndarray,
-    density: float,
-    normal: np.ndarray,
-    airborne: bool,
-) -> np.ndarray:
+def sample_polygon_jittered(rng: np.random.Generator, vertices: np.ndarray, density: float,
+                            normal: np.ndarray, airborne: bool) -> np.ndarray:
     """Points of a jittered grid (one per cell of area 1/density) on a convex planar polygon.
 
     Airborne faces get the grid in horizontal xy at the horizontal density
@@ -272,14 +263,8 @@ def rect_corners(center: np.ndarray, length: float, width: float, azimuth_deg: f
     return center + local[:, :1] * ex + local[:, 1:] * ey
 
 
-def in_rectangle(
-    xy: np.ndarray,
-    center: np.ndarray,
-    length: float,
-    width: float,
-    azimuth_deg: float,
-    margin: float = 0.0,
-) -> np.ndarray:
+def in_rectangle(xy: np.ndarray, center: np.ndarray, length: float, width: float,
+                 azimuth_deg: float, margin: float = 0.0) -> np.ndarray:
     """Mask of `xy` inside the (optionally enlarged) rectangle."""
     a = np.deg2rad(azimuth_deg)
     d = xy - center
@@ -295,15 +280,8 @@ class ColumnSampler:
     contiguous slice (a view) without sorting millions of points.
     """
 
-    def __init__(
-        self,
-        rng: np.random.Generator,
-        n: int,
-        size: tuple[float, float],
-        column: float = 1.0,
-        *,
-        jittered: bool = False,
-    ) -> None:
+    def __init__(self, rng: np.random.Generator, n: int, size: tuple[float, float],
+                 column: float = 1.0, *, jittered: bool = False) -> None:
         w, h = size
         if jittered:  # one point per cell of area w * h / n, grid columns of width `column`
             spacing = float(np.sqrt(w * h / max(n, 1)))

@@ -104,18 +104,11 @@ class _World:
     ground_plane: int = -1
     next_object: int = 0
 
-    def add_plane(
-        self,
-        normal: np.ndarray,
-        point: np.ndarray,
-        kind: str,
-        object_id: int,
-        polygon: np.ndarray | None,
-    ) -> int:
+    def add_plane(self, normal: np.ndarray, point: np.ndarray, kind: str, object_id: int,
+                  polygon: np.ndarray | None) -> int:
         n, rho = canonical_plane(normal, float(np.dot(normal, point)))
-        self.planes.append(
-            {"normal": n, "rho": rho, "kind": kind, "object_id": object_id, "polygon": polygon}
-        )
+        self.planes.append({"normal": n, "rho": rho, "kind": kind, "object_id": object_id,
+                            "polygon": polygon})
         return len(self.planes) - 1
 
     def new_object(self) -> int:
@@ -127,42 +120,31 @@ def _plane_normal(vertices: np.ndarray) -> np.ndarray:
     """Newell normal of a planar polygon (exact up to rounding)."""
     v = vertices
     w = np.roll(v, -1, axis=0)
-    n = np.array(
-        [
-            np.sum((v[:, 1] - w[:, 1]) * (v[:, 2] + w[:, 2])),
-            np.sum((v[:, 2] - w[:, 2]) * (v[:, 0] + w[:, 0])),
-            np.sum((v[:, 0] - w[:, 0]) * (v[:, 1] + w[:, 1])),
-        ]
-    )
+    n = np.array([
+        np.sum((v[:, 1] - w[:, 1]) * (v[:, 2] + w[:, 2])),
+        np.sum((v[:, 2] - w[:, 2]) * (v[:, 0] + w[:, 0])),
+        np.sum((v[:, 0] - w[:, 0]) * (v[:, 1] + w[:, 1])),
+    ])
     return n / np.linalg.norm(n)
 
 
-def _add_structure(
-    world: _World,
-    spec: BuildingSpec,
-    *,
-    object_kind: str,
-    density: float,
-    wall_density: float,
-    foot_edges: bool,
-) -> int:
+def _add_structure(world: _World, spec: BuildingSpec, *, object_kind: str, density: float,
+                   wall_density: float, foot_edges: bool) -> int:
     """Add a building ("building") or a car ("car") with its planes, faces, edges, corners."""
     oid = world.new_object()
     is_car = object_kind == "car"
     cls = CLASS_OTHER if is_car else CLASS_BUILDING
     roof_kind, wall_kind = ("car_top", "car_side") if is_car else ("roof", "wall")
     planar = world.terrain.is_planar
-    c2 = rect_corners(
-        np.asarray(spec.center, dtype=np.float64), spec.length, spec.width, spec.azimuth_deg
-    )
+    c2 = rect_corners(np.asarray(spec.center, dtype=np.float64), spec.length, spec.width,
+                      spec.azimuth_deg)
     g = world.terrain.local_height(c2)
     top = (g.min() if is_car else g.max()) + spec.height
     bottom = g if planar else np.full(4, g.min() - 1.0)
     o = 0.0 if is_car else float(spec.overhang)
     # the roof hides the ground under the overhang too
-    world.footprints.append(
-        (np.asarray(spec.center, float), spec.length + 2 * o, spec.width + 2 * o, spec.azimuth_deg)
-    )
+    world.footprints.append((np.asarray(spec.center, float), spec.length + 2 * o,
+                             spec.width + 2 * o, spec.azimuth_deg))
     az = np.deg2rad(spec.azimuth_deg)
     ex = np.array([np.cos(az), np.sin(az)])
     ey = np.array([-np.sin(az), np.cos(az)])
@@ -177,12 +159,8 @@ def _add_structure(
     hl, hw = 0.5 * spec.length, 0.5 * spec.width
     roof_ids: list[int] = []
     if spec.roof == "flat" or is_car:
-        poly = np.array(
-            [
-                loc(sx * (hl + o), sy * (hw + o), top)
-                for sx, sy in ((-1, -1), (1, -1), (1, 1), (-1, 1))
-            ]
-        )
+        poly = np.array([loc(sx * (hl + o), sy * (hw + o), top)
+                         for sx, sy in ((-1, -1), (1, -1), (1, 1), (-1, 1))])
         rid = world.add_plane(np.array([0.0, 0.0, 1.0]), poly[0], roof_kind, oid, poly)
         world.faces.append(Face(poly, rid, cls, oid, density, airborne=True))
         roof_ids = [rid]
@@ -194,12 +172,10 @@ def _add_structure(
         zo = top - o * slope
         ridge = (loc(-hl, 0.0, zr), loc(hl, 0.0, zr))  # where the ridge meets the gable walls
         ridge_ends = (loc(-hl - o, 0.0, zr), loc(hl + o, 0.0, zr))
-        face_a = np.array(
-            [loc(-hl - o, -hw - o, zo), loc(hl + o, -hw - o, zo), ridge_ends[1], ridge_ends[0]]
-        )
-        face_b = np.array(
-            [loc(hl + o, hw + o, zo), loc(-hl - o, hw + o, zo), ridge_ends[0], ridge_ends[1]]
-        )
+        face_a = np.array([loc(-hl - o, -hw - o, zo), loc(hl + o, -hw - o, zo), ridge_ends[1],
+                           ridge_ends[0]])
+        face_b = np.array([loc(hl + o, hw + o, zo), loc(-hl - o, hw + o, zo), ridge_ends[0],
+                           ridge_ends[1]])
         for poly in (face_a, face_b):
             n = _plane_normal(poly)
             rid = world.add_plane(n, poly[0], roof_kind, oid, poly)
@@ -251,52 +227,36 @@ def _add_structure(
         world.corners.append((p3(c2[3], top), (rb, wall_ids[2], wall_ids[3]), "eave", oid))
     # vertical wall-wall edges from the ground at the corner up to the eave
     for i in range(4):
-        world.edges.append(
-            (p3(c2[i], g[i]), p3(c2[i], top), wall_ids[i - 1], wall_ids[i], ek("wall"), oid)
-        )
+        world.edges.append((p3(c2[i], g[i]), p3(c2[i], top), wall_ids[i - 1], wall_ids[i],
+                            ek("wall"), oid))
     # foot lines and corners on a planar ground
     if planar and world.ground and world.ground_plane >= 0 and foot_edges:
         gp = world.ground_plane
         for i in range(4):
             j = (i + 1) % 4
             world.edges.append((p3(c2[i], g[i]), p3(c2[j], g[j]), gp, wall_ids[i], ek("foot"), oid))
-            world.corners.append(
-                (p3(c2[i], g[i]), (gp, wall_ids[i - 1], wall_ids[i]), ek("foot"), oid)
-            )
+            world.corners.append((p3(c2[i], g[i]), (gp, wall_ids[i - 1], wall_ids[i]), ek("foot"),
+                                  oid))
     return oid
 
 
-def _add_tree(
-    world: _World, rng: np.random.Generator, center: np.ndarray, crown_radius: float
-) -> None:
+def _add_tree(world: _World, rng: np.random.Generator, center: np.ndarray,
+              crown_radius: float) -> None:
     oid = world.new_object()
     gz = float(world.terrain.local_height(center[None, :])[0])
     trunk_h = float(rng.uniform(1.5, 4.0))
     crown_rz = float(rng.uniform(1.5, 4.0))
-    world.trees.append(
-        {
-            "object_id": oid,
-            "center": center,
-            "ground_z": gz,
-            "trunk_height": trunk_h,
-            "trunk_radius": float(rng.uniform(0.12, 0.3)),
-            "crown_radius": float(crown_radius),
-            "crown_rz": crown_rz,
-            "crown_z": gz + trunk_h + crown_rz,
-        }
-    )
+    world.trees.append({
+        "object_id": oid, "center": center, "ground_z": gz, "trunk_height": trunk_h,
+        "trunk_radius": float(rng.uniform(0.12, 0.3)), "crown_radius": float(crown_radius),
+        "crown_rz": crown_rz, "crown_z": gz + trunk_h + crown_rz,
+    })
 
 
 def _add_shrub(world: _World, rng: np.random.Generator, center: np.ndarray) -> None:
     oid = world.new_object()
-    world.shrubs.append(
-        {
-            "object_id": oid,
-            "center": center,
-            "radius": float(rng.uniform(0.5, 2.0)),
-            "height": float(rng.uniform(0.3, 1.5)),
-        }
-    )
+    world.shrubs.append({"object_id": oid, "center": center, "radius": float(rng.uniform(0.5, 2.0)),
+                         "height": float(rng.uniform(0.3, 1.5))})
 
 
 # --------------------------------------------------------------------- sampling
@@ -306,64 +266,40 @@ class _Chunks:
     def __init__(self) -> None:
         self.parts: list[dict[str, np.ndarray]] = []
 
-    def add(
-        self,
-        xyz: np.ndarray,
-        cls: Any,
-        ground: Any,
-        oid: Any,
-        pid: Any,
-        ret: Any = 1,
-        nret: Any = 1,
-    ) -> None:
+    def add(self, xyz: np.ndarray, cls: Any, ground: Any, oid: Any, pid: Any,
+            ret: Any = 1, nret: Any = 1) -> None:
         n = len(xyz)
         if n == 0:
             return
-        self.parts.append(
-            {
-                "xyz": xyz,
-                "cls": np.broadcast_to(np.asarray(cls, np.uint8), (n,)),
-                "ground": np.broadcast_to(np.asarray(ground, bool), (n,)),
-                "oid": np.broadcast_to(np.asarray(oid, np.int64), (n,)),
-                "pid": np.broadcast_to(np.asarray(pid, np.int64), (n,)),
-                "ret": np.broadcast_to(np.asarray(ret, np.uint8), (n,)),
-                "nret": np.broadcast_to(np.asarray(nret, np.uint8), (n,)),
-            }
-        )
+        self.parts.append({
+            "xyz": xyz,
+            "cls": np.broadcast_to(np.asarray(cls, np.uint8), (n,)),
+            "ground": np.broadcast_to(np.asarray(ground, bool), (n,)),
+            "oid": np.broadcast_to(np.asarray(oid, np.int64), (n,)),
+            "pid": np.broadcast_to(np.asarray(pid, np.int64), (n,)),
+            "ret": np.broadcast_to(np.asarray(ret, np.uint8), (n,)),
+            "nret": np.broadcast_to(np.asarray(nret, np.uint8), (n,)),
+        })
 
     def concat(self) -> dict[str, np.ndarray]:
         keys = ("xyz", "cls", "ground", "oid", "pid", "ret", "nret")
         if not self.parts:
-            empty = {
-                "xyz": np.zeros((0, 3)),
-                "cls": np.zeros(0, np.uint8),
-                "ground": np.zeros(0, bool),
-                "oid": np.zeros(0, np.int64),
-                "pid": np.zeros(0, np.int64),
-                "ret": np.zeros(0, np.uint8),
-                "nret": np.zeros(0, np.uint8),
-            }
+            empty = {"xyz": np.zeros((0, 3)), "cls": np.zeros(0, np.uint8),
+                     "ground": np.zeros(0, bool), "oid": np.zeros(0, np.int64),
+                     "pid": np.zeros(0, np.int64), "ret": np.zeros(0, np.uint8),
+                     "nret": np.zeros(0, np.uint8)}
             return empty
         return {k: np.concatenate([p[k] for p in self.parts]) for k in keys}
 
 
 def _veg_class(hag: np.ndarray) -> np.ndarray:
-    return np.where(
-        hag > 2.0, CLASS_HIGH_VEG, np.where(hag > 0.5, CLASS_MEDIUM_VEG, CLASS_LOW_VEG)
-    ).astype(np.uint8)
+    return np.where(hag > 2.0, CLASS_HIGH_VEG,
+                    np.where(hag > 0.5, CLASS_MEDIUM_VEG, CLASS_LOW_VEG)).astype(np.uint8)
 
 
-def _sample_strip(
-    world: _World,
-    rng: np.random.Generator,
-    *,
-    density: float,
-    noise: float,
-    wall_density: float,
-    outliers: int,
-    returns: bool,
-    pattern: str = "random",
-) -> dict[str, np.ndarray]:
+def _sample_strip(world: _World, rng: np.random.Generator, *, density: float, noise: float,
+                  wall_density: float, outliers: int, returns: bool,
+                  pattern: str = "random") -> dict[str, np.ndarray]:
     out = _Chunks()
     terrain = world.terrain
     w, h = world.size
@@ -421,9 +357,8 @@ def _sample_strip(
     # ---- planar faces (roofs, walls, cars)
     for f in world.faces:
         if pattern == "jittered":
-            p = sample_polygon_jittered(
-                rng, f.vertices, f.density, world.planes[f.plane]["normal"], f.airborne
-            )
+            p = sample_polygon_jittered(rng, f.vertices, f.density,
+                                        world.planes[f.plane]["normal"], f.airborne)
         else:
             p = sample_polygon(rng, f.vertices, f.density)
         if len(p) == 0:
@@ -442,13 +377,8 @@ def _sample_strip(
         flip = rng.random(m) < 0.6
         d[flip, 2] = np.abs(d[flip, 2])
         s = 1.0 - 0.4 * rng.random(m) ** 2
-        p = np.column_stack(
-            [
-                t["center"][0] + r * s * d[:, 0],
-                t["center"][1] + r * s * d[:, 1],
-                t["crown_z"] + rz * s * d[:, 2],
-            ]
-        )
+        p = np.column_stack([t["center"][0] + r * s * d[:, 0], t["center"][1] + r * s * d[:, 1],
+                             t["crown_z"] + rz * s * d[:, 2]])
         gz = terrain.local_height(p[:, :2])
         p = p[p[:, 2] > gz + 0.05]
         gz = terrain.local_height(p[:, :2])
@@ -469,13 +399,8 @@ def _sample_strip(
         if m:
             ang = rng.random(m) * 2 * np.pi
             hz = rng.random(m) * (th + rz * 0.5)
-            p = np.column_stack(
-                [
-                    t["center"][0] + tr * np.cos(ang),
-                    t["center"][1] + tr * np.sin(ang),
-                    t["ground_z"] + hz,
-                ]
-            )
+            p = np.column_stack([t["center"][0] + tr * np.cos(ang),
+                                 t["center"][1] + tr * np.sin(ang), t["ground_z"] + hz])
             out.add(p, _veg_class(hz), False, t["object_id"], -1)
     # ---- shrubs (low vegetation)
     for s in world.shrubs:
@@ -517,15 +442,8 @@ def _breaklines(terrain: TerrainModel) -> list[tuple[np.ndarray, np.ndarray, flo
     return out
 
 
-def _place(
-    rng: np.random.Generator,
-    n: int,
-    radii: Any,
-    size: tuple[float, float],
-    occupied: list[tuple[np.ndarray, float]],
-    keepout: list,
-    max_tries: int = 200,
-) -> list:
+def _place(rng: np.random.Generator, n: int, radii: Any, size: tuple[float, float],
+           occupied: list[tuple[np.ndarray, float]], keepout: list, max_tries: int = 200) -> list:
     """Rejection-sample up to `n` non-overlapping discs; returns [(center, radius)]."""
     placed = []
     oc = np.array([o[0] for o in occupied], dtype=np.float64).reshape(-1, 2)
@@ -553,16 +471,9 @@ def _place(
     return placed
 
 
-def _random_terrain(
-    rng: np.random.Generator,
-    size: tuple[float, float],
-    *,
-    slope_deg: float,
-    undulation: float,
-    curbs: int,
-    curb_height: float | None,
-    embankment: bool | float,
-) -> TerrainModel:
+def _random_terrain(rng: np.random.Generator, size: tuple[float, float], *, slope_deg: float,
+                    undulation: float, curbs: int, curb_height: float | None,
+                    embankment: bool | float) -> TerrainModel:
     w, h = size
     az = rng.uniform(0, 2 * np.pi)
     g = np.tan(np.deg2rad(slope_deg))
@@ -588,33 +499,17 @@ def _random_terrain(
         p = np.array([rng.uniform(0.2, 0.8) * w, rng.uniform(0.2, 0.8) * h])
         height = float(embankment) if not isinstance(embankment, bool) else float(rng.uniform(2, 4))
         embs.append([p[0], p[1], np.cos(ang), np.sin(ang), 0.0, rng.uniform(1.5, 3.0), height])
-    return TerrainModel(
-        z0=0.0,
-        gx=float(gx),
-        gy=float(gy),
-        waves=waves,
-        roads=np.asarray(roads, float).reshape(-1, 6),
-        embankments=np.asarray(embs, float).reshape(-1, 7),
-    )
+    return TerrainModel(z0=0.0, gx=float(gx), gy=float(gy), waves=waves,
+                        roads=np.asarray(roads, float).reshape(-1, 6),
+                        embankments=np.asarray(embs, float).reshape(-1, 7))
 
 
 def _random_building(rng: np.random.Generator, roof: str, center: np.ndarray) -> BuildingSpec:
     if roof == "flat":
-        return BuildingSpec(
-            "flat",
-            (float(center[0]), float(center[1])),
-            float(rng.uniform(10, 20)),
-            float(rng.uniform(7, 14)),
-            float(rng.uniform(0, 180)),
-            float(rng.uniform(4, 12)),
-            0.0,
-        )
-    return BuildingSpec(
-        "gable",
-        (float(center[0]), float(center[1])),
-        float(rng.uniform(10, 18)),
-        float(rng.uniform(7, 11)),
-        float(rng.uniform(0, 180)),
-        float(rng.uniform(3, 7)),
-        float(rng.uniform(25, 45)),
-    )
+        return BuildingSpec("flat", (float(center[0]), float(center[1])),
+                            float(rng.uniform(10, 20)), float(rng.uniform(7, 14)),
+                            float(rng.uniform(0, 180)), float(rng.uniform(4, 12)), 0.0)
+    return BuildingSpec("gable", (float(center[0]), float(center[1])),
+                        float(rng.uniform(10, 18)), float(rng.uniform(7, 11)),
+                        float(rng.uniform(0, 180)), float(rng.uniform(3, 7)),
+                        float(rng.uniform(25, 45)))

@@ -50,13 +50,8 @@ __all__ = [
 UTM_OFFSET = np.array([500_000.0, 5_400_000.0, 300.0])
 
 
-def tilted_plane(
-    n: int = 200,
-    *,
-    seed: int = 0,
-    noise: float = 0.0,
-    offset: tuple[float, float, float] = (0.0, 0.0, 0.0),
-) -> np.ndarray:
+def tilted_plane(n: int = 200, *, seed: int = 0, noise: float = 0.0,
+                 offset: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> np.ndarray:
     """`n` points of ``z = 0.1 x - 0.05 y + 2`` (+ `offset`) over a 20 m square.
 
     `noise` is the standard deviation (m) of Gaussian noise added to z.

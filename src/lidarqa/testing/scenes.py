@@ -104,13 +104,8 @@ class TruePlane:
         return np.asarray(points, dtype=np.float64) @ self.normal - self.rho
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "normal": [float(v) for v in self.normal],
-            "rho": float(self.rho),
-            "kind": self.kind,
-            "object_id": int(self.object_id),
-            "n_points": int(self.n_points),
-        }
+        return {"normal": [float(v) for v in self.normal], "rho": float(self.rho),
+                "kind": self.kind, "object_id": int(self.object_id), "n_points": int(self.n_points)}
 
 
 @dataclass(frozen=True, eq=False, repr=False)
@@ -165,11 +160,9 @@ class Scene:
         return int(self.points.shape[0])
 
     def __repr__(self) -> str:
-        return (
-            f"Scene(n_points={len(self)}, planes={len(self.planes)}, edges={len(self.edges)}, "
-            f"corners={len(self.corners)}, maker={self.params.get('maker')!r}, "
-            f"seed={self.params.get('seed')!r})"
-        )
+        return (f"Scene(n_points={len(self)}, planes={len(self.planes)}, edges={len(self.edges)}, "
+                f"corners={len(self.corners)}, maker={self.params.get('maker')!r}, "
+                f"seed={self.params.get('seed')!r})")
 
     @property
     def n_points(self) -> int:
@@ -191,12 +184,8 @@ class Scene:
         ``"curb"``, ``"embankment_foot"``, ``"embankment_top"``. Empty without a terrain model.
         """
         if self.terrain is None:
-            return Segments(
-                np.zeros(0, np.int64),
-                np.zeros((0, 3)),
-                np.zeros((0, 3)),
-                {"kind": np.zeros(0, dtype=str)},
-            )
+            return Segments(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3)),
+                            {"kind": np.zeros(0, dtype=str)})
         t = self.terrain
         lines = t.breaklines(tuple(self.params["size"]))
         start = np.array([t.rotation @ a for a, _b, _k in lines]).reshape(-1, 2) + t.offset[:2]
@@ -281,9 +270,8 @@ def _move_scene(scene: Scene, rot: np.ndarray, t: np.ndarray, record: dict | Non
         poly = None if pl.polygon is None else _move_points(pl.polygon, rot, t)
         planes.append(replace(pl, normal=n, rho=rho, polygon=poly))
     e = scene.edges
-    edges = Segments(
-        e.ids, _move_points(e.start, rot, t), _move_points(e.end, rot, t), dict(e.attributes), e.crs
-    )
+    edges = Segments(e.ids, _move_points(e.start, rot, t), _move_points(e.end, rot, t),
+                     dict(e.attributes), e.crs)
     c = scene.corners
     corners = PointSet(c.ids, _move_points(c.xyz, rot, t), dict(c.attributes), c.crs)
     terrain = None
@@ -292,15 +280,8 @@ def _move_scene(scene: Scene, rot: np.ndarray, t: np.ndarray, record: dict | Non
     params = dict(scene.params)
     if record is not None:
         params["motions"] = [*params.get("motions", []), record]
-    return replace(
-        scene,
-        points=_move_points(scene.points, rot, t),
-        planes=planes,
-        edges=edges,
-        corners=corners,
-        terrain=terrain,
-        params=params,
-    )
+    return replace(scene, points=_move_points(scene.points, rot, t), planes=planes, edges=edges,
+                   corners=corners, terrain=terrain, params=params)
 
 
 def rigid_motion(
@@ -335,21 +316,14 @@ def rigid_motion(
         c = np.asarray(center, dtype=np.float64).reshape(3)
         t = c + t - rot @ c
     if isinstance(scene_or_points, Scene):
-        record = {
-            "rotation_deg": [float(v) for v in rotation_deg],
-            "translation": [float(v) for v in translation],
-            "center": None if center is None else [float(v) for v in center],
-        }
+        record = {"rotation_deg": [float(v) for v in rotation_deg],
+                  "translation": [float(v) for v in translation],
+                  "center": None if center is None else [float(v) for v in center]}
         return _move_scene(scene_or_points, rot, t, record)
     if isinstance(scene_or_points, Segments):
         s = scene_or_points
-        return Segments(
-            s.ids,
-            _move_points(s.start, rot, t),
-            _move_points(s.end, rot, t),
-            dict(s.attributes),
-            s.crs,
-        )
+        return Segments(s.ids, _move_points(s.start, rot, t), _move_points(s.end, rot, t),
+                        dict(s.attributes), s.crs)
     if isinstance(scene_or_points, PointSet):
         s = scene_or_points
         return PointSet(s.ids, _move_points(s.xyz, rot, t), dict(s.attributes), s.crs)
@@ -357,34 +331,14 @@ def rigid_motion(
     return _move_points(pts, rot, t)
 
 
-def _finish(
-    world: _World,
-    rng: np.random.Generator,
-    *,
-    density: float,
-    noise: float,
-    wall_density: float,
-    outliers: int,
-    returns: bool,
-    strips: int,
-    pattern: str,
-    strip_offset: Sequence[float],
-    origin: Sequence[float],
-    min_plane_points: int,
-    params: dict[str, Any],
-) -> Scene:
+def _finish(world: _World, rng: np.random.Generator, *, density: float, noise: float,
+            wall_density: float, outliers: int, returns: bool, strips: int, pattern: str,
+            strip_offset: Sequence[float], origin: Sequence[float], min_plane_points: int,
+            params: dict[str, Any]) -> Scene:
     parts = []
     for k in range(strips):
-        d = _sample_strip(
-            world,
-            rng,
-            density=density,
-            noise=noise,
-            wall_density=wall_density,
-            outliers=outliers,
-            returns=returns,
-            pattern=pattern,
-        )
+        d = _sample_strip(world, rng, density=density, noise=noise, wall_density=wall_density,
+                          outliers=outliers, returns=returns, pattern=pattern)
         if k >= 1:
             d["xyz"] = d["xyz"] + np.asarray(strip_offset, dtype=np.float64) * k
         d["psid"] = np.full(len(d["xyz"]), k + 1, dtype=np.uint16)
@@ -395,52 +349,30 @@ def _finish(
 
     counts = np.bincount(data["pid"][data["pid"] >= 0], minlength=len(world.planes))
     observed = counts >= min_plane_points
-    planes = [
-        TruePlane(
-            normal=p["normal"],
-            rho=p["rho"],
-            kind=p["kind"],
-            object_id=p["object_id"],
-            polygon=p["polygon"],
-            n_points=int(counts[i]),
-        )
-        for i, p in enumerate(world.planes)
-    ]
+    planes = [TruePlane(normal=p["normal"], rho=p["rho"], kind=p["kind"], object_id=p["object_id"],
+                        polygon=p["polygon"], n_points=int(counts[i]))
+              for i, p in enumerate(world.planes)]
 
-    edges = [
-        e
-        for e in world.edges
-        if observed[e[2]]
-        and observed[e[3]]
-        and np.linalg.norm(np.asarray(e[1]) - np.asarray(e[0])) > 1e-9
-    ]
+    edges = [e for e in world.edges if observed[e[2]] and observed[e[3]]
+             and np.linalg.norm(np.asarray(e[1]) - np.asarray(e[0])) > 1e-9]
     starts = np.array([e[0] for e in edges], dtype=np.float64).reshape(-1, 3)
     ends = np.array([e[1] for e in edges], dtype=np.float64).reshape(-1, 3)
     pa = np.array([min(e[2], e[3]) for e in edges], dtype=np.int64)
     pb = np.array([max(e[2], e[3]) for e in edges], dtype=np.int64)
     seg = Segments(
-        ids=np.arange(len(edges), dtype=np.int64),
-        start=starts,
-        end=ends,
-        attributes={
-            "plane_a": pa,
-            "plane_b": pb,
-            "kind": np.array([e[4] for e in edges], dtype=str).reshape(-1),
-            "object_id": np.array([e[5] for e in edges], dtype=np.int64),
-        },
+        ids=np.arange(len(edges), dtype=np.int64), start=starts, end=ends,
+        attributes={"plane_a": pa, "plane_b": pb,
+                    "kind": np.array([e[4] for e in edges], dtype=str).reshape(-1),
+                    "object_id": np.array([e[5] for e in edges], dtype=np.int64)},
     )
     corners = [c for c in world.corners if all(observed[i] for i in c[1])]
     cid = np.array([sorted(c[1]) for c in corners], dtype=np.int64).reshape(-1, 3)
     cps = PointSet(
         ids=np.arange(len(corners), dtype=np.int64),
         xyz=np.array([c[0] for c in corners], dtype=np.float64).reshape(-1, 3),
-        attributes={
-            "plane_a": cid[:, 0],
-            "plane_b": cid[:, 1],
-            "plane_c": cid[:, 2],
-            "kind": np.array([c[2] for c in corners], dtype=str).reshape(-1),
-            "object_id": np.array([c[3] for c in corners], dtype=np.int64),
-        },
+        attributes={"plane_a": cid[:, 0], "plane_b": cid[:, 1], "plane_c": cid[:, 2],
+                    "kind": np.array([c[2] for c in corners], dtype=str).reshape(-1),
+                    "object_id": np.array([c[3] for c in corners], dtype=np.int64)},
     )
     fields = {"point_source_id": data["psid"]}
     if returns:
@@ -465,16 +397,12 @@ def _finish(
     return scene
 
 
-def _check_common(
-    density: float, noise: float, wall_density: float | None, strips: int, min_plane_points: int
-) -> float:
+def _check_common(density: float, noise: float, wall_density: float | None, strips: int,
+                  min_plane_points: int) -> float:
     check_positive(density, "density")
     check_positive(noise, "noise", allow_zero=True)
-    wd = (
-        density
-        if wall_density is None
-        else check_positive(wall_density, "wall_density", allow_zero=True)
-    )
+    wd = density if wall_density is None else check_positive(wall_density, "wall_density",
+                                                             allow_zero=True)
     if int(strips) != strips or strips < 1:
         raise OptionError(f"strips must be an integer >= 1, got {strips!r}")
     if int(min_plane_points) != min_plane_points or min_plane_points < 1:
@@ -597,15 +525,8 @@ def make_scene(
     outliers = round(2 * ha) if outliers is None else int(outliers)
     if not roofs and n_buildings:
         raise OptionError("roofs must name at least one roof type when there are buildings")
-    terrain = _random_terrain(
-        rng,
-        size,
-        slope_deg=slope_deg,
-        undulation=undulation,
-        curbs=curbs,
-        curb_height=curb_height,
-        embankment=embankment,
-    )
+    terrain = _random_terrain(rng, size, slope_deg=slope_deg, undulation=undulation, curbs=curbs,
+                              curb_height=curb_height, embankment=embankment)
     world = _World(size=size, terrain=terrain)
     if terrain.is_planar:
         n, rho = terrain.plane()
@@ -613,95 +534,47 @@ def make_scene(
     occupied: list = []
     keepout = _breaklines(terrain)
     buildings: list[BuildingSpec] = []
-    drafts = [
-        replace(_random_building(rng, roofs[i % len(roofs)], np.zeros(2)), overhang=overhang)
-        for i in range(n_buildings)
-    ]
+    drafts = [replace(_random_building(rng, roofs[i % len(roofs)], np.zeros(2)), overhang=overhang)
+              for i in range(n_buildings)]
     for spec in drafts:
         got = _place(rng, 1, lambda s=spec: s.radius, size, occupied, keepout)
         if got:
             buildings.append(replace(spec, center=(float(got[0][0][0]), float(got[0][0][1]))))
     for spec in buildings:
-        _add_structure(
-            world,
-            spec,
-            object_kind="building",
-            density=density,
-            wall_density=wd,
-            foot_edges=foot_edges,
-        )
+        _add_structure(world, spec, object_kind="building", density=density, wall_density=wd,
+                       foot_edges=foot_edges)
     cars = []
     for _ in range(n_cars):
-        spec = BuildingSpec(
-            "flat",
-            (0.0, 0.0),
-            float(rng.uniform(4.2, 4.9)),
-            float(rng.uniform(1.7, 1.9)),
-            float(rng.uniform(0, 180)),
-            float(rng.uniform(1.4, 1.6)),
-        )
+        spec = BuildingSpec("flat", (0.0, 0.0), float(rng.uniform(4.2, 4.9)),
+                            float(rng.uniform(1.7, 1.9)), float(rng.uniform(0, 180)),
+                            float(rng.uniform(1.4, 1.6)))
         got = _place(rng, 1, lambda s=spec: s.radius, size, occupied, keepout)
         if got:
             spec = replace(spec, center=(float(got[0][0][0]), float(got[0][0][1])))
             cars.append(spec)
-            _add_structure(
-                world,
-                spec,
-                object_kind="car",
-                density=density,
-                wall_density=wd,
-                foot_edges=foot_edges,
-            )
+            _add_structure(world, spec, object_kind="car", density=density, wall_density=wd,
+                           foot_edges=foot_edges)
     for c, r in _place(rng, n_trees, lambda: rng.uniform(1.5, 4.0), size, occupied, []):
         _add_tree(world, rng, c, r)
     for c, _r in _place(rng, n_shrubs, lambda: 1.5, size, occupied, []):
         _add_shrub(world, rng, c)
     params = {
-        "maker": "make_scene",
-        "seed": seed,
-        "size": list(size),
-        "density": density,
-        "noise": noise,
-        "wall_density": wd,
-        "roofs": list(roofs),
-        "slope_deg": slope_deg,
-        "undulation": undulation,
-        "curbs": curbs,
-        "curb_height": curb_height,
-        "embankment": embankment,
-        "outliers": outliers,
-        "returns": returns,
-        "strips": strips,
-        "strip_offset": [float(v) for v in strip_offset],
-        "origin": [float(v) for v in origin],
-        "foot_edges": foot_edges,
-        "min_plane_points": min_plane_points,
-        "overhang": overhang,
+        "maker": "make_scene", "seed": seed, "size": list(size), "density": density,
+        "noise": noise, "wall_density": wd, "roofs": list(roofs), "slope_deg": slope_deg,
+        "undulation": undulation, "curbs": curbs, "curb_height": curb_height,
+        "embankment": embankment, "outliers": outliers, "returns": returns, "strips": strips,
+        "strip_offset": [float(v) for v in strip_offset], "origin": [float(v) for v in origin],
+        "foot_edges": foot_edges, "min_plane_points": min_plane_points, "overhang": overhang,
         "pattern": pattern,
-        "counts": {
-            "buildings": len(buildings),
-            "cars": len(cars),
-            "trees": len(world.trees),
-            "shrubs": len(world.shrubs),
-        },
+        "counts": {"buildings": len(buildings), "cars": len(cars), "trees": len(world.trees),
+                   "shrubs": len(world.shrubs)},
         "buildings": [asdict(b) for b in buildings],
         "cars": [asdict(c) for c in cars],
     }
-    return _finish(
-        world,
-        rng,
-        density=density,
-        noise=noise,
-        wall_density=wd,
-        outliers=outliers,
-        returns=returns,
-        strips=strips,
-        pattern=pattern,
-        strip_offset=strip_offset,
-        origin=origin,
-        min_plane_points=min_plane_points,
-        params=params,
-    )
+    return _finish(world, rng, density=density, noise=noise, wall_density=wd, outliers=outliers,
+                   returns=returns, strips=strips, pattern=pattern,
+                   strip_offset=strip_offset, origin=origin,
+                   min_plane_points=min_plane_points, params=params)
 
 
 def make_terrain_scene(
@@ -729,23 +602,10 @@ def make_terrain_scene(
     undulation, one road with curbs and one embankment. The true surface is
     ``scene.ground_z(xy)``.
     """
-    scene = make_scene(
-        seed=seed,
-        size=size,
-        density=density,
-        noise=noise,
-        slope_deg=slope_deg,
-        undulation=undulation,
-        curbs=curbs,
-        curb_height=curb_height,
-        embankment=embankment,
-        n_buildings=n_buildings,
-        n_cars=n_cars,
-        n_trees=n_trees,
-        n_shrubs=n_shrubs,
-        outliers=outliers,
-        **kwargs,
-    )
+    scene = make_scene(seed=seed, size=size, density=density, noise=noise, slope_deg=slope_deg,
+                       undulation=undulation, curbs=curbs, curb_height=curb_height,
+                       embankment=embankment, n_buildings=n_buildings, n_cars=n_cars,
+                       n_trees=n_trees, n_shrubs=n_shrubs, outliers=outliers, **kwargs)
     scene.params["maker"] = "make_terrain_scene"
     return scene
 
@@ -841,66 +701,28 @@ def make_building_scene(
         n, rho = terrain.plane()
         world.ground_plane = world.add_plane(n, n * rho, "ground", -1, None)
     for spec in specs:
-        _add_structure(
-            world,
-            spec,
-            object_kind="building",
-            density=density,
-            wall_density=wd,
-            foot_edges=foot_edges,
-        )
+        _add_structure(world, spec, object_kind="building", density=density, wall_density=wd,
+                       foot_edges=foot_edges)
     params = {
-        "maker": "make_building_scene",
-        "seed": seed,
-        "size": list(size),
-        "density": density,
-        "noise": noise,
-        "wall_density": wd,
-        "roofs": [b.roof for b in specs],
-        "spacing": spacing,
-        "overhang": overhang,
-        "slope_deg": slope_deg,
-        "ground": ground,
-        "foot_edges": foot_edges,
-        "pattern": pattern,
-        "strips": strips,
-        "strip_offset": [float(v) for v in strip_offset],
-        "origin": [float(v) for v in origin],
-        "min_plane_points": min_plane_points,
+        "maker": "make_building_scene", "seed": seed, "size": list(size), "density": density,
+        "noise": noise, "wall_density": wd, "roofs": [b.roof for b in specs],
+        "spacing": spacing, "overhang": overhang, "slope_deg": slope_deg, "ground": ground,
+        "foot_edges": foot_edges, "pattern": pattern,
+        "strips": strips, "strip_offset": [float(v) for v in strip_offset],
+        "origin": [float(v) for v in origin], "min_plane_points": min_plane_points,
         "counts": {"buildings": len(specs)},
         "buildings": [asdict(b) for b in specs],
     }
-    return _finish(
-        world,
-        rng,
-        density=density,
-        noise=noise,
-        wall_density=wd,
-        outliers=0,
-        returns=False,
-        strips=strips,
-        pattern=pattern,
-        strip_offset=strip_offset,
-        origin=origin,
-        min_plane_points=min_plane_points,
-        params=params,
-    )
+    return _finish(world, rng, density=density, noise=noise, wall_density=wd, outliers=0,
+                   returns=False, strips=strips, pattern=pattern,
+                   strip_offset=strip_offset, origin=origin,
+                   min_plane_points=min_plane_points, params=params)
 
 
-def _small_scene(
-    faces: list[np.ndarray],
-    kinds: list[str],
-    edges: list[tuple],
-    corners: list[tuple],
-    *,
-    maker: str,
-    seed: int,
-    density: float,
-    noise: float,
-    rotation_deg: Sequence[float],
-    translation: Sequence[float],
-    params: dict[str, Any],
-) -> Scene:
+def _small_scene(faces: list[np.ndarray], kinds: list[str], edges: list[tuple],
+                 corners: list[tuple], *, maker: str, seed: int, density: float, noise: float,
+                 rotation_deg: Sequence[float], translation: Sequence[float],
+                 params: dict[str, Any]) -> Scene:
     check_positive(density, "density")
     check_positive(noise, "noise", allow_zero=True)
     rng = np.random.default_rng(seed)
@@ -910,37 +732,14 @@ def _small_scene(
         world.faces.append(Face(poly, pid, CLASS_OTHER, 0, density))
     world.edges.extend(edges)
     world.corners.extend(corners)
-    params = {
-        "maker": maker,
-        "seed": seed,
-        "density": density,
-        "noise": noise,
-        "rotation_deg": [float(v) for v in rotation_deg],
-        "translation": [float(v) for v in translation],
-        "size": [1.0, 1.0],
-        **params,
-    }
-    scene = _finish(
-        world,
-        rng,
-        density=density,
-        noise=noise,
-        wall_density=density,
-        outliers=0,
-        returns=False,
-        strips=1,
-        pattern="random",
-        strip_offset=(0.0, 0.0, 0.0),
-        origin=(0.0, 0.0, 0.0),
-        min_plane_points=3,
-        params=params,
-    )
-    scene = _move_scene(
-        scene,
-        rotation_matrix(rotation_deg),
-        np.asarray(translation, dtype=np.float64).reshape(3),
-        None,
-    )
+    params = {"maker": maker, "seed": seed, "density": density, "noise": noise,
+              "rotation_deg": [float(v) for v in rotation_deg],
+              "translation": [float(v) for v in translation], "size": [1.0, 1.0], **params}
+    scene = _finish(world, rng, density=density, noise=noise, wall_density=density, outliers=0,
+                    returns=False, strips=1, pattern="random", strip_offset=(0.0, 0.0, 0.0),
+                    origin=(0.0, 0.0, 0.0), min_plane_points=3, params=params)
+    scene = _move_scene(scene, rotation_matrix(rotation_deg),
+                        np.asarray(translation, dtype=np.float64).reshape(3), None)
     return replace(scene, terrain=None)
 
 
@@ -991,19 +790,10 @@ def make_plane_pair(
     o, e = np.zeros(3), np.array([length, 0.0, 0.0])
     face_a = np.array([o, e, e + [0, -width, 0], o + [0, -width, 0]])
     face_b = np.array([o, e, e + d, o + d])
-    return _small_scene(
-        [face_a, face_b],
-        ["strip", "strip"],
-        [(o, e, 0, 1, "pair", 0)],
-        [],
-        maker="make_plane_pair",
-        seed=seed,
-        density=density,
-        noise=noise,
-        rotation_deg=rotation_deg,
-        translation=translation,
-        params={"angle_deg": angle_deg, "length": length, "width": width},
-    )
+    return _small_scene([face_a, face_b], ["strip", "strip"], [(o, e, 0, 1, "pair", 0)], [],
+                        maker="make_plane_pair", seed=seed, density=density, noise=noise,
+                        rotation_deg=rotation_deg, translation=translation,
+                        params={"angle_deg": angle_deg, "length": length, "width": width})
 
 
 def make_corner(
@@ -1034,19 +824,10 @@ def make_corner(
     wall_x0 = np.array([o, ey, ey + ez, ez])
     wall_y0 = np.array([o, ez, ez + ex, ex])
     edges = [(o, ey, 0, 1, "pair", 0), (o, ex, 0, 2, "pair", 0), (o, ez, 1, 2, "pair", 0)]
-    return _small_scene(
-        [floor, wall_x0, wall_y0],
-        ["face"] * 3,
-        edges,
-        [(o, (0, 1, 2), "corner", 0)],
-        maker="make_corner",
-        seed=seed,
-        density=density,
-        noise=noise,
-        rotation_deg=rotation_deg,
-        translation=translation,
-        params={"face_size": s},
-    )
+    return _small_scene([floor, wall_x0, wall_y0], ["face"] * 3, edges,
+                        [(o, (0, 1, 2), "corner", 0)], maker="make_corner", seed=seed,
+                        density=density, noise=noise, rotation_deg=rotation_deg,
+                        translation=translation, params={"face_size": s})
 
 
 def plane_area(plane: TruePlane) -> float:
@@ -1103,12 +884,8 @@ def sample_checkpoints(
         cand = cand[~np.isfinite(d)]
     z0 = scene.ground_z(cand)
     ok = np.ones(len(cand), dtype=bool)
-    for dx, dy in (
-        (1, 0),
-        (0, 1),
-        (0.7071067811865476, 0.7071067811865476),
-        (0.7071067811865476, -0.7071067811865476),
-    ):
+    for dx, dy in ((1, 0), (0, 1), (0.7071067811865476, 0.7071067811865476),
+                   (0.7071067811865476, -0.7071067811865476)):
         step = clearance * np.array([dx, dy])
         second = scene.ground_z(cand + step) + scene.ground_z(cand - step) - 2 * z0
         ok &= np.abs(second) <= max_curvature

@@ -176,9 +176,8 @@ def score_edges(
         matched[has] = best[has]
         rms_out[has] = rms[np.arange(m), best][has]
         ov_out[has] = overlap[np.arange(m), best][has]
-    return EdgeScore(
-        true_index=idx, matched=matched, rms=rms_out, overlap=ov_out, n_found=len(found)
-    )
+    return EdgeScore(true_index=idx, matched=matched, rms=rms_out, overlap=ov_out,
+                     n_found=len(found))
 
 
 def score_corners(

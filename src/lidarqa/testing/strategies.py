@@ -66,9 +66,8 @@ def translations(max_offset: float = 1000.0) -> st.SearchStrategy:
     return st.tuples(f, f, f)
 
 
-def rigid_motions(
-    max_angle: float = 180.0, max_offset: float = 1000.0, *, z_only: bool = False
-) -> st.SearchStrategy:
+def rigid_motions(max_angle: float = 180.0, max_offset: float = 1000.0, *,
+                  z_only: bool = False) -> st.SearchStrategy:
     """``(rotation_deg, translation)`` pairs, ready for ``rigid_motion(x, *motion)``."""
     return st.tuples(rotations_deg(max_angle, z_only=z_only), translations(max_offset))
 
@@ -93,15 +92,8 @@ def planes(max_rho: float = 100.0) -> st.SearchStrategy:
 
 
 @st.composite
-def points_on_plane(
-    draw: Any,
-    *,
-    min_points: int = 10,
-    max_points: int = 200,
-    extent: float = 20.0,
-    noise: float = 0.0,
-    max_rho: float = 100.0,
-) -> tuple:
+def points_on_plane(draw: Any, *, min_points: int = 10, max_points: int = 200,
+                    extent: float = 20.0, noise: float = 0.0, max_rho: float = 100.0) -> tuple:
     """``(points, normal, rho)``: points spread over an `extent` x `extent` m patch of a plane.
 
     Points get Gaussian `noise` (m) along the normal.
@@ -121,15 +113,13 @@ def points_on_plane(
     return pts, normal, float(rho)
 
 
-def point_clouds(
-    *, min_points: int = 0, max_points: int = 100, extent: float = 100.0, dtype: Any = np.float64
-) -> st.SearchStrategy:
+def point_clouds(*, min_points: int = 0, max_points: int = 100, extent: float = 100.0,
+                 dtype: Any = np.float64) -> st.SearchStrategy:
     """(N, 3) arrays of finite coordinates in ``[-extent, extent]`` (hypothesis-drawn elements)."""
     width = 32 if np.dtype(dtype) == np.float32 else 64
     elements = st.floats(-extent, extent, allow_nan=False, allow_infinity=False, width=width)
     return st.integers(min_points, max_points).flatmap(
-        lambda n: hnp.arrays(dtype, (n, 3), elements=elements)
-    )
+        lambda n: hnp.arrays(dtype, (n, 3), elements=elements))
 
 
 def permutations(n: int) -> st.SearchStrategy:
@@ -137,10 +127,8 @@ def permutations(n: int) -> st.SearchStrategy:
     return st.permutations(range(n)).map(lambda p: np.asarray(p, dtype=np.int64))
 
 
-def building_scenes(
-    *, roofs: tuple[str, ...] = ("flat", "gable"), density: float = 5.0, noise: float = 0.02
-) -> st.SearchStrategy:
+def building_scenes(*, roofs: tuple[str, ...] = ("flat", "gable"), density: float = 5.0,
+                    noise: float = 0.02) -> st.SearchStrategy:
     """Random :func:`~lidarqa.testing.make_building_scene` scenes (low density: cheap)."""
-    return seeds().map(
-        lambda s: make_building_scene(seed=s, roofs=roofs, density=density, noise=noise)
-    )
+    return seeds().map(lambda s: make_building_scene(seed=s, roofs=roofs, density=density,
+                                                     noise=noise))

@@ -201,8 +201,10 @@ class Catalog:
             return []
         cell = float(cell or self.tile_size() or 1.0)
         xmin, ymin, xmax, ymax = self.bounds
-        nx = max(int(np.ceil((xmax - xmin) / cell - 1e-9)), 1)
-        ny = max(int(np.ceil((ymax - ymin) / cell - 1e-9)), 1)
+        # header bounds are data extents, a little smaller than the nominal tiles: a last
+        # row/column thinner than 5 % of a cell is not a cell of its own
+        nx = max(int(np.ceil((xmax - xmin) / cell - 0.05)), 1)
+        ny = max(int(np.ceil((ymax - ymin) / cell - 0.05)), 1)
         if nx * ny > 4_000_000:
             return []
         covered = np.zeros((ny, nx), dtype=bool)
