@@ -80,6 +80,7 @@ def test_default_chunk_size_follows_density_and_tiles(scene_tiles):
     cat = open_catalog(paths)
     size = default_chunk_size(cat)
     tile = cat.tile_size()
+    assert tile == 60.0  # nominal 60 m tiles whose data extents are a little smaller
     # a fraction tile/k or a multiple of the tile size
     ratio = size / tile if size >= tile else tile / size
     assert abs(ratio - round(ratio)) < 1e-9
@@ -112,3 +113,18 @@ def test_read_chunk_streams_core_and_buffer(scene_tiles):
                 d.cloud.fields["classification"][sel],
             )
     assert total == len(scene.points)
+
+
+def test_points_on_the_catalogs_east_and_north_edge_open_no_extra_chunks():
+    # a 50 m tile whose data reach x = 50 and y = 50 exactly (as IGN tiles do)
+    g = np.arange(0.0, 50.01, 2.5)
+    p = np.column_stack([np.repeat(g, len(g)), np.tile(g, len(g))])
+    cat = _catalog([p, p + [50.0, 0.0]])
+    chunks = make_chunks(cat, chunk_size=50.0, buffer=5.0)
+    assert [c.id for c in chunks] == ["c0000_r0000", "c0001_r0000"]
+    for q in (p, p + [50.0, 0.0]):
+        hits = sum(c.core_mask(q).astype(int) for c in chunks)
+        assert (hits == 1).all()
+    # x = 50 is a border between two tiles: those points stay in the east chunk
+    west = chunks[0].core_mask(p + [50.0, 0.0])
+    assert not west.any()

@@ -151,9 +151,19 @@ class Catalog:
         return max(self.n_points / area, 1e-6)
 
     def tile_size(self) -> float:
-        """Median tile side (the larger of width and height), m."""
+        """Median tile side (the larger of width and height), m.
+
+        Header bounds are data extents, a little under the nominal tile (999.98 m for a
+        1 km tile): a median side within 0.5 % below a whole number of metres is rounded
+        up to it, so that default chunks line up with the tiles (a 999.98 m grid from the
+        origin drifts metres away from the tile borders at national coordinates).
+        """
         sides = [max(t.bounds[2] - t.bounds[0], t.bounds[3] - t.bounds[1]) for t in self.tiles]
-        return float(np.median(sides)) if sides else 0.0
+        if not sides:
+            return 0.0
+        med = float(np.median(sides))
+        up = float(np.ceil(med - 1e-9))
+        return up if up > 0 and up - med <= 0.005 * up else med
 
     def overlaps(self, *, min_fraction: float = 0.5) -> list[dict[str, Any]]:
         """Pairs of tiles whose bounding boxes overlap by at least `min_fraction` of the

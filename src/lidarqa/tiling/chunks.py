@@ -6,7 +6,11 @@ a filter sees the neighbourhood of every core point: no edge artifacts) and keep
 the results of core points only. Core membership is decided by grid index,
 ``col = floor((x - origin_x) / chunk_size)`` (half-open cells), so every point of the
 catalog is a core point of exactly one chunk, whatever floating point rounding does
-at cell borders.
+at cell borders. One exception keeps tiles whose data reach their east/north border
+exactly (e.g. 770500.00 .. 770650.00) from making an extra column/row of chunks that
+would hold only the points on that line: when the catalog's east (north) edge lies
+exactly on a grid line, the points on it belong to the last column (row), i.e. the
+column index is clamped to the last one (:attr:`Chunk.last`).
 
 Defaults (chosen from the catalog header data):
 
@@ -86,6 +90,10 @@ class Chunk:
         Chunk side, m.
     origin : tuple of 2 floats
         Grid origin.
+    last : tuple of 2 int, optional
+        Absolute grid index of the catalog's last column and row: point indices are
+        clamped to them (points exactly on the catalog's east/north edge, when that
+        edge is a grid line, belong to the last column/row).
     """
 
     id: str
@@ -97,12 +105,16 @@ class Chunk:
     index: tuple[int, int] = (0, 0)
     size: float = 0.0
     origin: tuple[float, float] = (0.0, 0.0)
+    last: tuple[int, int] | None = None
 
     def core_mask(self, xy: np.ndarray) -> np.ndarray:
         """Boolean mask of the points of `xy` (N, 2+) whose grid cell is this chunk."""
         ox, oy = self.origin
         gi = np.floor((xy[:, 0] - ox) / self.size)
         gj = np.floor((xy[:, 1] - oy) / self.size)
+        if self.last is not None:
+            gi = np.minimum(gi, self.last[0])
+            gj = np.minimum(gj, self.last[1])
         return (gi == self.index[0]) & (gj == self.index[1])
 
     def to_dict(self) -> dict[str, Any]:
@@ -170,6 +182,12 @@ def make_chunks(
     r1 = np.floor((b[:, 3] - oy) / size).astype(np.int64)
     if not nonempty.any():
         return ()
+    # the catalog's last column/row: an east/north edge exactly on a grid line opens no
+    # column/row of its own (its points join the last one, see Chunk.core_mask)
+    last_c = max(int(np.ceil((b[nonempty, 2].max() - ox) / size)) - 1, int(c0[nonempty].min()))
+    last_r = max(int(np.ceil((b[nonempty, 3].max() - oy) / size)) - 1, int(r0[nonempty].min()))
+    c0, c1 = np.minimum(c0, last_c), np.minimum(c1, last_c)
+    r0, r1 = np.minimum(r0, last_r), np.minimum(r1, last_r)
     cells: set[tuple[int, int]] = set()
     for k in np.nonzero(nonempty)[0]:
         if (c1[k] - c0[k] + 1) * (r1[k] - r0[k] + 1) > 10_000_000:
@@ -210,6 +228,7 @@ def make_chunks(
                 index=(i, j),
                 size=size,
                 origin=(ox, oy),
+                last=(last_c, last_r),
             )
         )
     return tuple(out)
