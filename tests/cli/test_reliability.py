@@ -50,6 +50,9 @@ def test_latin1_comment_is_read(tmp_path):
     m = _points_csv(tmp_path / "m.csv", chk + 0.01)
     r = run_cli(["-q", "checkpoints", m, c], out_dir=tmp_path / "out")
     assert r.exit_code == 0, r.output
+    # the encoding is reported as one warning line, not Python's two-line warning format
+    assert "c.csv is not UTF-8" in r.stderr and r.stderr.startswith("warning: ")
+    assert "read_points(" not in r.stderr and "DataQualityWarning" not in r.stderr
 
 
 def test_no_check_point_inside_the_cloud_is_an_error(tmp_path):
