@@ -50,6 +50,9 @@ def test_latin1_comment_is_read(tmp_path):
     m = _points_csv(tmp_path / "m.csv", chk + 0.01)
     r = run_cli(["-q", "checkpoints", m, c], out_dir=tmp_path / "out")
     assert r.exit_code == 0, r.output
+    # the encoding is reported as one warning line, not Python's two-line warning format
+    assert "c.csv is not UTF-8" in r.stderr and r.stderr.startswith("warning: ")
+    assert "read_points(" not in r.stderr and "DataQualityWarning" not in r.stderr
 
 
 def test_no_check_point_inside_the_cloud_is_an_error(tmp_path):
@@ -84,3 +87,27 @@ def test_polygons_given_to_lines(tmp_path):
     r = run_cli(["-q", "lines", tmp_path / "poly.gpkg", tmp_path / "poly.gpkg"],
                 out_dir=tmp_path / "out")
     assert r.exit_code == 1 and "Polygon" in r.stderr
+
+
+def test_heights_with_no_reference_point_compared_is_an_error(tmp_path):
+    import lidarqa
+    from lidarqa.io import PointCloud
+
+    rng = np.random.default_rng(3)
+    xyz = np.column_stack([rng.uniform(0, 50, (3000, 2)), rng.normal(0, 0.01, 3000)])
+    lidarqa.write(PointCloud(xyz=xyz), tmp_path / "c.las")
+    far = _points_csv(tmp_path / "far.csv", np.array([[900.0, 900, 0], [950, 950, 0]]))
+    inside = _points_csv(tmp_path / "map.csv", np.array([[10.0, 10, 0], [40, 10, 0], [25, 40, 0]]))
+    out = tmp_path / "out"
+    r = run_cli(["-q", "heights", tmp_path / "c.las", inside, far, "-o", out / "h.csv"],
+                out_dir=out)
+    assert r.exit_code == 1 and "none of the 2 reference point(s)" in r.stderr, r.output
+    r = run_cli(["-q", "heights", tmp_path / "c.las", far, inside], out_dir=out)
+    assert r.exit_code == 1 and "none of the 2 map point(s) could be fitted" in r.stderr, r.output
+
+
+def test_repeatability_with_no_comparable_pair_is_an_error(tmp_path):
+    seg = tmp_path / "s.csv"
+    seg.write_text("id,x1,y1,z1,x2,y2,z2\n1,0,0,0,0,0,0\n2,5,5,0,5,5,0\n")
+    r = run_cli(["-q", "repeatability", seg, seg], out_dir=tmp_path / "out")
+    assert r.exit_code == 1 and "none of the 1 pair(s)" in r.stderr, r.output

@@ -144,6 +144,7 @@ POINTSETS = {
     "three-collinear": _ps([[0, 0, 0], [1, 1, 1], [2, 2, 2]]),
     "nan": _ps([[0, np.nan, 0], [1, 1, 1]]),
     "far": _ps([[1e9, 1e9, 0], [1e9 + 1, 1e9, 0], [1e9, 1e9 + 1, 1]]),
+    "huge": _ps([[1e308, 0, 0], [0, 1, 1]]),
     "dup-id": _ps([[0, 0, 0], [1, 1, 1]], ids=np.array([1, 1])),
     "square": _ps([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 1]]),
 }
@@ -157,6 +158,13 @@ def test_checkpoint_functions(a, b):
     _fine(acc.assess_checkpoints, POINTSETS[a], POINTSETS[b], match="nearest", max_distance=0.1)
     _fine(acc.match_points, POINTSETS[a], POINTSETS[b])
     _fine(acc.estimate_transform, POINTSETS[a].xyz, POINTSETS[b].xyz)
+
+
+@pytest.mark.parametrize("name", sorted(POINTSETS))
+def test_vertical_check_on_hostile_check_points(name):
+    rng = np.random.default_rng(4)
+    cloud = np.column_stack([rng.uniform(-5, 5, (400, 2)), rng.normal(0, 0.01, 400)])
+    _fine(acc.vertical_check, cloud, POINTSETS[name])
 
 
 @pytest.mark.parametrize("values", [np.empty((0, 3)), np.full((3, 3), np.nan), np.zeros(3),

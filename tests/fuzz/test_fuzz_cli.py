@@ -23,6 +23,7 @@ def test_every_command_is_covered(world, baseline, tmp_path):
 
     from lidarqa.cli.main import cli
 
+    # demo has no inputs; its outputs: test_fuzz_outputs.py::test_demo_hostile_outputs
     listed = set(cli.list_commands(click.Context(cli))) - {"demo"}
     assert listed <= set(baseline(tmp_path)), listed - set(baseline(tmp_path))
 

@@ -133,3 +133,22 @@ def test_read_only_folder(baseline, tmp_path):
     finally:
         out.chmod(0o755)
     assert r.exit_code == 1 and "not writable" in r.stderr, r.output
+
+
+def test_demo_hostile_outputs(tmp_path):
+    """`demo` has no input to corrupt: only its outputs can be hostile (refused before any work)."""
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "afile").write_text("x")
+    os.mkfifo(out / "fifo")
+    cases = [
+        ["-o", out / "afile" / "rep"],
+        ["-o", out / "fifo"],
+        ["-o", ""],
+        ["-o", out / "rep", "--json", out / "afile" / "r.json"],
+        ["-o", out / "rep", "--json", out / "fifo"],
+    ]
+    for args in cases:
+        r = run_cli(["-q", "demo", *args], out_dir=out)
+        assert r.exit_code in (1, 2), (args, r.output)
+        assert listing(out) == {"afile", "fifo"}, (args, listing(out))

@@ -58,7 +58,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validate import as_points, check_choice, check_positive
+from .._validate import MAX_COORDINATE, as_points, check_choice, check_positive
 from ..errors import (
     DegenerateGeometryError,
     InvalidPointsError,
@@ -506,6 +506,13 @@ def _check_finite(ps: PointSet, name: str, *, need_z: bool = True) -> None:
         ids = ", ".join(str(v) for v in ps.ids[bad][:5])
         raise InvalidPointsError(
             f"{name} has {int(bad.sum())} point(s) with NaN or infinite coordinates (id {ids})"
+        )
+    huge = (np.abs(cols) > MAX_COORDINATE).any(axis=1)
+    if huge.any():  # squared distances of such values overflow: corrupt data, not coordinates
+        ids = ", ".join(str(v) for v in ps.ids[huge][:5])
+        raise InvalidPointsError(
+            f"{name} has {int(huge.sum())} point(s) with coordinates beyond "
+            f"±{MAX_COORDINATE:g} (id {ids})"
         )
 
 

@@ -390,6 +390,20 @@ def heights(
         with steps(f"Fitting {len(mp):,} map points, testing {len(ref):,} reference points"):
             report = assess_heights(xyz, mp.xyz[:, :2], ref_xyz, largest_segment=largest_segment,
                                     **options)
+    done = report.to_dict()
+    n_fitted = done["map_points"]["n"] - done["map_points"]["n_failed"]
+    if n_fitted == 0 or (len(ref) and done["comparison"]["n"] == 0):
+        # Nothing to measure is an error (exit 1), never a table of n/a with exit 0. An
+        # empty reference file is allowed: the map points' sigmas are then the result.
+        from ..errors import NothingToMeasureError
+
+        raise NothingToMeasureError(
+            f"none of the {len(mp):,} map point(s) could be fitted"
+            if n_fitted == 0
+            else f"none of the {len(ref):,} reference point(s) could be compared "
+            f"({report.n_outside:,} outside the TIN of the fitted map points); do the map and "
+            "reference points lie inside the cloud, in the same CRS?"
+        )
     if output is not None:
         from ..io.vector import write_points
         from ._catalog_jobs import reproducible_vectors

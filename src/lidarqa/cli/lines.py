@@ -434,6 +434,13 @@ def repeatability(
         rows.append(row)
 
     _print_rows(rows, threshold, pool=pool)
+    if rows and all("error" in r for r in rows):
+        # Nothing to measure is an error (exit 1), never a table of n/a with exit 0.
+        from ..errors import NothingToMeasureError
+
+        raise NothingToMeasureError(
+            f"none of the {len(rows)} pair(s) of passes could be compared (reasons above)"
+        )
     finish(
         "repeatability",
         inputs={"files": list(files)},

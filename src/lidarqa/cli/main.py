@@ -7,16 +7,18 @@ the whole CLI down.
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import importlib.util
 import sys
 import traceback
+from collections.abc import Iterator
 from typing import Any
 
 import click
 
 from .._version import __version__
-from ..errors import LidarQAError, MissingDependencyError, TargetNotMetError
+from ..errors import LidarQAError, LidarQAWarning, MissingDependencyError, TargetNotMetError
 from ._common import Settings, settings
 
 # Exit statuses (documented in README.md and ``lidarqa --help``).
@@ -81,7 +83,7 @@ class LazyGroup(click.Group):
         saved = None if _STANDALONE else _save_signals()  # in-process callers get theirs back
         install_signal_handlers(exit_immediately=_STANDALONE)
         try:
-            with output_session():
+            with output_session(), _one_line_warnings(settings(ctx).verbose):
                 result = super().invoke(ctx)
                 if _STANDALONE:
                     # The outputs are complete: a signal from now on must not undo them,
@@ -240,6 +242,34 @@ def _ignore_signals() -> None:
                 signal.signal(getattr(signal, name), signal.SIG_IGN)
             except (ValueError, OSError):  # not the main thread
                 pass
+
+
+@contextlib.contextmanager
+def _one_line_warnings(verbose: int) -> Iterator[None]:
+    """Show warnings as ``warning: MESSAGE`` lines on stderr, each message once.
+
+    Warnings about the data (lidarqa's and its readers') are for the user; numeric
+    RuntimeWarnings from inside a computation are noise to them and are shown only
+    with ``-v`` (in Python's usual format, with the source line).
+    """
+    import warnings
+
+    seen: set[str] = set()
+    original = warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None):  # noqa: ANN001
+        if issubclass(category, RuntimeWarning) and not issubclass(category, LidarQAWarning):
+            if verbose:
+                original(message, category, filename, lineno, file, line)
+            return
+        text = " ".join(str(message).split())
+        if text not in seen:
+            seen.add(text)
+            click.echo(f"warning: {text}", err=True)
+
+    with warnings.catch_warnings():
+        warnings.showwarning = show
+        yield
 
 
 def _foreseeable(exc: BaseException) -> str | None:

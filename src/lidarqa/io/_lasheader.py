@@ -236,6 +236,8 @@ def _check(p: Path, fh, head: bytes, size: int) -> LasHeaderFacts:  # noqa: C901
                     raise _fail(
                         p, "LAZ chunk table", f"declares {n_chunks} chunks for {count} points"
                     )
+        if count and fmt >= 6:
+            _check_laz_layers(p, fh, header_size, n_vlrs, offset, end_of_points, count)
     elif count * record_length > available:
         raise _fail(
             p,
@@ -255,3 +257,81 @@ def _check(p: Path, fh, head: bytes, size: int) -> LasHeaderFacts:  # noqa: C901
         compressed=compressed,
         file_size=size,
     )
+
+
+# Layers of the LAS 1.4 ("layered") LAZ items: item type -> number of layers (BYTE14: one
+# per byte, given by the item size).
+_LAYERS = {10: 9, 11: 1, 12: 2, 13: 1}
+
+
+def _laszip_vlr(fh, header_size: int, n_vlrs: int) -> bytes | None:
+    pos = header_size
+    for _ in range(n_vlrs):
+        fh.seek(pos)
+        vh = fh.read(_VLR_HEADER)
+        record_id, length = struct.unpack_from("<HH", vh, 18)
+        if vh[2:18].rstrip(b"\0") == b"laszip encoded" and record_id == 22204:
+            fh.seek(pos + _VLR_HEADER)
+            return fh.read(length)
+        pos += _VLR_HEADER + length
+    return None
+
+
+def _check_laz_layers(p: Path, fh, header_size: int, n_vlrs: int, offset: int, end: int,
+                      count: int) -> None:
+    """Check each chunk's layer sizes (LAS 1.4 point formats) against the chunk's bytes.
+
+    A layered LAZ chunk is: the first point raw, the chunk's point count, one 32-bit
+    size per layer, then the layers. The decompressor allocates each layer at its
+    declared size: garbage there costs gigabytes before the read fails.
+    """
+    payload = _laszip_vlr(fh, header_size, n_vlrs)
+    if payload is None or len(payload) < 34:
+        raise _fail(p, "laszip VLR", "is missing or truncated in a compressed file")
+    n_items = struct.unpack_from("<H", payload, 32)[0]
+    if len(payload) < 34 + 6 * n_items:
+        raise _fail(p, "laszip VLR", f"declares {n_items} items but is {len(payload)} bytes")
+    items = [struct.unpack_from("<HHH", payload, 34 + 6 * i) for i in range(n_items)]
+    if not any(t in _LAYERS or t == 14 for t, _, _ in items):
+        return  # not layered (pre-1.4 items)
+    n_layers = sum(_LAYERS.get(t, size if t == 14 else 0) for t, size, _ in items)
+    raw = sum(size for _, size, _ in items)
+    chunks = _chunk_table(fh, payload, offset)
+    starts: list[tuple[int, int]] = []  # (start, byte size) of each chunk
+    if chunks is None:
+        starts = [(offset + 8, end - offset - 8)]  # at least the first chunk
+    else:
+        pos = offset + 8
+        for _n, nbytes in chunks:
+            starts.append((pos, nbytes))
+            pos += nbytes
+    for i, (start, nbytes) in enumerate(starts):
+        if start >= end:
+            break
+        fh.seek(start + raw)
+        hdr = fh.read(4 + 4 * n_layers)
+        if len(hdr) < 4 + 4 * n_layers:
+            raise _fail(p, f"LAZ chunk {i}", "is truncated")
+        n_points, *sizes = struct.unpack(f"<I{n_layers}I", hdr)
+        if n_points > count:
+            raise _fail(p, f"LAZ chunk {i}", f"claims {n_points} points, the file {count}")
+        room = min(nbytes, end - start)
+        if raw + 4 + 4 * n_layers + sum(sizes) > room:
+            raise _fail(
+                p, f"LAZ chunk {i}",
+                f"declares {sum(sizes)} bytes of compressed layers in {room} bytes",
+            )
+
+
+def _chunk_table(fh, payload: bytes, offset: int) -> list[tuple[int, int]] | None:
+    """The (points, bytes) of each chunk, or None if it cannot be read here."""
+    try:
+        import lazrs
+    except ImportError:
+        return None
+    try:
+        fh.seek(offset)
+        table = lazrs.read_chunk_table(fh, lazrs.LazVlr(payload))
+        return [(int(a), int(b)) for a, b in table] if table is not None else None
+    except Exception:  # noqa: BLE001 - no readable table: check the first chunk only
+        return None

@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from .._validate import MAX_COORDINATE
 from ..errors import InvalidPointsError, ReadError, WriteError
 from ._atomic import atomic_path, check_input
 
@@ -319,6 +320,8 @@ def read_segments(path: str | os.PathLike) -> Segments:
         attrs = {n: np.asarray(field_data[j])[rows_a] for j, n in enumerate(names) if n != "id"}
     if len(start) and not (np.isfinite(start).all() and np.isfinite(end).all()):
         raise InvalidPointsError(f"input {p} has segments with NaN or infinite coordinates")
+    if len(start) and max(np.abs(start).max(), np.abs(end).max()) > MAX_COORDINATE:
+        raise InvalidPointsError(f"input {p} has coordinates beyond ±{MAX_COORDINATE:g}")
     _check_unique(ids, p)
     return Segments(ids=ids, start=start, end=end, attributes=attrs, crs=crs)
 
@@ -386,6 +389,8 @@ def read_points(path: str | os.PathLike, *, require_z: bool = True) -> PointSet:
     finite = np.isfinite(xyz[:, :2]).all() and (not require_z or np.isfinite(xyz[:, 2]).all())
     if len(xyz) and not finite:
         raise InvalidPointsError(f"input {p} has points with NaN or infinite coordinates")
+    if len(xyz) and np.nanmax(np.abs(xyz)) > MAX_COORDINATE:
+        raise InvalidPointsError(f"input {p} has coordinates beyond ±{MAX_COORDINATE:g}")
     _check_unique(np.asarray(ids), p)
     return PointSet(ids=np.asarray(ids), xyz=xyz, attributes=attrs, crs=crs)
 
