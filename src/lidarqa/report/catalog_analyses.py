@@ -251,7 +251,9 @@ def _heights(ctx: Any, item: Any) -> Any:
     from ..io.vector import PointSet
     from ..tiling.jobs_api import catalog_heights
     from . import plots
-    from .analyses import SectionResult, _import, _write_vector_safe
+    from ._context import SectionResult
+    from ._context import import_module as _import
+    from ._context import write_vector as _write_vector_safe
 
     opts = item.options
     name, m, r = opts["cloud"], opts["map"], opts["reference"]

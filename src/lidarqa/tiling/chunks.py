@@ -176,12 +176,15 @@ def make_chunks(
     ox, oy = float(origin[0]), float(origin[1])
     b = np.array([t.bounds2d for t in catalog.tiles], dtype=float).reshape(-1, 4)
     nonempty = np.array([t.n_points > 0 for t in catalog.tiles], dtype=bool)
+    if not nonempty.any():
+        return ()
+    span = b[nonempty, 2:].max(axis=0) - b[nonempty, :2].min(axis=0)
+    if float(np.prod(span / size + 2.0)) > 10_000_000:
+        raise OptionError(f"chunk size {size:g} m makes too many chunks; choose a larger one")
     c0 = np.floor((b[:, 0] - ox) / size).astype(np.int64)
     c1 = np.floor((b[:, 2] - ox) / size).astype(np.int64)
     r0 = np.floor((b[:, 1] - oy) / size).astype(np.int64)
     r1 = np.floor((b[:, 3] - oy) / size).astype(np.int64)
-    if not nonempty.any():
-        return ()
     # the catalog's last column/row: an east/north edge exactly on a grid line opens no
     # column/row of its own (its points join the last one, see Chunk.core_mask)
     last_c = max(int(np.ceil((b[nonempty, 2].max() - ox) / size)) - 1, int(c0[nonempty].min()))
