@@ -8,6 +8,7 @@ from typing import Any
 import click
 
 from ..accuracy.transforms import TRANSFORMS
+from ._catalog_jobs import catalog_options, wants_catalog
 from ._common import (
     INT_LIST,
     Steps,
@@ -17,6 +18,7 @@ from ._common import (
     fmt_number,
     prepare_outputs,
     settings,
+    target_options,
 )
 
 
@@ -87,7 +89,7 @@ def _scaled(xyz: Any, fh: float, fv: float) -> Any:
 
 
 @click.command()
-@click.argument("measured", type=click.Path(dir_okay=False))
+@click.argument("measured", nargs=-1, required=True, type=click.Path())
 @click.argument("check", type=click.Path(dir_okay=False))
 @click.option(
     "--transform",
@@ -161,9 +163,16 @@ def _scaled(xyz: Any, fh: float, fv: float) -> Any:
     default=None,
     help="Write per-point residuals (.csv, .gpkg or .geojson).",
 )
+@catalog_options
+@target_options(
+    rmse_z=("rmse_z", "the vertical RMSE (m)"),
+    rmse_h=("rmse_h", "the horizontal RMSE (m)"),
+    rmse_3d=("rmse_3d", "the 3D RMSE (m)"),
+    mean_z=("mean_z", "the absolute mean vertical error (m)"),
+)
 @common_options
 def checkpoints(
-    measured: str,
+    measured: tuple[str, ...],
     check: str,
     transform: str,
     control_ids: str | None,
@@ -176,6 +185,7 @@ def checkpoints(
     checkpoint_rmse_h: float,
     checkpoint_rmse_v: float,
     output: str | None,
+    **cat_opts: Any,
 ) -> None:
     """Accuracy of MEASURED points against surveyed CHECK points.
 
@@ -184,6 +194,10 @@ def checkpoints(
     and max |residual|, RMSE_H, RMSE_3D, the ASPRS Edition 2 (2023) accuracy
     with the check-point survey accuracy folded in, and NSSDA 95 % figures.
     Residuals are MEASURED (transformed) minus CHECK, in metres.
+
+    With --vertical, MEASURED may be a catalog (several files, a folder, a
+    glob, a .vpc): each check point is compared in the chunk whose core holds
+    it, reading only those chunks; the figures equal one whole-area run.
     """
     from ..errors import OptionError
     from ..io.crs import crs_name, ensure_same_crs
@@ -200,6 +214,17 @@ def checkpoints(
         raise OptionError("--classes and --max-edge apply only with --vertical")
     if control_ids and control_file:
         raise OptionError("give --control-ids or --control-file, not both")
+    if wants_catalog(measured, cat_opts):
+        if not vertical:
+            raise OptionError("a catalog of clouds (several files, a folder, a glob, a .vpc) "
+                              "needs --vertical")
+        from ._catalog_jobs import vertical_on_catalog
+
+        vertical_on_catalog(measured, check, output, classes=classes, max_edge=max_edge,
+                            checkpoint_rmse_v=checkpoint_rmse_v, cat_opts=cat_opts,
+                            summary=_summary)
+        return
+    measured = measured[0]
     prepare_outputs(output, inputs=(measured, check, control_file))
     steps = Steps()
     notes: list[str] = []

@@ -4,17 +4,19 @@ from __future__ import annotations
 
 import click
 
+from ._catalog import is_catalog
 from ._common import INT_LIST, Steps, common_options, echo, finish, prepare_outputs
 
 
 @click.command()
-@click.argument("path", type=click.Path(dir_okay=False))
+@click.argument("paths", nargs=-1, required=True, type=click.Path())
 @click.option(
     "-o",
     "--output",
     required=True,
-    type=click.Path(dir_okay=False),
-    help="Output cloud (.las/.laz/.csv): every point, input order, all dimensions.",
+    type=click.Path(),
+    help="Output cloud (.las/.laz/.csv): every point, input order, all dimensions. "
+    "For a catalog (folder, glob, .vpc or several files): the output folder.",
 )
 @click.option(
     "--method",
@@ -99,9 +101,38 @@ from ._common import INT_LIST, Steps, common_options, echo, finish, prepare_outp
     default=None,
     help="With --evaluate: reference classes left out, e.g. 1,7,9.",
 )
+@click.option(
+    "--chunk-size",
+    type=float,
+    default=None,
+    help="Catalog: chunk side, m (default: from the point density, aligned with the tiles).",
+)
+@click.option(
+    "--buffer",
+    type=float,
+    default=None,
+    help="Catalog: margin read around each chunk, m (default: max(60, cell size)).",
+)
+@click.option(
+    "--workers",
+    type=int,
+    default=None,
+    help="Catalog: local worker processes (default: one per core; 1 = serial, no Dask).",
+)
+@click.option(
+    "--scheduler",
+    default=None,
+    help="Catalog: Dask scheduler address (tcp://host:port) or 'serial'.",
+)
+@click.option(
+    "--resume", is_flag=True, help="Catalog: re-use the chunks finished by an interrupted run."
+)
+@click.option(
+    "--skip-bad", is_flag=True, help="Catalog: leave out bad tiles (listed) instead of failing."
+)
 @common_options
 def ground(
-    path,
+    paths,
     output,
     method,
     preset,
@@ -120,11 +151,21 @@ def ground(
     exclude_classes,
     evaluate,
     ignore_classes,
+    chunk_size,
+    buffer,
+    workers,
+    scheduler,
+    resume,
+    skip_bad,
 ) -> None:
-    """Classify ground points of PATH and write them (class 2) to OUTPUT.
+    """Classify ground points of PATHS and write them (class 2) to OUTPUT.
 
     Points that were class 2 but are not ground become class 1; all other
     classes are kept. Existing ground labels are never used as input.
+
+    PATHS is one file, or a catalog: a folder, a glob pattern, a .vpc virtual point
+    cloud or several files. A catalog is filtered chunk by chunk with a buffer and
+    OUTPUT is a folder receiving one file per input tile plus a .vpc of them.
     """
     import warnings
 
@@ -134,6 +175,52 @@ def ground(
     from ..ground import classify_ground, relabel_classification
     from ..io import read, write
 
+    catalog_opts = {
+        "--chunk-size": chunk_size,
+        "--buffer": buffer,
+        "--workers": workers,
+        "--scheduler": scheduler,
+        "--resume": resume or None,
+        "--skip-bad": skip_bad or None,
+    }
+    if is_catalog(paths) or any(v is not None for v in catalog_opts.values()):
+        from ._catalog import ground_on_catalog
+
+        ground_on_catalog(
+            paths,
+            output,
+            method=method,
+            preset=preset,
+            sensor=sensor,
+            params={
+                k: v
+                for k, v in {
+                    "cell_size": cell_size,
+                    "max_terrain_angle": max_terrain_angle,
+                    "iter_angle": iter_angle,
+                    "iter_distance": iter_distance,
+                    "min_edge_length": min_edge_length,
+                    "mirror": False if no_mirror else None,
+                    "accept_ratio": accept_ratio,
+                    "orientation_thr": orientation_thr,
+                    "scatter_thr": scatter_thr,
+                    "grow_radius": grow_radius,
+                }.items()
+                if v is not None
+            },
+            all_returns=all_returns,
+            exclude_classes=exclude_classes,
+            evaluate=evaluate,
+            ignore_classes=ignore_classes,
+            chunk_size=chunk_size,
+            buffer=buffer,
+            workers=workers,
+            scheduler=scheduler,
+            resume=resume,
+            skip_bad=skip_bad,
+        )
+        return
+    path = paths[0]
     prepare_outputs(output, inputs=(path,))
     params = {
         k: v

@@ -1,8 +1,8 @@
 """Ground filtering: point-based and segment-based progressive TIN densification.
 
-- :class:`PTD` — Axelsson's progressive TIN densification (ALGORITHMS.md §1.1);
-- :class:`SegmentPTD` — Lin & Zhang's segment-based PTD (§1.3–1.4);
-- :func:`filter_errors` — ISPRS type I / type II / total error and Cohen's kappa (§2);
+- :class:`PTD` — Axelsson's progressive TIN densification (:ref:`alg-ptd`);
+- :class:`SegmentPTD` — Lin & Zhang's segment-based PTD (:ref:`alg-segment-ptd`);
+- :func:`filter_errors` — ISPRS type I / type II / total error and Cohen's kappa (:ref:`alg-isprs`);
 - :func:`classify_ground` — the library function behind ``lidarqa ground``: return
   handling, noise exclusion, filtering and (optionally) evaluation on a
   :class:`~lidarqa.io.PointCloud`.
@@ -16,8 +16,6 @@ Examples
 >>> bool(PTD(cell_size=20).ground_mask(pts).all())
 True
 """
-
-from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass, field
@@ -317,7 +315,9 @@ def classify_ground(
     if preset is not None:
         check_choice(preset, PRESET_CHOICES, "preset")
     if not isinstance(cloud, PointCloud):
-        cloud = PointCloud(np.asarray(cloud, dtype=np.float64))
+        from .._validate import as_points
+
+        cloud = PointCloud(as_points(cloud, "cloud"))
     cand, handling, n_noise, msgs = ground_candidates(
         cloud, last_returns_only=last_returns_only, exclude_classes=exclude_classes
     )

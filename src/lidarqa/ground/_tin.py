@@ -29,7 +29,7 @@ __all__ = [
 
 @dataclass(frozen=True)
 class Criteria:
-    """The §1.1 acceptance thresholds, in radians and metres."""
+    """The acceptance thresholds of :ref:`alg-ptd`, in radians and metres."""
 
     iter_angle: float  # rad
     iter_distance: float  # m
@@ -275,7 +275,7 @@ def judge_points(
     check_frozen: bool = True,
     presorted: bool = False,
 ) -> PointTest:
-    """Run the §1.1 step 5b–f tests for candidate points `p` (M, 3) against `tin`.
+    """Run the densification tests of :ref:`alg-ptd` for candidate points `p` (M, 3) against `tin`.
 
     One compiled pass per point: locate its facet (walk), XY-duplicate test,
     frozen-triangle test, distance and iteration angle, sub-facet slopes, and
@@ -570,7 +570,7 @@ def _judge_kernel(
     mirror_max,
     n_chunks,
 ):  # pragma: no cover - numba
-    """The §1.1 step 5b-f tests of each point against the TIN (see judge_points)."""
+    """The densification tests (:ref:`alg-ptd`) of each point against the TIN."""
     m = p.shape[0]
     tri = np.full(m, -1, np.int64)
     passed = np.zeros(m, np.bool_)

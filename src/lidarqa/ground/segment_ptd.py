@@ -1,8 +1,8 @@
-"""Segment-based progressive TIN densification (Lin & Zhang 2014/2015), ALGORITHMS.md §1.4.
+"""Segment-based progressive TIN densification (Lin & Zhang 2014/2015), :ref:`alg-segment-ptd`.
 
-The cloud is segmented into planar surfaces (surface growing, §1.2), object
+The cloud is segmented into planar surfaces (surface growing, :ref:`alg-segmentation`), object
 segments (façades, vegetation) are removed by orientation and scatterness
-(§1.3), and the PTD framework of §1.1 then decides per *segment*: segments
+(:ref:`alg-features`), and the PTD framework (:ref:`alg-ptd`) then decides per *segment*: segments
 holding a seed point are ground, and an undecided segment becomes ground when
 enough of its points pass the point-wise PTD tests against the current TIN.
 Lower parts of objects are rejected with their segment; terrain patches that
@@ -83,6 +83,7 @@ def default_grow_radius(points: np.ndarray, *, factor: float = 2.5, floor: float
     divided by the cell area (robust to scan-line patterns and to empty areas).
     Never below `floor`.
     """
+    points = as_points(points)
     n = points.shape[0]
     if n < 2:
         return floor
@@ -118,7 +119,7 @@ class SegmentPTD(TINParameters):
         A segment with a smaller fraction of passing points is entirely non-ground;
         between `reject_ratio` and `accept_ratio` its points keep their point-wise result.
     seed_segments : bool, default True
-        Every segment holding a seed point is ground as a whole (§1.4 step 2);
+        Every segment holding a seed point is ground as a whole (:ref:`alg-segment-ptd`);
         False: seed segments are judged by the vote like the others.
     min_tested : int, default 3
         Segments with fewer tested points (inside the TIN) stay undecided.
@@ -325,7 +326,7 @@ class SegmentPTD(TINParameters):
         candidates : ndarray of bool, shape (N,), optional
             Points allowed to be ground (others are ignored and never ground).
         object_segments : ndarray of bool, shape (S,), optional
-            Object flag per segment; default: orientation / scatterness rule (§1.3).
+            Object flag per segment; default: orientation / scatterness rule (:ref:`alg-features`).
         """
         pts = as_points(points)
         n = pts.shape[0]
@@ -355,7 +356,7 @@ def segment_ptd(
     candidates: Any = None,
     **params: Any,
 ) -> np.ndarray:
-    """Functional form of §1.4: ground mask from points, segment labels and object flags."""
+    """Ground mask from points, segment labels and object flags (:ref:`alg-segment-ptd`)."""
     return (
         SegmentPTD(**params)
         .run(points, labels=labels, candidates=candidates, object_segments=object_mask_by_segment)
