@@ -8,6 +8,7 @@ from typing import Any
 import click
 
 from ..accuracy.transforms import TRANSFORMS
+from ..units import param_unit
 from ._common import (
     INT_LIST,
     Steps,
@@ -317,8 +318,22 @@ def _summary(r: dict, vertical: bool) -> None:
     t = r["transform"]
     if t["name"] != "none":
         echo(f"transform       {t['name']}   sigma0 {fmt_number(t['sigma0'], 4)} m")
-        for k, v in t["params"].items():
-            echo(f"  {k:<14}{v:.8g} ± {fmt_number(t['sigmas'].get(k), 6)}")
+        o = t.get("origin")
+        if o:
+            echo(
+                f"  about the control-point centroid x {o['x']:.3f}  y {o['y']:.3f}  "
+                f"z {o['z']:.3f} m"
+            )
+        order = ["tx", "ty", "tz"] + [k for k in t["params"] if k not in ("tx", "ty", "tz")]
+        for k in order:
+            if k not in t["params"] or k in ("c", "d", "e"):  # c, d at the origin; e = tz
+                continue
+            v, unit = t["params"][k], param_unit(k)
+            digits = 7 if k in ("scale", "a", "b") else 4
+            echo(
+                f"  {k:<14}{fmt_number(v, digits):>14} ± "
+                f"{fmt_number(t['sigmas'].get(k), digits)} {unit}".rstrip()
+            )
     if not vertical:
         echo("                x          y          z")
         for name in ("mean", "std", "rmse", "max_abs"):
