@@ -36,7 +36,14 @@ __all__ = [
     "fmt_number",
     "parse_int_list",
     "INT_LIST",
+    "crs_option",
+    "classes_option",
+    "source_id_option",
+    "input_crs",
 ]
+
+#: Suffixes of text outputs that get a ``.prj`` CRS sidecar.
+_SIDECAR_SUFFIXES = {".csv", ".txt", ".xyz"}
 
 
 @dataclass
@@ -112,6 +119,46 @@ def common_options(func: Callable[..., Any]) -> Callable[..., Any]:
     for opt in reversed(opts):
         func = opt(func)
     return func
+
+
+CRS_HELP = (
+    "CRS of inputs that declare none: an EPSG code (2154 or EPSG:2154), WKT, or a .prj "
+    "file. CSV inputs also take it from a .prj file next to them; an input whose own "
+    "CRS differs is an error."
+)
+
+
+def crs_option(func: Callable[..., Any]) -> Callable[..., Any]:
+    """``--crs CRS``: the CRS of inputs that declare none (see :func:`input_crs`)."""
+    return click.option("--crs", "crs", default=None, metavar="CRS", help=CRS_HELP)(func)
+
+
+def classes_option(func: Callable[..., Any]) -> Callable[..., Any]:
+    """``--classes INT[,INT...]``: use only points of these LAS classes."""
+    return click.option(
+        "--classes",
+        type=INT_LIST,
+        default=None,
+        help="Use only points of these LAS classes (e.g. 6 for buildings, 2,6).",
+    )(func)
+
+
+def source_id_option(func: Callable[..., Any]) -> Callable[..., Any]:
+    """``--source-id INT[,INT...]``: use only points of these flight strips."""
+    return click.option(
+        "--source-id",
+        "source_id",
+        type=INT_LIST,
+        default=None,
+        help="Use only points of these flight strips / passes (LAS point_source_id).",
+    )(func)
+
+
+def input_crs(value: str | None) -> Any:
+    """The pyproj CRS of ``--crs`` (None when not given); a bad value is an OptionError."""
+    from ..io.crs import parse_crs
+
+    return parse_crs(value)
 
 
 def parse_int_list(value: str | None) -> list[int] | None:
@@ -195,11 +242,23 @@ def prepare_outputs(*outputs: str | Path | None, inputs: tuple = ()) -> None:
 
     Refuses an existing output without ``--overwrite`` and an output that is an input.
     """
+    from ..errors import OutputExistsError
+
     s = settings()
     for out in (*outputs, s.json_path):
         if out is None:
             continue
-        check_output(out, overwrite=s.overwrite)
+        paths = [Path(out)]
+        if Path(out).suffix.lower() in _SIDECAR_SUFFIXES and not Path(out).exists():
+            paths.append(Path(out).with_suffix(".prj"))  # its CRS sidecar
+        for p in paths:
+            try:
+                check_output(p, overwrite=s.overwrite)
+            except OutputExistsError:
+                what = "" if p == Path(out) else f" (the CRS file of {Path(out).name})"
+                raise OutputExistsError(
+                    f"output {p}{what} exists; add --overwrite to replace it"
+                ) from None
         check_distinct(out, *[i for i in inputs if i is not None])
 
 

@@ -13,11 +13,14 @@ from ._common import (
     INT_LIST,
     Steps,
     common_options,
+    crs_option,
     echo,
     finish,
     fmt_number,
+    input_crs,
     prepare_outputs,
     settings,
+    source_id_option,
 )
 
 
@@ -134,6 +137,7 @@ def _scaled(xyz: Any, fh: float, fv: float) -> Any:
     default=None,
     help="With --vertical: classes forming the ground TIN [default: 2].",
 )
+@source_id_option
 @click.option(
     "--max-edge",
     type=float,
@@ -160,8 +164,10 @@ def _scaled(xyz: Any, fh: float, fv: float) -> Any:
     "--output",
     type=click.Path(dir_okay=False),
     default=None,
-    help="Write per-point residuals (.csv, .gpkg or .geojson).",
+    help="Write per-point residuals (.csv, .gpkg or .geojson); they carry the CRS of the "
+    "inputs (a CSV in a .prj file next to it).",
 )
+@crs_option
 @common_options
 def checkpoints(
     measured: str,
@@ -173,10 +179,12 @@ def checkpoints(
     max_distance: float | None,
     vertical: bool,
     classes: list[int] | None,
+    source_id: list[int] | None,
     max_edge: float | None,
     checkpoint_rmse_h: float,
     checkpoint_rmse_v: float,
     output: str | None,
+    crs: str | None,
 ) -> None:
     """Accuracy of MEASURED points against surveyed CHECK points.
 
@@ -197,10 +205,11 @@ def checkpoints(
             "--vertical compares heights only: --transform, --control-ids, --control-file "
             "and --match do not apply"
         )
-    if not vertical and (classes is not None or max_edge is not None):
-        raise OptionError("--classes and --max-edge apply only with --vertical")
+    if not vertical and (classes is not None or max_edge is not None or source_id is not None):
+        raise OptionError("--classes, --source-id and --max-edge apply only with --vertical")
     if control_ids and control_file:
         raise OptionError("give --control-ids or --control-file, not both")
+    given = input_crs(crs)
     prepare_outputs(output, inputs=(measured, check, control_file))
     steps = Steps()
     notes: list[str] = []
@@ -209,17 +218,23 @@ def checkpoints(
         ctrl = _read_control_file(control_file)
 
     with steps("Reading check points"):
-        chk = read_points(check)
+        chk = read_points(check, crs=given)
 
     if vertical:
         from .. import read
         from ..accuracy.checkpoints import vertical_check
 
         with steps("Reading " + measured):
-            cloud = read(measured)
+            cloud = read(measured, crs=given)
+        if source_id is not None:
+            cloud = cloud.select(source_id=source_id)
+            if len(cloud) == 0:
+                raise OptionError(f"{measured} has no points with --source-id {source_id}")
         ensure_same_crs(cloud.crs, chk.crs, what=("MEASURED", "CHECK"))
-        crs = cloud.crs if cloud.crs is not None else chk.crs
-        fh, fv, hname, vname = _unit_factors(crs, "MEASURED" if cloud.crs is not None else "CHECK")
+        crs_used = cloud.crs if cloud.crs is not None else chk.crs
+        fh, fv, hname, vname = _unit_factors(
+            crs_used, "MEASURED" if cloud.crs is not None else "CHECK"
+        )
         if fv != 1.0 or fh != 1.0:
             notes.append(
                 f"coordinates converted to metres (horizontal unit: {hname or 'metre'}, "
@@ -254,10 +269,12 @@ def checkpoints(
                 "give a point list (id,x,y,z) such as the output of `lidarqa corners`"
             )
         with steps("Reading measured points"):
-            mea = read_points(measured)
+            mea = read_points(measured, crs=given)
         ensure_same_crs(mea.crs, chk.crs, what=("MEASURED", "CHECK"))
-        crs = mea.crs if mea.crs is not None else chk.crs
-        fh, fv, hname, vname = _unit_factors(crs, "MEASURED" if mea.crs is not None else "CHECK")
+        crs_used = mea.crs if mea.crs is not None else chk.crs
+        fh, fv, hname, vname = _unit_factors(
+            crs_used, "MEASURED" if mea.crs is not None else "CHECK"
+        )
         if fv != 1.0 or fh != 1.0:
             notes.append(
                 f"coordinates converted to metres (horizontal unit: {hname or 'metre'}, "
@@ -281,7 +298,7 @@ def checkpoints(
         res = report.residual_points()
         # write the check points in their own (unconverted) coordinates
         out = PointSet(
-            res.ids, _scaled(res.xyz, 1.0 / fh, 1.0 / fv), res.attributes, crs=chk.crs or crs
+            res.ids, _scaled(res.xyz, 1.0 / fh, 1.0 / fv), res.attributes, crs=chk.crs or crs_used
         )
         with steps("Writing " + output):
             write_points(out, output, overwrite=settings().overwrite)
@@ -300,11 +317,12 @@ def checkpoints(
             "max_distance": max_distance,
             "vertical": vertical,
             "classes": (classes or [2]) if vertical else None,
+            "source_id": source_id,
             "max_edge": results.get("vertical", {}).get("max_edge") if vertical else None,
             "checkpoint_rmse_h": checkpoint_rmse_h,
             "checkpoint_rmse_v": checkpoint_rmse_v,
             "output": output,
-            "crs": crs_name(crs),
+            "crs": crs_name(crs_used),
         },
         results=results,
     )

@@ -4,19 +4,30 @@ from __future__ import annotations
 
 import click
 
-from ._common import Steps, common_options, echo, finish, prepare_outputs, settings
+from ._common import (
+    Steps,
+    common_options,
+    crs_option,
+    echo,
+    finish,
+    input_crs,
+    prepare_outputs,
+    settings,
+)
 
 
 @click.command()
 @click.argument("path", type=click.Path(dir_okay=True))
+@crs_option
 @common_options
-def info(path: str) -> None:
+def info(path: str, crs: str | None) -> None:
     """Describe a point cloud: points, bounds, CRS, classes, strips, density, returns."""
     from ..io.info import describe
 
+    given = input_crs(crs)
     prepare_outputs(inputs=(path,))
     with Steps()("Reading " + path):
-        result = describe(path)
+        result = describe(path, crs=given)
     d = result.to_dict()
     b = d["bounds"]
     echo(f"{path}")
@@ -28,7 +39,13 @@ def info(path: str) -> None:
     echo(
         f"  CRS             {d['crs_name'] or 'none'}"
         + (f" (EPSG:{d['crs_epsg']})" if d["crs_epsg"] else "")
+        + (" (from --crs)" if given is not None and d["crs_name"] else "")
     )
+    if not d["crs_name"]:
+        echo(
+            "                  (the file declares no CRS: pass --crs, e.g. --crs EPSG:2154, "
+            "to every command that reads it, so that its outputs carry one)"
+        )
     if d["vertical_unit"]:
         echo(f"  vertical unit   {d['vertical_unit']}")
     if d["density_per_m2"]:
@@ -53,7 +70,7 @@ def info(path: str) -> None:
             )
         )
     )
-    finish("info", inputs={"path": path}, parameters={}, results=d)
+    finish("info", inputs={"path": path}, parameters={"crs": crs}, results=d)
 
 
 def _station(value: str | None) -> tuple[float, float, float]:
@@ -89,7 +106,13 @@ def _station(value: str | None) -> tuple[float, float, float]:
 @click.option(
     "--angle-unit", type=click.Choice(["deg", "gon", "rad"]), default="deg", show_default=True
 )
-@click.option("--crs", default=None, help="CRS of the output (EPSG code or WKT).")
+@click.option(
+    "--crs",
+    default=None,
+    metavar="CRS",
+    help="CRS of the station and so of the output: an EPSG code (2154 or EPSG:2154), WKT, "
+    "or a .prj file.",
+)
 @common_options
 def polar(
     observations: str,

@@ -1,7 +1,15 @@
-"""CRS helpers: EPSG codes, vertical units, height conversion, CRS comparison."""
+"""CRS helpers: EPSG codes, vertical units, height conversion, CRS comparison, sidecars.
+
+CSV files carry their CRS in a sidecar file next to them: ``points.csv`` ->
+``points.prj``, holding the CRS as WKT (the ESRI/GeoCSV ``.prj`` convention,
+which GDAL/OGR's CSV driver and so QGIS read). lidarqa writes it with every
+CSV output whose source had a CRS and reads it back with every CSV input.
+"""
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -17,11 +25,22 @@ __all__ = [
     "reproject",
     "ensure_same_crs",
     "parse_crs",
+    "crs_label",
+    "sidecar_path",
+    "read_crs_sidecar",
+    "write_crs_sidecar",
+    "resolve_crs",
 ]
+
+#: Suffixes of text tables whose CRS lives in a ``.prj`` sidecar.
+SIDECAR_SUFFIXES = {".csv", ".txt", ".xyz", ".pts"}
 
 
 def parse_crs(value: Any) -> Any:
-    """A pyproj CRS from an EPSG int, 'EPSG:xxxx', WKT or a CRS (None stays None)."""
+    """A pyproj CRS from an EPSG int or digits, 'EPSG:xxxx', WKT, a ``.prj`` file or a CRS.
+
+    None stays None; anything else raises :class:`OptionError`.
+    """
     if value is None or value == "":
         return None
     from pyproj import CRS
@@ -29,6 +48,13 @@ def parse_crs(value: Any) -> Any:
 
     from ..errors import OptionError
 
+    if isinstance(value, str) and value.lower().endswith((".prj", ".wkt")):
+        p = Path(value)
+        if not p.is_file():
+            raise OptionError(f"CRS file {value} does not exist")
+        value = p.read_text(encoding="utf-8-sig").strip()
+    elif isinstance(value, str) and value.strip().isdigit():
+        value = int(value)
     try:
         return CRS.from_user_input(value)
     except CRSError as exc:
@@ -48,6 +74,77 @@ def crs_epsg(crs: Any) -> int | None:
 
 def crs_name(crs: Any) -> str | None:
     return None if crs is None else str(crs.name)
+
+
+def crs_label(crs: Any) -> str:
+    """``"RGF93 v1 / Lambert-93 (EPSG:2154)"``, or ``"none"``."""
+    if crs is None:
+        return "none"
+    code = crs_epsg(crs)
+    return f"{crs.name} (EPSG:{code})" if code else str(crs.name)
+
+
+def sidecar_path(path: str | os.PathLike) -> Path:
+    """The ``.prj`` sidecar of a text table (``a/b.csv`` -> ``a/b.prj``)."""
+    return Path(path).with_suffix(".prj")
+
+
+def read_crs_sidecar(path: str | os.PathLike) -> Any:
+    """The CRS in the ``.prj`` sidecar of `path`, or None when there is none.
+
+    Raises
+    ------
+    ReadError
+        If the sidecar exists but holds no CRS that pyproj understands.
+    """
+    from ..errors import ReadError
+
+    prj = sidecar_path(path)
+    if Path(path).suffix.lower() not in SIDECAR_SUFFIXES or not prj.is_file():
+        return None
+    from pyproj import CRS
+    from pyproj.exceptions import CRSError
+
+    try:
+        text = prj.read_text(encoding="utf-8-sig").strip()
+        return CRS.from_user_input(text) if text else None
+    except (CRSError, UnicodeDecodeError) as exc:
+        raise ReadError(f"{prj} (the CRS of {Path(path).name}) is not a CRS: {exc}") from exc
+
+
+def write_crs_sidecar(path: str | os.PathLike, crs: Any, *, overwrite: bool = False) -> Path | None:
+    """Write (or, when `crs` is None, remove a stale) ``.prj`` sidecar of `path`, atomically."""
+    from ._atomic import atomic_path
+
+    prj = sidecar_path(path)
+    if crs is None:  # a sidecar left from an earlier version of this file would lie
+        if overwrite and prj.is_file():
+            prj.unlink()
+        return None
+    with atomic_path(prj, overwrite=overwrite) as tmp:
+        tmp.write_text(crs.to_wkt() + "\n", encoding="utf-8")
+    return prj
+
+
+def resolve_crs(own: Any, given: Any, source: str | os.PathLike) -> Any:
+    """The CRS of an input: its own, else the one given (``--crs``).
+
+    An input whose own CRS differs from the given one is an error that names both.
+    """
+    if given is None:
+        return own
+    if own is None:
+        return given
+    try:
+        same = own.equals(given, ignore_axis_order=True)
+    except Exception:
+        same = own == given
+    if not same:
+        raise CRSMismatchError(
+            f"{source} is in {crs_label(own)} but --crs says {crs_label(given)}; "
+            "drop --crs or reproject the file"
+        )
+    return own
 
 
 def _vertical_axis(crs: Any) -> Any:
@@ -107,8 +204,8 @@ def ensure_same_crs(
         same = a == b
     if not same:
         raise CRSMismatchError(
-            f"{what[0]} CRS ({crs_name(a)}) differs from {what[1]} CRS ({crs_name(b)}); "
-            "reproject one of them first (or ask for reprojection)"
+            f"{what[0]} CRS ({crs_label(a)}) differs from {what[1]} CRS ({crs_label(b)}); "
+            "reproject one of them first"
         )
 
 

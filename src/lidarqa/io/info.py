@@ -136,9 +136,15 @@ def describe_cloud(cloud: Any) -> CloudInfo:
     return _finish(acc, cloud.crs, ["X", "Y", "Z", *cloud.fields], {})
 
 
-def describe(path: str | os.PathLike, *, chunk_size: int = 2_000_000) -> CloudInfo:
-    """Describe a point cloud file, streaming LAS/LAZ in chunks (constant memory)."""
+def describe(
+    path: str | os.PathLike, *, chunk_size: int = 2_000_000, crs: Any = None
+) -> CloudInfo:
+    """Describe a point cloud file, streaming LAS/LAZ in chunks (constant memory).
+
+    `crs` (a pyproj CRS) stands for the CRS of a file that declares none.
+    """
     from . import las_header_summary, read
+    from .crs import resolve_crs
     from .las import LasReader
 
     if Path(path).suffix.lower() in {".las", ".laz"}:
@@ -147,6 +153,7 @@ def describe(path: str | os.PathLike, *, chunk_size: int = 2_000_000) -> CloudIn
             acc = _Accumulator(_density_cell(np.array(b[:3]), np.array(b[3:]), reader.n_points))
             for chunk in reader.chunks(chunk_size):
                 acc.add(chunk)
-            return _finish(acc, reader.crs, reader.dimension_names, las_header_summary(reader))
-    cloud = read(path)
+            own = resolve_crs(reader.crs, crs, path)
+            return _finish(acc, own, reader.dimension_names, las_header_summary(reader))
+    cloud = read(path, crs=crs)
     return describe_cloud(cloud)

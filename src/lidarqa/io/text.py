@@ -5,11 +5,13 @@ from __future__ import annotations
 import csv
 import os
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from ..errors import InvalidPointsError, ReadError
-from ._atomic import atomic_path, check_input
+from ._atomic import atomic_path, check_input, check_output
+from .crs import read_crs_sidecar, resolve_crs, sidecar_path, write_crs_sidecar
 from .pointcloud import PointCloud
 
 __all__ = ["read_text", "write_text", "sniff_header"]
@@ -50,12 +52,14 @@ def sniff_header(path: str | os.PathLike) -> tuple[list[str] | None, str | None]
     return [t.lower() for t in tokens], delim
 
 
-def read_text(path: str | os.PathLike) -> PointCloud:
+def read_text(path: str | os.PathLike, *, crs: Any = None) -> PointCloud:
     """Read an XYZ/CSV/TXT point table.
 
     The first line names the columns (``x, y, z`` required, case-insensitive;
     every other numeric column becomes a field). A file whose first line is all
-    numbers has no header: its first three columns are x, y, z.
+    numbers has no header: its first three columns are x, y, z. The CRS comes
+    from a ``.prj`` sidecar next to the file, else from `crs` (a pyproj CRS);
+    a sidecar that differs from `crs` raises :class:`CRSMismatchError`.
 
     Raises
     ------
@@ -109,20 +113,45 @@ def read_text(path: str | os.PathLike) -> PointCloud:
             fields[name] = col.astype(np.int64)
         else:
             fields[name] = col
-    return PointCloud(xyz=xyz, fields=fields, crs=None, source=None, path=str(p))
+    own = resolve_crs(read_crs_sidecar(p), crs, p)
+    return PointCloud(xyz=xyz, fields=fields, crs=own, source=None, path=str(p))
+
+
+def _decimals(cloud: PointCloud) -> list[int]:
+    """Decimals of x, y, z: those of the LAS scale the cloud came from, else mm."""
+    scales = getattr(cloud.source, "scales", None)
+    if scales is None:
+        return [3, 3, 3]
+    out = []
+    for sc in np.asarray(scales, dtype=float):
+        d = int(np.ceil(-np.log10(sc) - 1e-9)) if 0 < sc < 1 else 0
+        out.append(min(max(d, 0), 9))
+    return out
 
 
 def write_text(cloud: PointCloud, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
-    """Write a cloud as CSV with a header ``x,y,z,<fields>``, atomically."""
+    """Write a cloud as CSV with a header ``x,y,z,<fields>``, atomically.
+
+    Coordinates keep the precision of the cloud's source (the LAS scale, e.g.
+    0.01 m -> 2 decimals), else 1 mm; integer fields are written as integers,
+    other decimals with 10 significant digits. The CRS goes to a ``.prj``
+    sidecar (WKT) that GDAL/QGIS and :func:`read_text` read.
+    """
     names = ["x", "y", "z", *cloud.fields]
     cols = [cloud.x, cloud.y, cloud.z, *(np.asarray(v) for v in cloud.fields.values())]
+    fmts = [f"%.{d}f" for d in _decimals(cloud)]
+    for c in cols[3:]:
+        fmts.append("%d" if c.dtype.kind in "iub" else "%.10g")
+    replacing = Path(path).exists()
+    if cloud.crs is not None:
+        check_output(sidecar_path(path), overwrite=overwrite or replacing)
     with atomic_path(path, overwrite=overwrite) as tmp:
         with tmp.open("w", encoding="utf-8", newline="") as fh:
             fh.write(",".join(names) + "\n")
-            table = (
-                np.column_stack([c.astype(np.float64) for c in cols])
-                if len(cloud)
-                else np.empty((0, len(cols)))
-            )
-            np.savetxt(fh, table, delimiter=",", fmt="%.17g")
+            if len(cloud):
+                table = np.empty(len(cloud), dtype=[(f"c{i}", c.dtype) for i, c in enumerate(cols)])
+                for i, c in enumerate(cols):
+                    table[f"c{i}"] = c
+                np.savetxt(fh, table, delimiter=",", fmt=fmts)
+        write_crs_sidecar(path, cloud.crs, overwrite=replacing or overwrite)
     return Path(path)

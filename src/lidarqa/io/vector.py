@@ -6,6 +6,12 @@ CSV is handled with the standard library; GeoPackage and GeoJSON need the
 - Segments CSV: ``id,x1,y1,z1,x2,y2,z2`` then any attribute columns.
 - Points CSV: ``id,x,y,z`` (``z`` optional where noted) then attributes.
 - GeoPackage/GeoJSON: LineString Z / Point Z features with an ``id`` field.
+
+CRS: GeoPackage/GeoJSON carry it inside; a CSV carries it in a ``.prj``
+sidecar (WKT, read by GDAL/QGIS), written with the CSV and read back with it.
+Every reader takes ``crs=`` for inputs without one (an input whose own CRS
+differs is an error naming both). CSV coordinates are written to 0.1 mm and
+other decimals to 10 significant digits (see :mod:`lidarqa.units`).
 """
 
 from __future__ import annotations
@@ -19,7 +25,9 @@ from typing import Any
 import numpy as np
 
 from ..errors import InvalidPointsError, ReadError, WriteError
-from ._atomic import atomic_path, check_input
+from ..units import format_coordinate, format_decimal
+from ._atomic import atomic_path, check_input, check_output
+from .crs import read_crs_sidecar, resolve_crs, sidecar_path, write_crs_sidecar
 
 __all__ = [
     "Segments",
@@ -211,17 +219,21 @@ def _gis():
 # --------------------------------------------------------------------- segments
 
 
-def read_segments(path: str | os.PathLike) -> Segments:
+def read_segments(path: str | os.PathLike, *, crs: Any = None) -> Segments:
     """Read 3D line segments from CSV (``id,x1,y1,z1,x2,y2,z2``), GeoPackage or GeoJSON.
 
     Multi-vertex LineStrings are split into their consecutive segments (ids
     ``<id>.<k>``). Raises :class:`ReadError` for a missing/empty file, missing
     columns or 2D geometry, and :class:`InvalidPointsError` for NaN coordinates.
+    `crs` (a pyproj CRS) is the CRS of a file that declares none; a file whose
+    own CRS (embedded, or a CSV's ``.prj`` sidecar) differs raises
+    :class:`CRSMismatchError`.
     """
     p = check_input(path)
     suffix = _suffix(p)
-    crs = None
+    given, crs = crs, None
     if suffix == ".csv":
+        crs = read_crs_sidecar(p)
         table = _read_csv_table(p)
         _need(table, ("x1", "y1", "z1", "x2", "y2", "z2"), p)
         start = np.column_stack([_floats(table, c, p) for c in ("x1", "y1", "z1")])
@@ -260,6 +272,7 @@ def read_segments(path: str | os.PathLike) -> Segments:
     if len(start) and not (np.isfinite(start).all() and np.isfinite(end).all()):
         raise InvalidPointsError(f"input {p} has segments with NaN or infinite coordinates")
     _check_unique(ids, p)
+    crs = resolve_crs(crs, given, p)
     return Segments(ids=ids, start=start, end=end, attributes=attrs, crs=crs)
 
 
@@ -281,7 +294,7 @@ def write_segments(
         for i, c in enumerate(("x2", "y2", "z2")):
             cols[c] = segments.end[:, i]
         cols.update(segments.attributes)
-        return _write_csv(cols, path, overwrite=overwrite)
+        return _write_csv(cols, path, overwrite=overwrite, crs=segments.crs)
     _, shapely = _gis()
     geoms = shapely.linestrings(segments.endpoints) if len(segments) else np.empty(0, dtype=object)
     return _write_ogr(
@@ -298,15 +311,19 @@ def write_segments(
 # ----------------------------------------------------------------------- points
 
 
-def read_points(path: str | os.PathLike, *, require_z: bool = True) -> PointSet:
+def read_points(path: str | os.PathLike, *, require_z: bool = True, crs: Any = None) -> PointSet:
     """Read a point list from CSV (``id,x,y,z``), GeoPackage or GeoJSON (Point Z).
 
     With ``require_z=False`` a missing z column / 2D geometry gives z = NaN.
+    `crs` (a pyproj CRS) is the CRS of a file that declares none; a file whose
+    own CRS (embedded, or a CSV's ``.prj`` sidecar) differs raises
+    :class:`CRSMismatchError`.
     """
     p = check_input(path)
     suffix = _suffix(p)
-    crs = None
+    given, crs = crs, None
     if suffix == ".csv":
+        crs = read_crs_sidecar(p)
         table = _read_csv_table(p)
         _need(table, ("x", "y") + (("z",) if require_z else ()), p)
         x, y = _floats(table, "x", p), _floats(table, "y", p)
@@ -327,6 +344,7 @@ def read_points(path: str | os.PathLike, *, require_z: bool = True) -> PointSet:
     if len(xyz) and not finite:
         raise InvalidPointsError(f"input {p} has points with NaN or infinite coordinates")
     _check_unique(np.asarray(ids), p)
+    crs = resolve_crs(crs, given, p)
     return PointSet(ids=np.asarray(ids), xyz=xyz, attributes=attrs, crs=crs)
 
 
@@ -345,7 +363,7 @@ def write_points(
             "z": points.xyz[:, 2],
         }
         cols.update(points.attributes)
-        return _write_csv(cols, path, overwrite=overwrite)
+        return _write_csv(cols, path, overwrite=overwrite, crs=points.crs)
     _, shapely = _gis()
     geoms = shapely.points(points.xyz) if len(points) else np.empty(0, dtype=object)
     return _write_ogr(
@@ -362,23 +380,37 @@ def write_points(
 # ------------------------------------------------------------------- writers
 
 
-def _fmt(v: Any) -> str:
+#: CSV columns holding coordinates (written to 0.1 mm).
+COORDINATE_COLUMNS = frozenset({"x", "y", "z", "x1", "y1", "z1", "x2", "y2", "z2"})
+
+
+def _fmt(v: Any, coordinate: bool = False) -> str:
     if isinstance(v, float | np.floating):
-        return "" if not np.isfinite(v) else repr(float(v))
+        if not np.isfinite(v):
+            return ""
+        return format_coordinate(v) if coordinate else format_decimal(v)
     if isinstance(v, bool | np.bool_):
         return "true" if v else "false"
     return str(v)
 
 
-def _write_csv(cols: dict[str, Any], path: str | os.PathLike, *, overwrite: bool) -> Path:
+def _write_csv(
+    cols: dict[str, Any], path: str | os.PathLike, *, overwrite: bool, crs: Any = None
+) -> Path:
     names = list(cols)
     arrays = [np.asarray(cols[n]) for n in names]
+    is_coord = [n in COORDINATE_COLUMNS for n in names]
+    replacing = Path(path).exists()
+    if crs is not None:
+        check_output(sidecar_path(path), overwrite=overwrite or replacing)
     with atomic_path(path, overwrite=overwrite) as tmp:
         with tmp.open("w", encoding="utf-8", newline="") as fh:
             w = csv.writer(fh)
             w.writerow(names)
             for row in zip(*arrays, strict=True):
-                w.writerow([_fmt(v) for v in row])
+                w.writerow([_fmt(v, c) for v, c in zip(row, is_coord, strict=True)])
+        # the sidecar belongs to the CSV: replaced with it, removed if now stale
+        write_crs_sidecar(path, crs, overwrite=replacing or overwrite)
     return Path(path)
 
 
