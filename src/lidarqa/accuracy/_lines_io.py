@@ -57,10 +57,10 @@ def extract_segments(points: np.ndarray, *, crs: Any = None, **options: Any) -> 
     return seg
 
 
-def _read_cloud(path: str | os.PathLike, classes: Any) -> Any:
+def _read_cloud(path: str | os.PathLike, classes: Any, crs: Any = None) -> Any:
     from ..io import read
 
-    cloud = read(path)
+    cloud = read(path, crs=crs)
     if classes is not None:
         cloud = cloud.select(classes=classes)
     return cloud
@@ -72,19 +72,21 @@ def load_segments(
     classes: Any = None,
     source_id: Any = None,
     edge_options: dict | None = None,
+    crs: Any = None,
 ) -> Segments:
     """Segments from a segment file, or the edges of the selected points of a cloud.
 
     `classes` and `source_id` (int or list of ints) select points of a cloud; for a
     segment file, which has no points, they raise :class:`InvalidPointsError`.
+    `crs` (a pyproj CRS) is the CRS of an input that declares none.
     """
     if is_segment_file(path):
         if classes is not None or source_id is not None:
             raise InvalidPointsError(
                 f"{path} is a segment file: --classes / --source-id select points of a cloud only"
             )
-        return read_segments(path)
-    cloud = _read_cloud(path, classes)
+        return read_segments(path, crs=crs)
+    cloud = _read_cloud(path, classes, crs)
     if source_id is not None:
         cloud = cloud.select(source_id=source_id)
     if len(cloud) == 0:
@@ -99,6 +101,7 @@ def load_passes(
     classes: Any = None,
     source_id: Any = None,
     edge_options: dict | None = None,
+    crs: Any = None,
 ) -> list[tuple[str, str, Any]]:
     """``[(group, name, Segments or LidarQAError)]``: one pass per file, or per strip.
 
@@ -112,11 +115,12 @@ def load_passes(
     for path in paths:
         stem = Path(path).name
         if not by_source_id:
-            out.append(("", stem, load_segments(path, classes=classes, edge_options=edge_options)))
+            seg_or_edges = load_segments(path, classes=classes, edge_options=edge_options, crs=crs)
+            out.append(("", stem, seg_or_edges))
             continue
         if is_segment_file(path):
             raise InvalidPointsError(f"--by-source-id needs point clouds; {path} is a segment file")
-        cloud = _read_cloud(path, classes)
+        cloud = _read_cloud(path, classes, crs)
         sid = cloud.point_source_id
         if sid is None:
             raise InvalidPointsError(f"{path} has no point_source_id field for --by-source-id")

@@ -10,7 +10,17 @@ from typing import Any
 import click
 import numpy as np
 
-from ._common import INT_LIST, Steps, common_options, echo, finish, prepare_outputs, settings
+from ._common import (
+    CRS_HELP,
+    INT_LIST,
+    Steps,
+    common_options,
+    echo,
+    finish,
+    input_crs,
+    prepare_outputs,
+    settings,
+)
 
 _OUT_SUFFIXES = (".csv", ".gpkg", ".geojson", ".json")
 
@@ -35,6 +45,7 @@ def _selection_options(func: Callable[..., Any]) -> Callable[..., Any]:
                      help="Smallest planar segment kept (points)."),
         click.option("--max-rmse", type=float, default=0.15, show_default=True,
                      help="Drop segments whose plane RMS residual exceeds this (m)."),
+        click.option("--crs", "crs", default=None, metavar="CRS", help=CRS_HELP),
     ]
     for opt in reversed(opts):
         func = opt(func)
@@ -48,14 +59,16 @@ def _check_suffix(output: str) -> None:
         raise OptionError(f"output {output}: use a .csv, .gpkg or .geojson file name")
 
 
-def _load(path: str, classes: list[int] | None, source_id: list[int] | None, steps: Steps):
+def _load(path: str, classes: list[int] | None, source_id: list[int] | None, steps: Steps,
+          crs: str | None = None):
     """Read and select; return (cloud selection, xyz in metres, z factor)."""
     from ..errors import InvalidPointsError
     from ..io import read
     from ..io.crs import z_to_metres_factor
 
+    given = input_crs(crs)
     with steps(f"Reading {path}"):
-        cloud = read(path)
+        cloud = read(path, crs=given)
     sub = cloud.select(classes=classes, source_id=source_id) if (classes or source_id) else cloud
     if len(sub) < 3:
         what = []
@@ -111,7 +124,7 @@ def planes(path: str, output: str, classes: list[int] | None, source_id: list[in
     _check_suffix(output)
     prepare_outputs(output, inputs=(path,))
     steps = Steps()
-    sub, xyz, f = _load(path, classes, source_id, steps)
+    sub, xyz, f = _load(path, classes, source_id, steps, opts.pop("crs", None))
     seg = _segment(xyz, opts, steps)
     cen = seg.centroid.copy()
     cen[:, 2] /= f
@@ -165,7 +178,7 @@ def edges(path: str, output: str, classes: list[int] | None, source_id: list[int
     check_positive(min_length, "--min-length", allow_zero=True)
     prepare_outputs(output, inputs=(path,))
     steps = Steps()
-    sub, xyz, f = _load(path, classes, source_id, steps)
+    sub, xyz, f = _load(path, classes, source_id, steps, opts.pop("crs", None))
     seg = _segment(xyz, opts, steps)
     with steps("Intersecting adjacent planes"):
         e, skipped = edges_from_segmentation(xyz, seg, near_dist=near_dist, min_angle=min_angle,
@@ -220,7 +233,7 @@ def corners(path: str, output: str, classes: list[int] | None, source_id: list[i
     check_positive(max_dist, "--max-dist")
     prepare_outputs(output, inputs=(path,))
     steps = Steps()
-    sub, xyz, f = _load(path, classes, source_id, steps)
+    sub, xyz, f = _load(path, classes, source_id, steps, opts.pop("crs", None))
     seg = _segment(xyz, opts, steps)
     with steps("Intersecting plane triples"):
         c, refused = corners_from_segmentation(seg, xyz, min_det=min_det, min_angle=min_angle,

@@ -4,7 +4,16 @@ from __future__ import annotations
 
 import click
 
-from ._common import INT_LIST, Steps, common_options, echo, finish, prepare_outputs
+from ._common import (
+    INT_LIST,
+    Steps,
+    common_options,
+    crs_option,
+    echo,
+    finish,
+    input_crs,
+    prepare_outputs,
+)
 
 
 @click.command()
@@ -91,6 +100,7 @@ from ._common import INT_LIST, Steps, common_options, echo, finish, prepare_outp
     default=None,
     help="With --evaluate: reference classes left out, e.g. 1,7,9.",
 )
+@crs_option
 @common_options
 def ground(
     path,
@@ -111,6 +121,7 @@ def ground(
     exclude_classes,
     evaluate,
     ignore_classes,
+    crs,
 ) -> None:
     """Classify ground points of PATH and write them (class 2) to OUTPUT.
 
@@ -125,6 +136,7 @@ def ground(
     from ..ground import classify_ground, relabel_classification
     from ..io import read, write
 
+    given_crs = input_crs(crs)
     prepare_outputs(output, inputs=(path,))
     params = {
         k: v
@@ -155,7 +167,7 @@ def ground(
     params.update(given)
     steps = Steps()
     with steps("Reading " + path):
-        cloud = read(path)
+        cloud = read(path, crs=given_crs)
     with (
         steps(f"Filtering ({method}, {len(cloud):,} points)"),
         warnings.catch_warnings(record=True) as caught,
@@ -206,6 +218,7 @@ def ground(
             "last_returns_only": not all_returns,
             "exclude_classes": list(exclude_classes or []),
             "ignore_classes": list(ignore_classes or []),
+            "crs": crs,
             **result.parameters,
         },
         results=res,

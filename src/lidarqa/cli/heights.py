@@ -19,9 +19,20 @@ from ..accuracy.heights import (
     SIGMA_REF,
     SIGMA_STRIP,
 )
-from ._common import INT_LIST, Steps, common_options, echo, finish, prepare_outputs, settings
+from ._common import (
+    INT_LIST,
+    Steps,
+    common_options,
+    crs_option,
+    echo,
+    finish,
+    input_crs,
+    prepare_outputs,
+    settings,
+    source_id_option,
+)
 
-OUT_SUFFIXES = (".csv", ".gpkg")  # GeoJSON cannot hold the NaN z of unfitted map points
+OUT_SUFFIXES = (".csv", ".gpkg", ".geojson")  # GeoJSON: unfitted map points are written 2D
 
 
 def _horizontal_vertical(crs: Any) -> tuple[Any, Any]:
@@ -41,13 +52,13 @@ def _check_crs(a: Any, b: Any, names: tuple[str, str]) -> None:
     ensure_same_crs(va, vb, what=(names[0] + " vertical", names[1] + " vertical"))
 
 
-def _read_reference(path: str) -> Any:
+def _read_reference(path: str, crs: Any = None) -> Any:
     from ..io.vector import PointSet, read_points
 
     p = Path(path)
     if p.is_file() and p.stat().st_size == 0:  # an empty file: no reference points
-        return PointSet(ids=np.empty(0, dtype=np.int64), xyz=np.empty((0, 3)))
-    return read_points(p, require_z=True)
+        return PointSet(ids=np.empty(0, dtype=np.int64), xyz=np.empty((0, 3)), crs=crs)
+    return read_points(p, require_z=True, crs=crs)
 
 
 def _ids(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -88,8 +99,11 @@ def _output_rows(report: Any, map_ids: np.ndarray, ref_ids: np.ndarray, crs: Any
     return PointSet(ids=_ids(map_ids, ref_ids), xyz=xyz, attributes=attrs, crs=crs)
 
 
-def _fmt(v: float, scale: float = 100.0, unit: str = "cm") -> str:
-    return "n/a" if v is None or not np.isfinite(v) else f"{v * scale:.1f} {unit}"
+def _fmt(v: float, scale: float = 1.0, unit: str = "m") -> str:
+    """Metres to the millimetre (the unit policy: metres everywhere); % with one decimal."""
+    if v is None or not np.isfinite(v):
+        return "n/a"
+    return f"{v * scale:.1f} {unit}" if unit == "%" else f"{v * scale:.3f} {unit}"
 
 
 @click.command()
@@ -171,6 +185,7 @@ def _fmt(v: float, scale: float = 100.0, unit: str = "cm") -> str:
     default=None,
     help="Use only laser points of these classes, e.g. 2 or 2,11.",
 )
+@source_id_option
 @click.option(
     "--spacing",
     type=float,
@@ -204,9 +219,10 @@ def _fmt(v: float, scale: float = 100.0, unit: str = "cm") -> str:
     "--output",
     type=click.Path(dir_okay=False),
     default=None,
-    help="Per-point output (.csv or .gpkg, layer 'heights'): a row per map point and per "
-    "reference point, told apart by the 'kind' column.",
+    help="Per-point output (.csv, .gpkg or .geojson, layer 'heights'): a row per map point "
+    "and per reference point, told apart by the 'kind' column.",
 )
+@crs_option
 @common_options
 def heights(
     cloud: str,
@@ -224,12 +240,14 @@ def heights(
     correlation: float,
     alpha: float,
     classes: list[int] | None,
+    source_id: list[int] | None,
     spacing: float,
     eq8_diagonal: bool,
     posterior: bool,
     estimate_offset: bool,
     largest_segment: bool,
     output: str | None,
+    crs: str | None,
 ) -> None:
     """Height quality of map points by error propagation, tested with w-tests.
 
@@ -247,17 +265,22 @@ def heights(
 
     if output is not None and Path(output).suffix.lower() not in OUT_SUFFIXES:
         raise OptionError(f"--output must end in {', '.join(OUT_SUFFIXES)}; got {output!r}")
+    given = input_crs(crs)
     prepare_outputs(output, inputs=(cloud, map_path, reference))
     steps = Steps()
     with steps("Reading " + cloud):
-        pc = read(cloud)
-        if classes:
-            pc = pc.select(classes=classes)
+        pc = read(cloud, crs=given)
+        if classes or source_id:
+            pc = pc.select(classes=classes, source_id=source_id)
+            if len(pc) == 0:
+                raise OptionError(
+                    f"{cloud} has no points with --classes {classes} --source-id {source_id}"
+                )
         xyz = pc.xyz.copy()
         xyz[:, 2] *= z_to_metres_factor(pc.crs)
     with steps("Reading map and reference points"):
-        mp = read_map_points(map_path, spacing=spacing)
-        ref = _read_reference(reference)
+        mp = read_map_points(map_path, spacing=spacing, crs=given)
+        ref = _read_reference(reference, given)
         _check_crs(pc.crs, mp.crs, ("cloud", "map"))
         _check_crs(pc.crs, ref.crs, ("cloud", "reference"))
         _check_crs(mp.crs, ref.crs, ("map", "reference"))
@@ -309,7 +332,7 @@ def heights(
     if report.flags:
         echo("flags             " + ", ".join(report.flags))
     params = dict(report.parameters)
-    params.update(classes=classes, spacing=spacing)
+    params.update(classes=classes, source_id=source_id, spacing=spacing, crs=crs)
     finish(
         "heights",
         inputs={"cloud": cloud, "map": map_path, "reference": reference, "output": output},

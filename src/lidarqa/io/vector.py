@@ -366,6 +366,16 @@ def write_points(
         return _write_csv(cols, path, overwrite=overwrite, crs=points.crs)
     _, shapely = _gis()
     geoms = shapely.points(points.xyz) if len(points) else np.empty(0, dtype=object)
+    no_z = ~np.isfinite(points.xyz[:, 2])
+    if suffix in {".geojson", ".json"} and no_z.any():
+        # GeoJSON has no NaN: a point without a height is written as [x, y]
+        geoms = np.array(
+            [
+                shapely.to_wkb(g, output_dimension=2 if flat else 3)
+                for g, flat in zip(geoms, no_z, strict=True)
+            ],
+            dtype=object,
+        )
     return _write_ogr(
         geoms,
         {"id": points.ids, **points.attributes},
@@ -436,7 +446,12 @@ def _write_ogr(
         elif a.dtype == bool:
             a = a.astype(np.int32)
         arrays.append(a)
-    wkb = shapely.to_wkb(geoms, output_dimension=3) if len(geoms) else np.empty(0, dtype=object)
+    if len(geoms) and isinstance(geoms[0], bytes):  # already WKB (mixed dimensions)
+        wkb = geoms
+    else:
+        wkb = (
+            shapely.to_wkb(geoms, output_dimension=3) if len(geoms) else np.empty(0, dtype=object)
+        )
     crs_wkt = crs.to_wkt() if crs is not None else None
     import warnings
 
