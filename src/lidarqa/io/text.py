@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import os
+import re
 from pathlib import Path
 from typing import Any
 
@@ -14,7 +15,58 @@ from ._atomic import atomic_path, check_input, check_output
 from .crs import read_crs_sidecar, resolve_crs, sidecar_path, write_crs_sidecar
 from .pointcloud import PointCloud
 
-__all__ = ["read_text", "write_text", "sniff_header"]
+__all__ = ["read_text", "write_text", "sniff_header", "dialect_hint", "DECIMAL_COMMA"]
+
+#: A number written with a decimal comma (``770500,05``, ``-0,3``).
+DECIMAL_COMMA = re.compile(r"^\s*[+-]?\d+,\d+\s*$")
+
+
+def _header_commas(text: str) -> int:
+    for ln in text.splitlines():
+        if ln.strip() and not ln.startswith("#"):
+            return ln.count(",")
+    return 0
+
+
+def dialect_hint(path: str | os.PathLike) -> str:
+    """A hint on a text table's dialect, for error messages ("" when nothing stands out).
+
+    Recognises the usual spreadsheet exports that are not plain CSV: UTF-16
+    ("Unicode text"), ';'-separated with decimal commas (European locales),
+    text that is not UTF-8 (Latin-1/Windows-1252), and a byte-order mark.
+    """
+    try:
+        with open(path, "rb") as fh:
+            raw = fh.read(8192)
+    except OSError:
+        return ""
+    if raw.startswith((b"\xff\xfe", b"\xfe\xff")):
+        return (
+            " (the file is UTF-16, 'Unicode text' in spreadsheets: save it as 'CSV UTF-8' with "
+            "',' between values and '.' as decimal point)"
+        )
+    hints = []
+    text = raw.decode("utf-8-sig", errors="replace")
+    if "\ufffd" in text:
+        hints.append("it is not UTF-8 (Latin-1/Windows-1252?): save it as 'CSV UTF-8'")
+    lines = [ln for ln in text.splitlines()[1:20] if ln.strip() and not ln.startswith("#")]
+    if any(";" in ln for ln in lines):
+        tokens = [t for ln in lines for t in ln.split(";")]
+        if any(DECIMAL_COMMA.match(t) for t in tokens):
+            hints.append(
+                "it looks like ';'-separated with decimal commas, which lidarqa reads; "
+                "check for thousands separators or text columns with commas"
+            )
+    elif any(DECIMAL_COMMA.match(t) for ln in lines for t in ln.split("\t")) and "\t" in text:
+        hints.append("it looks like tab-separated with decimal commas")
+    elif lines and any(ln.count(",") > _header_commas(text) for ln in lines):
+        hints.append(
+            "there are more commas than columns: decimal commas in a ','-separated file? "
+            "Export with ';' between values or '.' as decimal point"
+        )
+    if raw.startswith(b"\xef\xbb\xbf") and not hints:
+        return ""  # a UTF-8 byte-order mark is read fine
+    return f" ({'; '.join(hints)})" if hints else ""
 
 
 def _is_number(token: str) -> bool:
@@ -71,6 +123,9 @@ def read_text(path: str | os.PathLike, *, crs: Any = None) -> PointCloud:
     p = check_input(path)
     names, delim = sniff_header(p)
     skip = 0 if names is None else 1
+    extra: dict[str, Any] = {}
+    if delim in (";", "\t") and "decimal commas" in dialect_hint(p):
+        extra["converters"] = lambda v: float(v.replace(",", "."))
     try:
         data = np.loadtxt(
             p,
@@ -81,10 +136,12 @@ def read_text(path: str | os.PathLike, *, crs: Any = None) -> PointCloud:
             dtype=np.float64,
             encoding="utf-8-sig",
             quotechar='"',
+            **extra,
         )
     except ValueError as exc:
         raise ReadError(
             f"cannot read {p} as a numeric table: {str(exc).splitlines()[0][:160]}"
+            + dialect_hint(p)
         ) from exc
     if names is None:
         if data.shape[1] < 3:

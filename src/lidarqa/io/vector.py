@@ -28,6 +28,7 @@ from ..errors import InvalidPointsError, ReadError, WriteError
 from ..units import format_coordinate, format_decimal
 from ._atomic import atomic_path, check_input, check_output
 from .crs import read_crs_sidecar, resolve_crs, sidecar_path, write_crs_sidecar
+from .text import DECIMAL_COMMA, dialect_hint
 
 __all__ = [
     "Segments",
@@ -144,6 +145,9 @@ def _convert_column(values: list[str]) -> np.ndarray:
     try:
         arr = np.array([float(v) if v.strip() != "" else np.nan for v in values], dtype=np.float64)
     except ValueError:
+        # decimal commas (';'-separated European exports): every value a number with a comma
+        if values and all(DECIMAL_COMMA.match(v) or _is_float(v) for v in values if v.strip()):
+            return _convert_column([v.replace(",", ".") for v in values])
         return np.array(values, dtype=object)
     if (
         arr.size
@@ -169,9 +173,20 @@ def _read_csv_table(p: Path) -> dict[str, np.ndarray]:
     body = rows[1:]
     for i, r in enumerate(body, start=2):
         if len(r) != len(header):
-            raise ReadError(f"input {p} line {i}: {len(r)} values for {len(header)} columns")
+            raise ReadError(
+                f"input {p} line {i}: {len(r)} values for {len(header)} columns"
+                + dialect_hint(p)
+            )
     cols = list(zip(*body, strict=True)) if body else [() for _ in header]
     return {h: _convert_column(list(c)) for h, c in zip(header, cols, strict=True)}
+
+
+def _is_float(v: str) -> bool:
+    try:
+        float(v)
+    except ValueError:
+        return False
+    return True
 
 
 def _need(table: dict, names: tuple[str, ...], p: Path) -> None:
@@ -183,7 +198,10 @@ def _need(table: dict, names: tuple[str, ...], p: Path) -> None:
 def _floats(table: dict, name: str, p: Path) -> np.ndarray:
     col = table[name]
     if col.dtype == object:
-        raise ReadError(f"input {p}: column {name!r} is not numeric")
+        bad = next((str(v) for v in col if not _is_float(str(v))), "")
+        raise ReadError(
+            f"input {p}: column {name!r} is not numeric (e.g. {bad!r})" + dialect_hint(p)
+        )
     return col.astype(np.float64)
 
 
