@@ -8,6 +8,9 @@ Policy
 - **Ratios** (error rates, shares of points) are stored in JSON as **fractions
   between 0 and 1**; text and report show them as percentages. Keys ending in
   ``_pct`` are percentages (0–100).
+- **Targets** ``target_<metric>`` (config keys and verdicts) have the unit of
+  their metric: ``target_total = 0.05`` is a fraction (5 %), ``target_lhd = 0.5``
+  metres.
 - **Key names carry their unit** where the name alone would be ambiguous:
   ``_m`` metres, ``_deg`` degrees, ``_m2`` square metres, ``_per_m2`` per square
   metre, ``_s`` seconds, ``_pct`` percent, ``_ppm`` parts per million. Every other
@@ -37,11 +40,14 @@ import re
 __all__ = [
     "SUFFIX_UNITS",
     "KEY_UNITS",
+    "STAT_KEYS",
+    "GROUP_KEYS",
     "key_unit",
     "param_unit",
     "COORDINATE_DECIMALS",
     "format_coordinate",
     "format_decimal",
+    "undefined_units",
 ]
 
 #: Unit of a key from its suffix (checked in this order).
@@ -60,69 +66,114 @@ _D = "degree"
 _N = "count"
 _F = "fraction"
 _1 = "1"
+_ID = "id"
 
-#: Unit of every numeric JSON key without a unit suffix.
+
+def _keys(unit: str, names: str) -> dict[str, str]:
+    return dict.fromkeys(names.split(), unit)
+
+
+#: Unit of every numeric JSON key without a unit suffix. "1" is dimensionless,
+#: "count" a number of things, "fraction" a ratio between 0 and 1 (shown as % in
+#: text and report), "id" a code or identifier (class, strip, EPSG, format).
 KEY_UNITS: dict[str, str] = {
-    # coordinates, bounds, lengths (metres)
-    **dict.fromkeys(
-        (
-            "x", "y", "z", "x1", "y1", "z1", "x2", "y2", "z2", "dx", "dy", "dz",
-            "min_x", "min_y", "min_z", "max_x", "max_y", "max_z",
-            "tx", "ty", "tz", "c", "d", "e",
-            "mean_x", "mean_y", "mean_z", "std_x", "std_y", "std_z",
-            "rmse_x", "rmse_y", "rmse_z", "rmse_h", "rmse_v", "rmse_3d", "rmse_r",
-            "max_abs_x", "max_abs_y", "max_abs_z", "max_abs", "mean", "std", "rmse", "median",
-            "accuracy_r", "accuracy_z", "accuracy_h", "accuracy_v", "accuracy_3d",
-            "sigma0", "sigma0_h", "sigma0_v", "sigma_x", "sigma_y", "sigma_z", "sigma_line",
-            "sigma_point", "sigma_map", "sigma_reference", "sigma_h", "sigma",
-            "checkpoint_rmse_h", "checkpoint_rmse_v",
-            "max_distance", "max_edge", "radius", "threshold", "cell_size", "spacing",
-            "min_spacing", "lhd", "lhd_sym", "lhd_test_model", "lhd_model_test",
-            "iter_distance", "max_iter_distance", "distance", "length", "rho", "rms",
-            "instrument_height", "height", "offset", "tolerance", "buffer",
-            "mean_spacing", "ground_spacing", "sensitivity_m",
-        ),
+    # coordinates, bounds, translations, lengths, distances, precisions: metres
+    **_keys(
         _M,
+        """x y z x1 y1 z1 x2 y2 z2 dx dy dz tin_z min_x min_y min_z max_x max_y max_z
+        station offsets scales tx ty tz c d e translation_at_coordinate_origin
+        mean_x mean_y mean_z std_x std_y std_z rmse_x rmse_y rmse_z rmse_h rmse_v rmse_3d
+        rmse_r rmse_h1 rmse_v1 max_abs_x max_abs_y max_abs_z
+        accuracy_r accuracy_r_exact accuracy_z accuracy_h accuracy_v accuracy_3d
+        sigma0 sigma0_h sigma0_v sigma_x sigma_y sigma_z sigma_line sigma_point sigma_gps
+        sigma_ins sigma_strip sigma_ref sigma_map sigma_reference sigma_mean sigma_p95
+        sigma_model_empirical sigma_h sigma comparison
+        checkpoint_rmse_h checkpoint_rmse_v max_distance max_edge radius max_radius
+        search_radius threshold threshold_tm threshold_mt olhd_tm olhd_mt lhd sensitivity
+        cell_size spacing point_spacing mean_spacing ground_spacing min_spacing
+        iter_distance final_distance below_distance connect_distance min_edge_length
+        grow_dist grow_radius seed_dist seed_dz seed_radius raised_radius raised_step
+        adjacency_dist near_dist max_dist min_length max_rmse instrument_height
+        distance length rho rms rmse buffer tolerance cutoff gao_leung_tm gao_leung_mt
+        hausdorff_tm hausdorff_mt grid map_spacing median_length median_sigma_line
+        total_length""",
     ),
-    # angles (degrees)
-    **dict.fromkeys(("omega", "phi", "kappa", "iter_angle", "angle", "orientation"), _D),
-    # counts
-    **dict.fromkeys(
-        (
-            "n_points", "n_ground", "n_check", "n_control", "n_edges", "n_planes", "n_corners",
-            "n_pairs", "n_matched", "n_test", "n_model", "n_map", "n_reference", "n_rejected",
-            "n_segments", "n_used", "n_flagged", "dof", "support_a", "support_b", "support_c",
-            "count", "points", "min_points", "iterations", "workers", "chunk_size",
-        ),
+    # angles: degrees
+    **_keys(
+        _D,
+        """omega phi kappa iter_angle max_terrain_angle connect_angle raised_angle
+        orientation_thr orientation min_angle hough_angle_step angle""",
+    ),
+    # numbers of things
+    **_keys(
         _N,
+        """n p q dof classes point_source_ids flags confusion ok no_ground_nearby sparse_tin
+        outside_tin support_a support_b support_c min_points min_segment_size
+        min_seed_points min_contacts min_tested min_facade_points connect_min_size k_feat
+        k_seed seed_support max_iter points_per_segment_median chunk_size workers
+        accepted_per_iter added_per_iter max_points min_support sigma_classes""",
     ),
-    # ratios 0..1
-    **dict.fromkeys(
-        (
-            "type_i", "type_ii", "total", "kappa_coefficient", "precision", "recall",
-            "frac_lt1", "fraction", "correlation", "alpha", "sensitivity", "share",
-        ),
+    # ratios between 0 and 1
+    **_keys(
         _F,
+        """type_i type_ii total precision recall frac_lt1 frac_lt2 ground_fraction
+        segmented_fraction accept_ratio connect_ratio raised_ratio reject_ratio
+        seed_support_ratio min_gain_frac refit_growth correlation alpha fraction q_lo q_hi""",
     ),
     # dimensionless numbers
-    **dict.fromkeys(
-        ("a", "b", "scale", "weight", "w", "w_test", "critical_value", "k", "factor", "seed"),
+    **_keys(
         _1,
+        """a b scale ratio weight w critical std_without_outliers rotation_matrix det
+        min_det scatter_thr trim growth grow_radius_factor kappa_coefficient seed""",
     ),
+    # codes and identifiers
+    **_keys(
+        _ID,
+        """crs_epsg point_format source_id source_ids test_source_id model_source_id
+        exclude_classes ignore_classes id""",
+    ),
+    # per volume/area densities and curvature
+    "max_segment_density": "1/m²",
+    "curvature": "1/m",
+    "size": "byte",
+    # a verdict's value and target have the unit of the metric named beside them
+    "value": "unit of the metric",
+    "target": "unit of the metric",
 }
 
+#: Statistics whose unit is that of the quantity they summarise (the parent key):
+#: ``{"angle_deg": {"min": ..., "median": ..., "max": ...}}`` is in degrees.
+STAT_KEYS = frozenset("min max median mean std p95 rms max_abs".split())
 
-def key_unit(key: str) -> str | None:
+#: Objects whose every member has the object's unit (counts per class, per flag, ...).
+GROUP_KEYS = frozenset("classes point_source_ids flags confusion sigma_classes timings_s".split())
+
+
+def key_unit(key: str, parent: str | None = None) -> str | None:
     """The unit of a JSON key by the policy (None when it is not defined).
+
+    `parent` is the key of the enclosing object: a statistic (``min``, ``max``,
+    ``mean``, ...) has the unit of the quantity it summarises, and an object
+    keyed by codes (``{"classes": {"2": 1200}}``) has the unit of its own key.
 
     Examples
     --------
     >>> key_unit("rmse_z"), key_unit("angle_deg"), key_unit("density_per_m2")
     ('m', 'degree', '1/m²')
+    >>> key_unit("max", parent="angle_deg"), key_unit("2", parent="classes")
+    ('degree', 'count')
     """
     k = key.lower()
+    if parent is not None and (
+        k in STAT_KEYS or k.lstrip("-").isdigit() or parent.lower() in GROUP_KEYS
+    ):
+        unit = key_unit(parent)
+        if unit is not None:
+            return unit
     if k in KEY_UNITS:
         return KEY_UNITS[k]
+    if k.startswith("target_"):  # target_<metric> has the unit of the metric
+        return key_unit(k[len("target_") :])
     for suffix, unit in SUFFIX_UNITS.items():
         if k.endswith(suffix):
             return unit
@@ -164,3 +215,26 @@ def format_decimal(value: float) -> str:
     ('0.3', '1e-12')
     """
     return f"{float(value):.10g}"
+
+
+def _numbers(obj: object, key: str | None, parent: str | None, path: str):
+    if isinstance(obj, dict):
+        for k, v in obj.items():
+            yield from _numbers(v, str(k), key, f"{path}/{k}")
+    elif isinstance(obj, list | tuple):
+        for v in obj:
+            yield from _numbers(v, key, parent, f"{path}[]")
+    elif isinstance(obj, int | float) and not isinstance(obj, bool):
+        yield path, key, parent
+
+
+def undefined_units(document: object) -> list[str]:
+    """Paths of the numbers in a JSON document whose unit this policy does not define.
+
+    Examples
+    --------
+    >>> undefined_units({"results": {"rmse_z": 0.1, "wobble": 2.0, "classes": {"2": 7}}})
+    ['/results/wobble']
+    """
+    found = _numbers(document, None, None, "")
+    return sorted({p for p, k, parent in found if key_unit(k or "", parent) is None})

@@ -210,7 +210,7 @@ def edges(path: str, output: str, classes: list[int] | None, source_id: list[int
 @click.command()
 @_selection_options
 @click.option("--min-det", type=float, default=0.1, show_default=True,
-              help="Smallest |det| of the three unit normals (conditioning).")
+              help="Smallest |det| of the three unit normals (dimensionless, 0..1; conditioning).")
 @click.option("--min-angle", type=float, default=10.0, show_default=True,
               help="Smallest angle (degrees) between any two of the three planes.")
 @click.option("--max-dist", type=float, default=1.0, show_default=True,

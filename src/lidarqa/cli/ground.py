@@ -39,43 +39,45 @@ from ._common import (
     help="Parameter set: als (airborne, ~1 pt/m2) or mls (Lin & Zhang Table 1, the default); "
     "explicit options override it.",
 )
-@click.option("--cell-size", type=float, default=None, help="Seed grid cell, m (default 60).")
 @click.option(
-    "--max-terrain-angle", type=float, default=None, help="Steepest facet, degrees (default 88)."
+    "--cell-size", type=float, default=None, help="Seed grid cell size (m) [default: 60]."
 )
 @click.option(
-    "--iter-angle", type=float, default=None, help="Iteration angle, degrees (default 6)."
+    "--max-terrain-angle", type=float, default=None, help="Steepest facet (degrees) [default: 88]."
 )
 @click.option(
-    "--iter-distance", type=float, default=None, help="Iteration distance, m (default 0.5)."
+    "--iter-angle", type=float, default=None, help="Iteration angle (degrees) [default: 6]."
 )
 @click.option(
-    "--min-edge-length", type=float, default=None, help="Minimum edge length, m (default 1)."
+    "--iter-distance", type=float, default=None, help="Iteration distance (m) [default: 0.5]."
+)
+@click.option(
+    "--min-edge-length", type=float, default=None, help="Minimum TIN edge length (m) [default: 1]."
 )
 @click.option("--no-mirror", is_flag=True, help="Do not test points mirrored at steep edges.")
 @click.option(
     "--accept-ratio",
     type=float,
     default=None,
-    help="segment-ptd: fraction of tested points that must pass (default 0.5).",
+    help="segment-ptd: fraction of tested points that must pass (0..1) [default: 0.5].",
 )
 @click.option(
     "--orientation-thr",
     type=float,
     default=None,
-    help="segment-ptd: façade orientation threshold, degrees (default 45).",
+    help="segment-ptd: façade orientation threshold (degrees) [default: 45].",
 )
 @click.option(
     "--scatter-thr",
     type=float,
     default=None,
-    help="segment-ptd: vegetation scatterness threshold (default 0.2).",
+    help="segment-ptd: vegetation scatterness threshold (dimensionless) [default: 0.2].",
 )
 @click.option(
     "--grow-radius",
     type=float,
     default=None,
-    help="segment-ptd: surface-growing radius, m (default 2.5 x point spacing).",
+    help="segment-ptd: surface-growing radius (m) [default: 2.5 x point spacing].",
 )
 @click.option(
     "--all-returns",

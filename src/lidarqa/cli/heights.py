@@ -170,14 +170,14 @@ def _fmt(v: float, scale: float = 1.0, unit: str = "m") -> str:
     type=float,
     default=0.0,
     show_default=True,
-    help="Correlation 0..1 between the heights of the three TIN vertices.",
+    help="Correlation between the heights of the three TIN vertices (0..1).",
 )
 @click.option(
     "--alpha",
     type=float,
     default=0.001,
     show_default=True,
-    help="Significance level of the w-tests (0.001 -> critical value 3.29).",
+    help="Significance level of the w-tests (0..1; 0.001 -> critical value 3.29).",
 )
 @click.option(
     "--classes",
@@ -191,7 +191,7 @@ def _fmt(v: float, scale: float = 1.0, unit: str = "m") -> str:
     type=float,
     default=10.0,
     show_default=True,
-    help="Map points every this many metres along polygon boundaries (polygon MAP).",
+    help="Distance between map points along polygon boundaries (m; polygon MAP).",
 )
 @click.option(
     "--eq8",

@@ -100,9 +100,15 @@ def _station(value: str | None) -> tuple[float, float, float]:
     type=float,
     default=0.0,
     show_default=True,
-    help="Azimuth of the instrument's zero direction, in the angle unit.",
+    help="Azimuth of the instrument's zero direction (in --angle-unit).",
 )
-@click.option("--instrument-height", type=float, default=0.0, show_default=True, help="Metres.")
+@click.option(
+    "--instrument-height",
+    type=float,
+    default=0.0,
+    show_default=True,
+    help="Instrument height above the station mark (m).",
+)
 @click.option(
     "--angle-unit", type=click.Choice(["deg", "gon", "rad"]), default="deg", show_default=True
 )
