@@ -287,15 +287,23 @@ def echo(text: str = "") -> None:
     click.echo(text)
 
 
+def _no_progress(fraction: float) -> None:
+    """The progress callback of a step that shows nothing."""
+
+
 class Steps:
     """Progress display for the steps of a long command (rich, on stderr).
 
-    ``with steps("Reading input"):`` shows a spinner while the step runs and a
-    tick with its duration afterwards; nothing is shown with ``-q``. For loops
-    with a known length use :meth:`track`.
+    ``with steps("Reading input") as progress:`` shows the step while it runs
+    and a tick with its duration afterwards; nothing is shown with ``-q``.
+    `progress` is a callback for the kernels' ``progress=`` keyword: once the
+    kernel reports a fraction, the spinner becomes a bar with percentage,
+    elapsed time and ETA. When stderr is not a terminal (piped, redirected,
+    CI logs) there is no live display and no control code: one plain line per
+    finished step, never wrapped. For loops with a known length use :meth:`track`.
     """
 
-    def __init__(self, quiet: bool | None = None) -> None:
+    def __init__(self, quiet: bool | None = None, console: Any = None) -> None:
         if quiet is None:
             try:
                 quiet = settings().quiet
@@ -306,26 +314,80 @@ class Steps:
         if not quiet:
             from rich.console import Console
 
-            self._console = Console(stderr=True)
+            self._console = console or Console(stderr=True, soft_wrap=True, highlight=False)
+
+    @property
+    def live(self) -> bool:
+        """True when progress is drawn live (stderr is an interactive terminal)."""
+        c = self._console
+        return c is not None and c.is_terminal and not c.is_dumb_terminal
+
+    def _done(self, description: str, seconds: float) -> None:
+        from rich.markup import escape
+        from rich.text import Text
+
+        assert self._console is not None
+        if self.live:
+            self._console.print(
+                f"[green]✓[/green] {escape(description)} [dim]({seconds:.1f} s)[/dim]"
+            )
+        else:
+            self._console.print(Text(f"✓ {description} ({seconds:.1f} s)"), soft_wrap=True)
 
     @contextlib.contextmanager
-    def __call__(self, description: str) -> Iterator[None]:
+    def __call__(self, description: str) -> Iterator[Callable[[float], None]]:
         if self._console is None:
-            yield
+            yield _no_progress
             return
         t0 = time.perf_counter()
-        with self._console.status(description + " ..."):
-            yield
-        self._console.print(
-            f"[green]✓[/green] {description} [dim]({time.perf_counter() - t0:.1f} s)[/dim]"
+        if not self.live:
+            yield _no_progress
+            self._done(description, time.perf_counter() - t0)
+            return
+        from rich.progress import (
+            BarColumn,
+            Progress,
+            SpinnerColumn,
+            TaskProgressColumn,
+            TextColumn,
+            TimeElapsedColumn,
+            TimeRemainingColumn,
         )
 
+        bar = Progress(
+            SpinnerColumn(),
+            TextColumn("{task.description}", markup=False),
+            BarColumn(bar_width=24),
+            TaskProgressColumn(),
+            TimeElapsedColumn(),
+            TextColumn("ETA"),
+            TimeRemainingColumn(),
+            console=self._console,
+            transient=True,
+        )
+        with bar:
+            task = bar.add_task(description, total=None)
+
+            def update(fraction: float) -> None:
+                f = min(1.0, max(0.0, float(fraction)))
+                bar.update(task, total=1.0, completed=f, refresh=True)
+
+            yield update
+        self._done(description, time.perf_counter() - t0)
+
     def track(self, iterable: Any, description: str, total: int | None = None) -> Iterator[Any]:
+        """Iterate with a progress bar (count, %, ETA) when live; plain lines otherwise."""
         if self._console is None:
             yield from iterable
+            return
+        t0 = time.perf_counter()
+        if not self.live:
+            yield from iterable
+            self._done(description, time.perf_counter() - t0)
             return
         from rich.progress import track
 
         yield from track(
             iterable, description=description, total=total, console=self._console, transient=True
         )
+        self._done(description, time.perf_counter() - t0)

@@ -88,10 +88,11 @@ def _load(path: str, classes: list[int] | None, source_id: list[int] | None, ste
 def _segment(xyz: np.ndarray, opts: dict, steps: Steps):
     from ..geometry.segmentation import segment_planes
 
-    with steps(f"Segmenting {len(xyz):,} points into planes"):
+    with steps(f"Segmenting {len(xyz):,} points into planes") as progress:
         return segment_planes(xyz, grow_radius=opts["grow_radius"], grow_dist=opts["grow_dist"],
                               seed_method=opts["seed_method"],
-                              min_segment_size=opts["min_segment_size"], max_rmse=opts["max_rmse"])
+                              min_segment_size=opts["min_segment_size"], max_rmse=opts["max_rmse"],
+                              progress=progress)
 
 
 def _stats(values: np.ndarray) -> dict[str, Any]:

@@ -171,7 +171,7 @@ def ground(
     with steps("Reading " + path):
         cloud = read(path, crs=given_crs)
     with (
-        steps(f"Filtering ({method}, {len(cloud):,} points)"),
+        steps(f"Filtering ({method}, {len(cloud):,} points)") as progress,
         warnings.catch_warnings(record=True) as caught,
     ):
         warnings.simplefilter("always", DataQualityWarning)
@@ -183,6 +183,7 @@ def ground(
             evaluate=evaluate,
             ignore_classes=ignore_classes,
             preset=preset,
+            progress=progress,
             **params,
         )
     for w in caught:

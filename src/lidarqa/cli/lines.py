@@ -152,7 +152,7 @@ def lines(
     if ground_truth:
         with steps("Reading ground truth"):
             gt = read_pairs(ground_truth)
-    with steps(f"Matching {len(t)} × {len(m)} segments"):
+    with steps(f"Matching {len(t)} × {len(m)} segments") as progress:
         r = match_segments(
             t,
             m,
@@ -162,6 +162,7 @@ def lines(
             rotate=rotate,
             denominator=denominator,
             ground_truth=gt,
+            progress=progress,
         )
     from ..io._atomic import atomic_path
 

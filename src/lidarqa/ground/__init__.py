@@ -231,6 +231,7 @@ def classify_ground(
     evaluate: bool = False,
     ignore_classes: Any = None,
     preset: str | None = None,
+    progress: Any = None,
     **params: Any,
 ) -> GroundResult:
     """Detect ground points in a point cloud from geometry and return numbers alone.
@@ -255,6 +256,9 @@ def classify_ground(
     preset : {"als", "mls"}, optional
         Start from :data:`PRESETS` ``[preset]`` (``"mls"`` = the library defaults);
         explicit `params` override it.
+    progress : callable, optional
+        Called with the estimated fraction of the work done (0..1), e.g. to show
+        a progress bar; the filter itself never prints.
     **params
         Filter parameters of :class:`SegmentPTD` or :class:`PTD` (m, degrees).
 
@@ -278,7 +282,7 @@ def classify_ground(
     cand, handling, n_noise, msgs = ground_candidates(
         cloud, last_returns_only=last_returns_only, exclude_classes=exclude_classes
     )
-    details = filt.run(cloud.xyz, candidates=cand)
+    details = filt.run(cloud.xyz, candidates=cand, progress=progress)
     ground = details.ground_mask
     evaluation = None
     if evaluate:

@@ -113,7 +113,11 @@ class ParamDefaults(dict):
 
 
 def keyword_defaults(func: Any, *, exclude: tuple[str, ...] = ()) -> ParamDefaults:
-    """Keyword parameters of `func` with their defaults (required ones map to None)."""
+    """Keyword parameters of `func` with their defaults (required ones map to None).
+
+    ``progress`` (the kernels' progress callback) is a runtime hook, never a parameter.
+    """
+    exclude = (*exclude, "progress")
     out = ParamDefaults()
     for name, p in inspect.signature(func).parameters.items():
         if p.annotation is not inspect.Parameter.empty and name not in exclude:
@@ -195,13 +199,16 @@ class RunContext:
                     break
 
     @contextlib.contextmanager
-    def step(self, description: str) -> Iterator[None]:
-        """Progress display for a long step (nested steps are folded into the outer one)."""
+    def step(self, description: str) -> Iterator[Any]:
+        """Progress display for a long step (nested steps are folded into the outer one).
+
+        Yields a progress callback for the kernels' ``progress=`` keyword, or None.
+        """
         if self._step is None:
-            yield
+            yield None
         else:
-            with self._step(description):
-                yield
+            with self._step(description) as progress:
+                yield progress
 
     # -- inputs
     def cloud(self, name: str) -> Any:
@@ -487,8 +494,8 @@ def run_lines(ctx: RunContext, item: AnalysisItem) -> SectionResult:
         raise DegenerateGeometryError(
             f"no segments to match: {len(test)} test ({tlabel}), {len(model)} model ({mlabel})"
         )
-    with ctx.step(f"Matching {len(test):,} × {len(model):,} segments"):
-        m = match_segments(test, model, ground_truth=gt, **item.params)
+    with ctx.step(f"Matching {len(test):,} × {len(model):,} segments") as progress:
+        m = match_segments(test, model, ground_truth=gt, progress=progress, **item.params)
     res = m.to_dict()
     res.update(
         test=tlabel,
@@ -1217,13 +1224,17 @@ def run_ground(ctx: RunContext, item: AnalysisItem) -> SectionResult:
     ignore = list(opts["ignore_classes"] or [])
     import warnings
 
-    with ctx.step(f"Ground filtering ({opts['method']}, {n:,} points)"), warnings.catch_warnings():
+    with (
+        ctx.step(f"Ground filtering ({opts['method']}, {n:,} points)") as progress,
+        warnings.catch_warnings(),
+    ):
         warnings.simplefilter("ignore")  # reported through result.warnings instead
         result = ground_mod.classify_ground(
             cloud,
             method=opts["method"],
             evaluate=evaluate,
             ignore_classes=ignore or None,
+            progress=progress,
             **item.params,
         )
     ground = np.asarray(result.ground_mask, dtype=bool)
