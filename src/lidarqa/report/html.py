@@ -11,6 +11,7 @@ from __future__ import annotations
 import base64
 import html
 import math
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -80,6 +81,9 @@ class Report:
     config_text: str | None = None
 
 
+_ID_HEADER = re.compile(r"(^|\b)(id|ids|epsg|strip|source id|point)(\b|$)", re.IGNORECASE)
+
+
 def fmt(value: Any, digits: int = 4) -> str:
     """A compact, human-readable rendering of a table value."""
     if value is None:
@@ -94,10 +98,10 @@ def fmt(value: Any, digits: int = 4) -> str:
         if value == 0:
             return "0"
         a = abs(value)
-        if a >= 1e5 or a < 1e-4:
+        if a >= 1e9 or a < 1e-4:
             return f"{value:.3e}"
-        if a >= 1000:
-            return f"{value:,.1f}"
+        if a >= 1000:  # coordinates and long distances: to the millimetre, no separators
+            return f"{value:.3f}"
         return f"{value:.{digits}g}"
     try:
         import numpy as np
@@ -201,11 +205,16 @@ def _table(t: Table, *, numeric_right: bool = True) -> str:
         and all(_is_num(r[j]) or r[j] is None for r in t.rows if j < len(r))
         for j in range(ncol)
     ]
+    # identifiers (point ids, strip ids, EPSG codes) are names, not quantities: no separators
+    id_col = [bool(_ID_HEADER.search(str(c))) for c in t.columns] + [False] * ncol
     for row in t.rows:
         cells = []
         for j, v in enumerate(row):
             num = numeric_col[j]
-            text = fmt(v)
+            is_int = (isinstance(v, int) and not isinstance(v, bool)) or (
+                getattr(getattr(v, "dtype", None), "kind", "") in ("i", "u")
+            )
+            text = str(v) if id_col[j] and is_int else fmt(v)
             cls = ' class="num"' if num else (' class="wrap"' if len(text) > 60 else "")
             cells.append(f"<td{cls}>{_e(text)}</td>")
         out.append("<tr>" + "".join(cells) + "</tr>")
