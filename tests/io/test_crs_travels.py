@@ -144,3 +144,17 @@ def test_ground_text_output_keeps_las_precision_and_crs(data_dir, tmp_path):
     back = lidarqa.read(out)
     assert back.crs is not None and back.crs.to_epsg() == 32632
     np.testing.assert_allclose(back.xyz, src.xyz, atol=0.5 * 10.0**-decimals + 1e-9)
+
+
+def test_assess_reads_csv_sidecars_and_refuses_a_contradicting_config(tmp_path):
+    from lidarqa.report.config import ConfigCRSMismatchError, load_config
+
+    p = tmp_path / "check.csv"
+    write_points(PointSet(np.array([1, 2]), [[1.0, 2.0, 3.0], [2.0, 3.0, 4.0]], crs=L93), p)
+    cfg = tmp_path / "a.toml"
+    cfg.write_text(
+        'crs = "EPSG:32632"\n[inputs.points]\ncheck = "check.csv"\nmeasured = "check.csv"\n'
+        '[checkpoints]\nmeasured = "measured"\ncheck = "check"\n'
+    )
+    with pytest.raises(ConfigCRSMismatchError, match="Lambert-93"):
+        load_config(cfg)

@@ -858,9 +858,11 @@ def run_checkpoints(ctx: RunContext, item: AnalysisItem) -> SectionResult:
             "(transformed) measured − check."
         )
     res = rep.to_dict()
-    _write_vector_safe(ctx, item, rep.residual_points(), "residuals", opts["format"], notes)
+    res_pts = rep.residual_points()
+    res_pts.crs = check.crs if check.crs is not None else ctx.crs  # outputs carry the CRS
+    _write_vector_safe(ctx, item, res_pts, "residuals", opts["format"], notes)
     if opts["format"] != "csv":
-        _write_vector_safe(ctx, item, rep.residual_points(), "residuals", "csv", notes)
+        _write_vector_safe(ctx, item, res_pts, "residuals", "csv", notes)
     notes.extend(str(w) for w in res.get("warnings", []))
     figures = []
     with ctx.step("Plotting residuals"):
