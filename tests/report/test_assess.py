@@ -278,3 +278,8 @@ transform = "helmert"
     # A 3D Helmert absorbs a pure shift: residuals vanish.
     assert run.results["helmert"]["rmse_3d"] < 1e-6
     assert run.document["parameters"]["helmert"]["params"]["transform"] == "helmert"
+    # about the control-point centroid, the translation is the shift itself (issue #16)
+    t = run.results["helmert"]["transform"]
+    assert [t["params"][k] for k in ("tx", "ty", "tz")] == pytest.approx(-MEASURED_SHIFT, abs=1e-6)
+    html = (tmp_path / "out" / "report.html").read_text(encoding="utf-8")
+    assert "tx (m)" in html and "control-point centroid" in html

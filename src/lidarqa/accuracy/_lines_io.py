@@ -90,7 +90,9 @@ def load_segments(
     if source_id is not None:
         cloud = cloud.select(source_id=source_id)
     if len(cloud) == 0:
-        raise InvalidPointsError(f"{path}: no points with classes={classes} source_id={source_id}")
+        raise InvalidPointsError(
+            f"{path}: no points in the selection (classes {classes}, source ids {source_id})"
+        )
     return extract_segments(cloud.xyz, crs=cloud.crs, **(edge_options or {}))
 
 

@@ -910,10 +910,17 @@ def run_checkpoints(ctx: RunContext, item: AnalysisItem) -> SectionResult:
                 f"Transformation: {tr['name']}",
                 ["parameter", "value", "σ"],
                 [
-                    [k, v, (tr.get("sigmas") or {}).get(k)]
+                    [_with_unit(k), v, (tr.get("sigmas") or {}).get(k)]
                     for k, v in (tr.get("params") or {}).items()
                 ],
-                note=f"σ0 = {fmt_or_dash(tr.get('sigma0'))}",
+                note=f"σ0 = {fmt_or_dash(tr.get('sigma0'))} m"
+                + (
+                    "; tx, ty, tz are the shift of the control-point centroid "
+                    + ", ".join(f"{a} {fmt_or_dash(tr['origin'][a])}" for a in "xyz")
+                    + " m, about which rotations and scale act"
+                    if tr.get("origin")
+                    else ""
+                ),
             )
         )
     if opts["vertical"]:
@@ -956,6 +963,14 @@ def run_checkpoints(ctx: RunContext, item: AnalysisItem) -> SectionResult:
         notes=notes,
         paragraphs=paragraphs,
     )
+
+
+def _with_unit(key: str) -> str:
+    """``"tx (m)"``, ``"kappa_deg"`` stays, ``"scale"`` stays: the unit policy of lidarqa.units."""
+    from ..units import param_unit
+
+    unit = param_unit(key)
+    return f"{key} ({unit})" if unit and not key.endswith("_deg") else key
 
 
 def fmt_or_dash(v: Any) -> str:
