@@ -158,3 +158,18 @@ def test_assess_reads_csv_sidecars_and_refuses_a_contradicting_config(tmp_path):
     )
     with pytest.raises(ConfigCRSMismatchError, match="Lambert-93"):
         load_config(cfg)
+
+
+def test_las_without_crs_gets_the_given_one_on_write(tmp_path):
+    from lidarqa.io import PointCloud
+
+    xyz = np.random.default_rng(0).uniform(0, 100, (500, 3)) + [770000.0, 6277000.0, 0.0]
+    bare = tmp_path / "bare.laz"
+    lidarqa.write(PointCloud(xyz=xyz), bare)
+    assert lidarqa.read(bare).crs is None
+    cloud = lidarqa.read(bare, crs=L93)  # what --crs does
+    out = tmp_path / "out.laz"
+    lidarqa.write(cloud, out)
+    back = lidarqa.read(out)
+    assert back.crs.to_epsg() == 2154
+    np.testing.assert_array_equal(back.xyz, lidarqa.read(bare).xyz)  # points untouched
