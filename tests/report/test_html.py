@@ -113,3 +113,10 @@ def test_id_columns_have_no_thousands_separators():
     )  # fmt: skip
     assert "<td>12345</td>" in html_text.replace(' class="num"', "")
     assert "12,345" in html_text  # a count keeps its separators
+    t2 = Table(title="r", columns=["cloud z (m)", "dz (m)"], rows=[[20.9, 0.031694]], decimals=3)
+    sec2 = Section(id="s2", title="s2", kind="checkpoints", tables=[t2])
+    html2 = render_html(
+        Report(title="t", subtitle="s", summary=[], sections=[sec2], parameters={}, provenance=[],
+               inputs=[], versions={})
+    )  # fmt: skip
+    assert "20.900" in html2 and "0.032" in html2 and "0.03169" not in html2

@@ -943,6 +943,7 @@ def run_checkpoints(ctx: RunContext, item: AnalysisItem) -> SectionResult:
             note="first 100 points; all in the output files"
             if len(res.get("residuals", [])) > 100
             else "",
+            decimals=3,  # metres to the millimetre, heights and residuals alike
         )
     )
     if opts["vertical"]:

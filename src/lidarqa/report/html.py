@@ -36,6 +36,8 @@ class Table:
     columns: Sequence[str]
     rows: Sequence[Sequence[Any]]
     note: str = ""
+    #: Fixed decimals for every decimal number (e.g. 3: metres to the mm), else :func:`fmt`.
+    decimals: int | None = None
 
 
 @dataclass(frozen=True)
@@ -79,6 +81,13 @@ class Report:
     versions: dict[str, Any]
     attribution: str | None = None
     config_text: str | None = None
+
+
+def _is_float(v: Any) -> bool:
+    if isinstance(v, bool) or v is None:
+        return False
+    kind = getattr(getattr(v, "dtype", None), "kind", "")
+    return (isinstance(v, float) or kind == "f") and math.isfinite(float(v))
 
 
 _ID_HEADER = re.compile(r"(^|\b)(id|ids|epsg|strip|source id|point)(\b|$)", re.IGNORECASE)
@@ -214,7 +223,12 @@ def _table(t: Table, *, numeric_right: bool = True) -> str:
             is_int = (isinstance(v, int) and not isinstance(v, bool)) or (
                 getattr(getattr(v, "dtype", None), "kind", "") in ("i", "u")
             )
-            text = str(v) if id_col[j] and is_int else fmt(v)
+            if id_col[j] and is_int:
+                text = str(v)
+            elif t.decimals is not None and _is_float(v):
+                text = f"{float(v):.{t.decimals}f}"
+            else:
+                text = fmt(v)
             cls = ' class="num"' if num else (' class="wrap"' if len(text) > 60 else "")
             cells.append(f"<td{cls}>{_e(text)}</td>")
         out.append("<tr>" + "".join(cells) + "</tr>")
