@@ -42,6 +42,7 @@ __all__ = [
     "KEY_UNITS",
     "STAT_KEYS",
     "GROUP_KEYS",
+    "GROUP_UNITS",
     "key_unit",
     "param_unit",
     "COORDINATE_DECIMALS",
@@ -107,7 +108,7 @@ KEY_UNITS: dict[str, str] = {
     # numbers of things
     **_keys(
         _N,
-        """n p q dof classes point_source_ids flags confusion ok no_ground_nearby sparse_tin
+        """n p q dof flags confusion ok no_ground_nearby sparse_tin
         outside_tin support_a support_b support_c min_points min_segment_size
         min_seed_points min_contacts min_tested min_facade_points connect_min_size k_feat
         k_seed seed_support max_iter points_per_segment_median chunk_size workers
@@ -129,8 +130,8 @@ KEY_UNITS: dict[str, str] = {
     # codes and identifiers
     **_keys(
         _ID,
-        """crs_epsg point_format source_id source_ids test_source_id model_source_id
-        exclude_classes ignore_classes id""",
+        """crs_epsg point_format classes point_source_ids source_id source_ids test_source_id
+        model_source_id exclude_classes ignore_classes id""",
     ),
     # per volume/area densities and curvature
     "max_segment_density": "1/m²",
@@ -145,8 +146,13 @@ KEY_UNITS: dict[str, str] = {
 #: ``{"angle_deg": {"min": ..., "median": ..., "max": ...}}`` is in degrees.
 STAT_KEYS = frozenset("min max median mean std p95 rms max_abs".split())
 
-#: Objects whose every member has the object's unit (counts per class, per flag, ...).
-GROUP_KEYS = frozenset("classes point_source_ids flags confusion sigma_classes timings_s".split())
+#: Objects whose members all have one unit: ``{"classes": {"2": 21786}}`` counts points per
+#: class code (while a list ``"classes": [2, 6]`` holds codes), ``timings_s`` seconds per step.
+GROUP_UNITS: dict[str, str] = {
+    **dict.fromkeys("classes point_source_ids flags confusion sigma_classes".split(), _N),
+    "timings_s": "second",
+}
+GROUP_KEYS = frozenset(GROUP_UNITS)
 
 
 def key_unit(key: str, parent: str | None = None) -> str | None:
@@ -160,13 +166,13 @@ def key_unit(key: str, parent: str | None = None) -> str | None:
     --------
     >>> key_unit("rmse_z"), key_unit("angle_deg"), key_unit("density_per_m2")
     ('m', 'degree', '1/m²')
-    >>> key_unit("max", parent="angle_deg"), key_unit("2", parent="classes")
-    ('degree', 'count')
+    >>> key_unit("max", parent="angle_deg"), key_unit("2", parent="classes"), key_unit("classes")
+    ('degree', 'count', 'id')
     """
     k = key.lower()
-    if parent is not None and (
-        k in STAT_KEYS or k.lstrip("-").isdigit() or parent.lower() in GROUP_KEYS
-    ):
+    if parent is not None and parent.lower() in GROUP_UNITS:
+        return GROUP_UNITS[parent.lower()]
+    if parent is not None and (k in STAT_KEYS or k.lstrip("-").isdigit()):
         unit = key_unit(parent)
         if unit is not None:
             return unit
