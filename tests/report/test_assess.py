@@ -202,6 +202,7 @@ def test_cli_assess_and_refusal(synthetic_config, tmp_path):
     r2 = CliRunner().invoke(cli, ["assess", str(synthetic_config), "--out", str(out), "-q"])
     assert r2.exit_code == 1
     assert "exists" in r2.stderr and "--overwrite" in r2.stderr
+    assert "overwrite=True" not in r2.stderr  # CLI terms, not Python
     assert len(r2.stderr.strip().splitlines()) == 1
 
 
