@@ -18,9 +18,10 @@ Policy
   walks every command's JSON document and fails on a number whose unit is not
   defined here).
 - **Coordinates written to files** keep the precision of their source: a LAS
-  file's scale (usually 1 cm or 1 mm); computed coordinates (corners, edges,
-  check-point residuals) are written to 0.1 mm, and other decimal numbers to
-  at most 10 significant digits, never ``770500.05000000005``.
+  file's scale (usually 1 cm or 1 mm); computed coordinates (corners, edges)
+  and coordinate differences (check-point residuals ``dx``, ``dy``, ``dz``,
+  ``dh``) are written to 0.1 mm, other decimal numbers to at most 10
+  significant digits, never ``770500.05000000005``.
 - **CRS**: every file lidarqa writes carries the CRS of its source. CSV files
   get a sidecar ``<name>.prj`` with the CRS as WKT (ESRI ``.prj`` convention,
   which GDAL/OGR and QGIS read for a CSV) ; lidarqa reads it back when

@@ -173,3 +173,14 @@ def test_las_without_crs_gets_the_given_one_on_write(tmp_path):
     back = lidarqa.read(out)
     assert back.crs.to_epsg() == 2154
     np.testing.assert_array_equal(back.xyz, lidarqa.read(bare).xyz)  # points untouched
+
+
+def test_csv_residuals_are_written_to_a_tenth_of_a_millimetre(tmp_path):
+    p = tmp_path / "r.csv"
+    pts = PointSet(
+        ids=np.array(["A"]), xyz=[[1.0, 2.0, 3.0]],
+        attributes={"dx": np.array([-0.0002972952789]), "sigma": np.array([8.82e-07])},
+    )  # fmt: skip
+    write_points(pts, p)
+    row = p.read_text().splitlines()[1].split(",")
+    assert row[-2:] == ["-0.0003", "8.82e-07"]  # metres to 0.1 mm; other decimals keep their digits

@@ -408,8 +408,10 @@ def write_points(
 # ------------------------------------------------------------------- writers
 
 
-#: CSV columns holding coordinates (written to 0.1 mm).
-COORDINATE_COLUMNS = frozenset({"x", "y", "z", "x1", "y1", "z1", "x2", "y2", "z2"})
+#: CSV columns holding coordinates and coordinate differences in metres (written to 0.1 mm).
+COORDINATE_COLUMNS = frozenset(
+    {"x", "y", "z", "x1", "y1", "z1", "x2", "y2", "z2", "dx", "dy", "dz", "dh"}
+)
 
 
 def _fmt(v: Any, coordinate: bool = False) -> str:
