@@ -348,10 +348,15 @@ def _summary(r: dict, vertical: bool) -> None:
                 continue
             v, unit = t["params"][k], param_unit(k)
             digits = 7 if k in ("scale", "a", "b") else 4
-            echo(
-                f"  {k:<14}{fmt_number(v, digits):>14} ± "
-                f"{fmt_number(t['sigmas'].get(k), digits)} {unit}".rstrip()
-            )
+            sig = t["sigmas"].get(k)
+            if k == "scale" and not sig:
+                echo(f"  {'scale':<14}{'1 (fixed)':>14}")
+                continue
+            line = f"  {k.removesuffix('_deg'):<14}{fmt_number(v, digits):>14} ± "
+            line += f"{fmt_number(sig, digits)} {unit}".rstrip()
+            if k == "scale" and v is not None and sig is not None:  # surveyors read ppm
+                line += f"   ({(v - 1.0) * 1e6:+.1f} ± {sig * 1e6:.1f} ppm)"
+            echo(line)
     if not vertical:
         echo("                x          y          z")
         for name in ("mean", "std", "rmse", "max_abs"):
