@@ -184,3 +184,15 @@ def test_csv_residuals_are_written_to_a_tenth_of_a_millimetre(tmp_path):
     write_points(pts, p)
     row = p.read_text().splitlines()[1].split(",")
     assert row[-2:] == ["-0.0003", "8.82e-07"]  # metres to 0.1 mm; other decimals keep their digits
+
+
+def test_text_output_keeps_gps_time_microseconds(tmp_path):
+    from lidarqa.data import demo_tile
+
+    src = lidarqa.read(demo_tile())
+    assert src.fields["gps_time"].max() > 1e8  # adjusted GPS time: 15 significant digits needed
+    out = tmp_path / "demo.txt"
+    lidarqa.write(src, out)
+    back = lidarqa.read(out)
+    assert back.crs is not None and back.crs.equals(src.crs)
+    np.testing.assert_allclose(back.fields["gps_time"], src.fields["gps_time"], rtol=0, atol=1e-6)

@@ -191,14 +191,15 @@ def write_text(cloud: PointCloud, path: str | os.PathLike, *, overwrite: bool = 
 
     Coordinates keep the precision of the cloud's source (the LAS scale, e.g.
     0.01 m -> 2 decimals), else 1 mm; integer fields are written as integers,
-    other decimals with 10 significant digits. The CRS goes to a ``.prj``
+    other decimals with 15 significant digits (what a float64 holds without
+    noise: GPS time keeps its microseconds). The CRS goes to a ``.prj``
     sidecar (WKT) that GDAL/QGIS and :func:`read_text` read.
     """
     names = ["x", "y", "z", *cloud.fields]
     cols = [cloud.x, cloud.y, cloud.z, *(np.asarray(v) for v in cloud.fields.values())]
     fmts = [f"%.{d}f" for d in _decimals(cloud)]
     for c in cols[3:]:
-        fmts.append("%d" if c.dtype.kind in "iub" else "%.10g")
+        fmts.append("%d" if c.dtype.kind in "iub" else "%.15g")
     replacing = Path(path).exists()
     if cloud.crs is not None:
         check_output(sidecar_path(path), overwrite=overwrite or replacing)
