@@ -160,13 +160,20 @@ def _convert_column(values: list[str]) -> np.ndarray:
 
 
 def _read_csv_table(p: Path) -> dict[str, np.ndarray]:
-    with p.open("r", encoding="utf-8-sig", newline="") as fh:
-        sample = fh.read(4096)
-        fh.seek(0)
-        delim = ";" if sample.count(";") > sample.count(",") else ","
-        rows = [
-            r for r in csv.reader(fh, delimiter=delim) if r and not r[0].lstrip().startswith("#")
-        ]
+    try:
+        with p.open("r", encoding="utf-8-sig", newline="") as fh:
+            sample = fh.read(4096)
+            fh.seek(0)
+            delim = ";" if sample.count(";") > sample.count(",") else ","
+            rows = [
+                r
+                for r in csv.reader(fh, delimiter=delim)
+                if r and not r[0].lstrip().startswith("#")
+            ]
+    except UnicodeDecodeError as exc:  # a spreadsheet export in Latin-1 or UTF-16
+        raise ReadError(
+            f"cannot read {p} as text ({exc.reason} at byte {exc.start})" + dialect_hint(p)
+        ) from exc
     if not rows:
         raise ReadError(f"input {p} has no rows")
     header = [h.strip().lower() for h in rows[0]]
