@@ -196,3 +196,15 @@ def test_text_output_keeps_gps_time_microseconds(tmp_path):
     back = lidarqa.read(out)
     assert back.crs is not None and back.crs.equals(src.crs)
     np.testing.assert_allclose(back.fields["gps_time"], src.fields["gps_time"], rtol=0, atol=1e-6)
+
+
+def test_info_describes_point_lists_with_text_ids(tmp_path):
+    p = tmp_path / "check.csv"
+    write_points(PointSet(np.array(["C1", "C2"]), [[1.0, 2.0, 3.0], [2.0, 3.0, 4.5]], crs=L93), p)
+    gpkg = tmp_path / "check.gpkg"
+    write_points(read_points(p), gpkg)
+    for path in (p, gpkg):
+        r = run("info", path)
+        assert r.exit_code == 0, r.output
+        assert "points          2" in r.output and "Lambert-93 (EPSG:2154)" in r.output
+        assert "3.000 .. 4.500" in r.output

@@ -49,7 +49,7 @@ def info(path: str, crs: str | None) -> None:
     if d["vertical_unit"]:
         echo(f"  vertical unit   {d['vertical_unit']}")
     if d["density_per_m2"]:
-        echo(f"  density         {d['density_per_m2']:.1f} pts/m²")
+        echo(f"  density         {d['density_per_m2']:.3g} pts/m²")
     if d["classes"]:
         echo("  classes         " + ", ".join(f"{k}: {v:,}" for k, v in d["classes"].items()))
     if d["point_source_ids"]:

@@ -142,6 +142,8 @@ def describe(
     """Describe a point cloud file, streaming LAS/LAZ in chunks (constant memory).
 
     `crs` (a pyproj CRS) stands for the CRS of a file that declares none.
+    A point list that is not a cloud (CSV with text ids, GeoPackage, GeoJSON)
+    is described by its points.
     """
     from . import las_header_summary, read
     from .crs import resolve_crs
@@ -155,5 +157,17 @@ def describe(
                 acc.add(chunk)
             own = resolve_crs(reader.crs, crs, path)
             return _finish(acc, own, reader.dimension_names, las_header_summary(reader))
-    cloud = read(path, crs=crs)
+    from ..errors import ReadError
+    from .vector import VECTOR_SUFFIXES, read_points
+
+    try:
+        cloud = read(path, crs=crs)
+    except ReadError:
+        # a point list (check points, corners, residuals) with text ids or a GIS layer
+        if Path(path).suffix.lower() not in VECTOR_SUFFIXES:
+            raise
+        from .pointcloud import PointCloud
+
+        pts = read_points(path, crs=crs)
+        cloud = PointCloud(xyz=pts.xyz, crs=pts.crs)
     return describe_cloud(cloud)
