@@ -51,6 +51,25 @@ def test_segmentation_and_matching_report_progress():
     _check_fractions(seen)
 
 
+def test_edge_extraction_of_passes_reports_progress(tmp_path):
+    """lines/repeatability read clouds and segment them: the longest step of both."""
+    from lidarqa.accuracy._lines_io import load_passes, load_segments
+    from lidarqa.testing import make_scene
+
+    scene = make_scene(seed=3, size=(40.0, 40.0), density=10.0, strips=2, n_buildings=2,
+                       n_trees=0, n_cars=0)  # fmt: skip
+    path = tmp_path / "scene.laz"
+    lidarqa.write(scene.to_cloud(), path)
+    seen: list[float] = []
+    passes = load_passes([str(path)], by_source_id=True, classes=[6], progress=seen.append)
+    assert len(passes) == 2
+    _check_fractions(seen)
+    assert any(0.0 < f < 0.5 for f in seen) and any(0.5 < f < 1.0 for f in seen)  # per strip
+    seen = []
+    load_segments(path, classes=[6], source_id=1, progress=seen.append)
+    _check_fractions(seen)
+
+
 def test_live_bar_shows_percentage_and_eta():
     from rich.console import Console
 

@@ -144,10 +144,14 @@ def lines(
     steps = Steps()
     test_label = test + _selection(classes, test_source_id)
     model_label = model + _selection(classes, model_source_id)
-    with steps("Reading test " + test_label):
-        t = load_segments(test, classes=classes, source_id=test_source_id, crs=given)
-    with steps("Reading model " + model_label):
-        m = load_segments(model, classes=classes, source_id=model_source_id, crs=given)
+    with steps("Reading test " + test_label) as progress:
+        t = load_segments(
+            test, classes=classes, source_id=test_source_id, crs=given, progress=progress
+        )
+    with steps("Reading model " + model_label) as progress:
+        m = load_segments(
+            model, classes=classes, source_id=model_source_id, crs=given, progress=progress
+        )
     gt = None
     if ground_truth:
         with steps("Reading ground truth"):
@@ -331,9 +335,14 @@ def repeatability(
     if source_id is not None and not by_source_id:
         raise OptionError("--source-id selects strips and needs --by-source-id")
     steps = Steps()
-    with steps("Reading passes and extracting edges"):
+    with steps("Reading passes and extracting edges") as progress:
         passes = load_passes(
-            list(files), by_source_id=by_source_id, classes=classes, source_id=source_id, crs=given
+            list(files),
+            by_source_id=by_source_id,
+            classes=classes,
+            source_id=source_id,
+            crs=given,
+            progress=progress,
         )
     groups: dict[str, list] = {}
     for group, name, seg in passes:
