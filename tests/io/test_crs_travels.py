@@ -190,6 +190,7 @@ def test_text_output_keeps_gps_time_microseconds(tmp_path):
     from lidarqa.data import demo_tile
 
     src = lidarqa.read(demo_tile())
+    src = src.subset(np.arange(len(src)) < 3000)
     assert src.fields["gps_time"].max() > 1e8  # adjusted GPS time: 15 significant digits needed
     out = tmp_path / "demo.txt"
     lidarqa.write(src, out)
