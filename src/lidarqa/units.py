@@ -5,8 +5,8 @@ Policy
 - **Lengths and coordinates are metres**, angles are **degrees**, in text, JSON,
   CSV and the report. ``checkpoints`` converts coordinates whose CRS axes are
   in feet to metres before computing (and says so in a warning); ``heights``
-  and the geometry commands convert heights (z) only, so a cloud in a CRS with
-  horizontal feet should be reprojected to metres first.
+  and the geometry commands convert heights (z) in feet and refuse a cloud
+  whose x, y are in feet or degrees (reproject it to metres first).
 - **Ratios** (error rates, shares of points) are stored in JSON as **fractions
   between 0 and 1**; text and report show them as percentages. Keys ending in
   ``_pct`` are percentages (0–100).

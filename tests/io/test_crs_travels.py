@@ -209,3 +209,21 @@ def test_info_describes_point_lists_with_text_ids(tmp_path):
         assert r.exit_code == 0, r.output
         assert "points          2" in r.output and "Lambert-93 (EPSG:2154)" in r.output
         assert "3.000 .. 4.500" in r.output
+
+
+@pytest.mark.parametrize("epsg", [2227, 4326])  # California zone 3 (US survey feet), WGS 84
+def test_geometry_commands_refuse_x_y_not_in_metres(tmp_path, epsg):
+    from lidarqa.io import PointCloud
+
+    xyz = np.random.default_rng(0).uniform(0, 30, (300, 3)) + [6_000_000.0, 2_000_000.0, 0.0]
+    if epsg == 4326:
+        xyz = xyz / [1e5, 1e5, 1.0]
+    path = tmp_path / "c.laz"
+    lidarqa.write(PointCloud(xyz=xyz, crs=CRS.from_epsg(epsg)), path)
+    r = run("planes", path, "-o", tmp_path / "p.csv")
+    assert r.exit_code == 1 and "metres" in r.output and "reproject" in r.output, r.output
+    assert not (tmp_path / "p.csv").exists()
+    pts = tmp_path / "m.csv"
+    write_points(PointSet(np.array([1]), xyz[:1], crs=CRS.from_epsg(epsg)), pts)
+    r = run("heights", path, pts, pts)
+    assert r.exit_code == 1 and "x, y unit" in r.output and "metres" in r.output, r.output

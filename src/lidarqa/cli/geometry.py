@@ -64,7 +64,7 @@ def _load(path: str, classes: list[int] | None, source_id: list[int] | None, ste
     """Read and select; return (cloud selection, xyz in metres, z factor)."""
     from ..errors import InvalidPointsError
     from ..io import read
-    from ..io.crs import z_to_metres_factor
+    from ..io.crs import require_metric_xy, z_to_metres_factor
 
     given = input_crs(crs)
     with steps(f"Reading {path}"):
@@ -78,6 +78,8 @@ def _load(path: str, classes: list[int] | None, source_id: list[int] | None, ste
             what.append(f"source ids {','.join(map(str, source_id))}")
         sel = (" with " + " and ".join(what)) if what else ""
         raise InvalidPointsError(f"{path}: {len(sub)} point(s){sel}; at least 3 are needed")
+    # fitted in metres: x, y in feet or degrees mixed with z in metres would distort them
+    require_metric_xy(sub.crs, path, "planes, edges and corners need")
     f = z_to_metres_factor(sub.crs) if sub.crs is not None else 1.0
     xyz = sub.xyz.copy()
     if f != 1.0:

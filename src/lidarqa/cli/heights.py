@@ -261,7 +261,7 @@ def heights(
     from ..accuracy.heights import assess_heights, read_map_points
     from ..errors import OptionError
     from ..io import read
-    from ..io.crs import z_to_metres_factor
+    from ..io.crs import require_metric_xy, z_to_metres_factor
 
     if output is not None and Path(output).suffix.lower() not in OUT_SUFFIXES:
         raise OptionError(f"--output must end in {', '.join(OUT_SUFFIXES)}; got {output!r}")
@@ -276,6 +276,7 @@ def heights(
                 raise OptionError(
                     f"{cloud} has no points with --classes {classes} --source-id {source_id}"
                 )
+        require_metric_xy(pc.crs, cloud, "the search radius and the plane fits need")
         xyz = pc.xyz.copy()
         xyz[:, 2] *= z_to_metres_factor(pc.crs)
     with steps("Reading map and reference points"):

@@ -19,6 +19,8 @@ from ..errors import CRSMismatchError
 __all__ = [
     "crs_epsg",
     "crs_name",
+    "horizontal_unit",
+    "require_metric_xy",
     "vertical_unit",
     "z_to_metres_factor",
     "heights_to_metres",
@@ -158,6 +160,34 @@ def _vertical_axis(crs: Any) -> Any:
             if axis.direction in ("up", "down"):
                 return axis
     return None
+
+
+def horizontal_unit(crs: Any) -> tuple[str | None, float | None]:
+    """Name and metre factor of the horizontal axes (e.g. ``("US survey foot", 0.3048006)``).
+
+    ``(None, None)`` without a CRS or horizontal axis; a geographic CRS gives
+    its angular unit (``("degree", 0.01745...)``, a factor to radians).
+    """
+    if crs is None:
+        return None, None
+    for c in list(crs.sub_crs_list) if crs.is_compound else [crs]:
+        for axis in c.axis_info:
+            if axis.direction in ("east", "north", "west", "south"):
+                return str(axis.unit_name), float(axis.unit_conversion_factor)
+    return None, None
+
+
+def require_metric_xy(crs: Any, what: str, needs: str) -> None:
+    """Refuse a CRS whose x, y are not metres (feet, degrees), naming it and what `needs` metres.
+
+    A missing CRS is accepted: the user vouches for metres.
+    """
+    unit, factor = horizontal_unit(crs)
+    if unit is not None and (crs.is_geographic or abs(factor - 1.0) > 1e-12):
+        raise CRSMismatchError(
+            f"{what} is in {crs_label(crs)} (x, y unit: {unit}); {needs} a projected CRS in "
+            "metres: reproject it first"
+        )
 
 
 def vertical_unit(crs: Any) -> tuple[str | None, float | None]:
