@@ -23,7 +23,8 @@ from ._common import (
     "--output",
     required=True,
     type=click.Path(dir_okay=False),
-    help="Output cloud (.las/.laz/.csv): every point, input order, all dimensions.",
+    help="Output cloud (.las/.laz, or .csv/.txt text with a .prj CRS file): every point, input "
+    "order, all dimensions; coordinates to the input's precision (its LAS scale).",
 )
 @click.option(
     "--method",
