@@ -6,8 +6,6 @@ matching, check points with ASPRS/NSSDA statistics, height error propagation
 with w-tests), with LAS/LAZ I/O, a command line and HTML reports.
 """
 
-from __future__ import annotations
-
 from ._version import __version__
 from .errors import LidarQAError
 from .io import PointCloud, open, read, write  # noqa: A004

@@ -52,7 +52,15 @@ def as_points(
     if n and not np.isfinite(arr).all():
         bad = int((~np.isfinite(arr)).any(axis=1).sum())
         raise InvalidPointsError(f"{name} has {bad} row(s) with NaN or infinite coordinates")
+    if n and np.abs(arr).max() > MAX_COORDINATE:
+        # squared distances of such values overflow: they are corrupt data, not coordinates
+        raise InvalidPointsError(
+            f"{name} has coordinates beyond ±{MAX_COORDINATE:g} (largest {np.abs(arr).max():g})"
+        )
     return np.ascontiguousarray(arr)
+
+
+MAX_COORDINATE = 1e15  # metres (or degrees): far beyond any real survey
 
 
 def as_mask(mask: Any, n: int, name: str = "mask") -> np.ndarray:

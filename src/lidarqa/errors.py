@@ -20,6 +20,8 @@ __all__ = [
     "EstimationError",
     "ConfigError",
     "AnalysisError",
+    "TargetNotMetError",
+    "NothingToMeasureError",
     "TilingError",
     "MissingDependencyError",
     "LidarQAWarning",
@@ -74,6 +76,23 @@ class ConfigError(LidarQAError, ValueError):
 
 class AnalysisError(LidarQAError):
     """One or more analyses of an assessment run failed (the report says which and why)."""
+
+    keep_outputs = True  # the report is complete and explains the failure
+
+
+class TargetNotMetError(LidarQAError):
+    """A run completed but an accuracy target was not met (command-line exit status 4).
+
+    The outputs (report, JSON) are complete; the error only carries the verdict
+    to scripts and CI pipelines.
+    """
+
+    keep_outputs = True
+
+
+class NothingToMeasureError(LidarQAError, ValueError):
+    """Nothing to measure: no check point inside the cloud, no matched pair, no
+    sample left after filtering. Never reported as a NaN result."""
 
 
 class TilingError(LidarQAError):

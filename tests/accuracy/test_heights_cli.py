@@ -166,8 +166,11 @@ def test_cli_polygon_map(scene, tmp_path):
         "-q",
     )
     assert r.exit_code == 0, r.output
-    res = json.loads(out.read_text())["results"]
-    assert res["map_points"]["n"] == 4 * 6 and res["map_points"]["n_failed"] == 0
+    doc = json.loads(out.read_text())
+    res = doc["results"]
+    # road polygons go through the level-aware reconstruction (issue #15)
+    assert doc["parameters"]["levels"] is True
+    assert res["roads"]["n_map_points"] == 4 * 6 and res["roads"]["n_failed"] == 0
     assert res["comparison"]["n"] == 200
 
 

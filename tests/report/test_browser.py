@@ -1,5 +1,8 @@
 """Open report.html in headless Chromium: no console errors, every image loaded, a screenshot.
 
+Also: the analyses fold and unfold (<details>), the summary bar stays at the top while
+scrolling, and the sample-size warnings sit beside the verdict they qualify.
+
 Needs the Debian packages ``chromium`` and ``chromium-driver`` and selenium. Skips
 when they are absent, except under CI (``CI`` set), where their absence fails.
 """
@@ -103,6 +106,9 @@ def test_report_opens_in_headless_chromium(demo_report: Path, tmp_path_factory) 
         assert external == [], external
         severe = [e for e in driver.get_log("browser") if e.get("level") == "SEVERE"]
         assert not severe, f"console errors: {severe}"
+        _check_collapsible_sections(driver)
+        _check_sticky_summary(driver)
+        driver.execute_script("window.scrollTo(0, 0);")
         shots = Path(os.environ.get(SCREENSHOT_ENV) or tmp_path_factory.mktemp("screenshots"))
         shots.mkdir(parents=True, exist_ok=True)
         shot = shots / "report.png"
@@ -118,6 +124,72 @@ def test_report_opens_in_headless_chromium(demo_report: Path, tmp_path_factory) 
     finally:
         driver.quit()
         shutil.rmtree(profile, ignore_errors=True)
+
+
+def _check_collapsible_sections(driver) -> None:
+    """Every analysis is a <details> opened by default; its summary folds and unfolds it."""
+    ids = driver.execute_script(
+        "return Array.from(document.querySelectorAll('section.analysis')).map(s => s.id);"
+    )
+    assert len(ids) >= 5, f"expected the demo's analyses as sections, got {ids}"
+    for sid in ids:
+        is_open = driver.execute_script(
+            "const d = document.querySelector(`section#${arguments[0]} > details`);"
+            "return d === null ? null : d.open;",
+            sid,
+        )
+        assert is_open is True, f"section {sid} is not an open <details>"
+    sid = ids[1]
+    height = "return document.getElementById(arguments[0]).getBoundingClientRect().height;"
+    toggle = f"section#{sid} > details > summary"
+    tall = driver.execute_script(height, sid)
+    summary = driver.find_element("css selector", toggle)
+    driver.execute_script("arguments[0].scrollIntoView({block: 'center'});", summary)
+    summary.click()  # a real click on the section's heading folds it
+    folded = driver.execute_script(height, sid)
+    assert not driver.execute_script(
+        "return document.querySelector(arguments[0]).parentElement.open;", toggle
+    )
+    assert folded < tall / 3, f"folding {sid} left it {folded:.0f} px tall (was {tall:.0f})"
+    # the content is hidden, the heading with its verdict still shows
+    assert summary.is_displayed() and "PASS" in summary.text.upper()
+    summary.click()
+    assert driver.execute_script(height, sid) == pytest.approx(tall, abs=2)
+    # Parameters and provenance start folded: the page opens on the results.
+    for sid in ("parameters", "provenance"):
+        assert driver.execute_script(
+            "return document.querySelector(`section#${arguments[0]} > details`).open;", sid
+        ) is False
+
+
+def _check_sticky_summary(driver) -> None:
+    """The summary bar stays at the top of the window, with every verdict, while scrolling."""
+    bar = driver.find_element("css selector", "#summary-bar")
+    verdicts = bar.find_elements("css selector", ".verdict")
+    rows = driver.find_elements("css selector", "section#summary table tbody tr")
+    assert len(verdicts) == len(rows) > 0
+    for y in ("document.body.scrollHeight / 2", "document.body.scrollHeight"):
+        driver.execute_script(f"window.scrollTo(0, {y});")
+        top = driver.execute_script(
+            "return document.getElementById('summary-bar').getBoundingClientRect().top;"
+        )
+        assert driver.execute_script("return window.scrollY;") > 500
+        assert abs(top) <= 1, f"summary bar not at the top of the window (top = {top} px)"
+        assert bar.is_displayed()
+    # Its links jump to the sections, which are not hidden under the bar.
+    link = bar.find_elements("css selector", "a")[-1]
+    target = link.get_attribute("href").split("#")[-1]
+    driver.execute_script("arguments[0].click();", link)
+    bar_bottom = driver.execute_script(
+        "return document.getElementById('summary-bar').getBoundingClientRect().bottom;"
+    )
+    sec_top = driver.execute_script(
+        "return document.getElementById(arguments[0]).getBoundingClientRect().top;", target
+    )
+    assert sec_top >= bar_bottom - 1, f"section {target} starts under the summary bar"
+    # The caveats of a verdict sit beside it, in the summary table.
+    caveats = driver.find_elements("css selector", "section#summary td.verdict-cell .caveat")
+    assert any("check points" in c.text for c in caveats), "sample-size warning not by the verdict"
 
 
 @pytest.mark.parametrize("ci, outcome", [("", "skip"), ("true", "fail"), ("false", "skip")])

@@ -203,7 +203,7 @@ def test_demo_config_is_a_normal_config():
 
     cfg = load_config(demo_config_path(), skip_unavailable=True)
     kinds = {a.kind for a in cfg.analyses} | {k for k, _, _ in cfg.skipped}
-    assert kinds == {"info", "ground", "edges", "lines", "checkpoints", "heights"}
+    assert kinds == {"info", "ground", "edges", "lines", "checkpoints", "heights", "swaths"}
     assert all("not available" in r or "lacks" in r for _, _, r in cfg.skipped)
     heights = next((a for a in cfg.analyses if a.kind == "heights"), None)
     if heights is not None:

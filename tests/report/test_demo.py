@@ -21,7 +21,15 @@ def test_demo_writes_report_json_and_outputs(demo_run):
     # Every analysis of the bundled config ran, or is listed as not available in this build.
     planned = {a.kind for a in load_config(demo_config_path(), skip_unavailable=True).analyses}
     skipped = {s["kind"] for s in doc["skipped"]}
-    assert planned | skipped == {"info", "ground", "edges", "lines", "checkpoints", "heights"}
+    assert planned | skipped == {
+        "info",
+        "ground",
+        "edges",
+        "lines",
+        "checkpoints",
+        "heights",
+        "swaths",
+    }
     params = doc["parameters"]
     for pid, p in params.items():
         assert p["kind"] in ANALYSIS_KINDS
@@ -39,6 +47,8 @@ def test_demo_writes_report_json_and_outputs(demo_run):
     if "checkpoints" in res and res["checkpoints"]:
         assert res["checkpoints"]["n_check"] >= 15
         assert abs(res["checkpoints"]["mean_z"]) < 0.1  # two strips of one survey agree
+    if res.get("swaths"):
+        assert [(p["strip_a"], p["strip_b"]) for p in res["swaths"]["pairs"]] == [(706, 707)]
 
 
 def test_demo_report_is_self_contained(demo_run):

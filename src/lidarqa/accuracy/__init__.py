@@ -6,6 +6,10 @@
   corners vs check points, least-squares transformations, RMSE to ASPRS (2023) and NSSDA.
 - :mod:`lidarqa.accuracy.heights` — Oude Elberink & Vosselman: plane-fitted heights with error
   propagation, TIN precision, w-tests.
+- :mod:`lidarqa.accuracy.swaths` — relative accuracy of flight strips: swath-overlap differences,
+  smooth-surface repeatability, strip offsets and the measured strip noise E4.
+- :mod:`lidarqa.accuracy.roads` — Oude Elberink & Vosselman §2: 3D roads from 2D map polygons,
+  each polygon on its own height level, with the map-point precision.
 """
 
 from .checkpoints import (
@@ -44,9 +48,13 @@ from .lines import (
     segment_distance,
     segment_distances,
 )
+from .swaths import SwathReport, assess_swaths
 from .transforms import TRANSFORMS, TransformFit, estimate_transform
 
 __all__ = [
+    # swaths
+    "SwathReport",
+    "assess_swaths",
     # lines
     "LineMatch",
     "Threshold",

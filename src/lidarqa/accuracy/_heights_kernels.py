@@ -1,4 +1,4 @@
-"""Vectorised kernels behind :mod:`lidarqa.accuracy.heights` (ALGORITHMS.md §6).
+"""Vectorised kernels behind :mod:`lidarqa.accuracy.heights` (:ref:`alg-heights`).
 
 Internals: inputs are trusted (validated in ``heights.py``). No Python loop per
 map point or reference point: one cKDTree k-NN query, one ball query, stacked
@@ -303,8 +303,20 @@ def triangulate_locate(
     area = 0.5 * np.abs(_cross(corners[:, 0], corners[:, 1], corners[:, 2]))
     ok = (area >= EPS) & np.isfinite(w[inside]).all(axis=1)
     rows = np.flatnonzero(inside)[ok]
-    verts[rows] = order[tri.simplices[s[ok]]]
-    weights[rows] = w[inside][ok]
+    # each triangle's vertices in (x, y) order and its weights recomputed from coordinate
+    # differences (exact for nearby points): the same bits whatever subset of vertices (a chunk of
+    # a catalog) was triangulated and whatever origin it was shifted by
+    vs = order[tri.simplices[s[ok]]]
+    cxy = vertex_xy[vs]
+    vs = np.take_along_axis(vs, np.lexsort((cxy[..., 1], cxy[..., 0]), axis=-1), axis=-1)
+    cxy = vertex_xy[vs]
+    a = cxy[:, 0]
+    v0, v1, v2 = cxy[:, 1] - a, cxy[:, 2] - a, query_xy[rows] - a
+    den = v0[:, 0] * v1[:, 1] - v1[:, 0] * v0[:, 1]
+    wb = (v2[:, 0] * v1[:, 1] - v1[:, 0] * v2[:, 1]) / den
+    wc = (v0[:, 0] * v2[:, 1] - v2[:, 0] * v0[:, 1]) / den
+    verts[rows] = vs
+    weights[rows] = np.column_stack([1.0 - wb - wc, wb, wc])
     return verts, weights, True
 
 

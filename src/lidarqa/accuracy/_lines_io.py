@@ -13,7 +13,14 @@ from .._progress import ProgressCallback, report, stage
 from ..errors import InvalidPointsError, LidarQAError, MissingDependencyError, ReadError
 from ..io.vector import Segments, read_segments
 
-__all__ = ["is_segment_file", "load_segments", "load_passes", "read_pairs", "extract_segments"]
+__all__ = [
+    "is_segment_file",
+    "load_segments",
+    "load_passes",
+    "pool_passes",
+    "read_pairs",
+    "extract_segments",
+]
 
 _VECTOR_ONLY = {".gpkg", ".geojson", ".json"}
 _SEGMENT_COLUMNS = {"x1", "y1", "z1", "x2", "y2", "z2"}
@@ -152,6 +159,50 @@ def load_passes(
                 seg = exc
             out.append((stem, str(s), seg))
     report(progress, 1.0)
+    return out
+
+
+def pool_passes(passes: list[tuple[str, str, Any]]) -> list[tuple[str, str, Any]]:
+    """Join the passes of the same strip across files: ``[("", strip, Segments or error)]``.
+
+    Strips with the same point_source_id in neighbouring tiles are one flight
+    line, so their edges are pooled into one pass (ids become ``"file:id"``;
+    only the attributes every part has are kept). A tile cuts both strips along
+    the same border, so pooling adds no false edges between them. A strip whose
+    edges failed in every file keeps the first error; failures in some files
+    are skipped.
+    """
+    names: dict[str, list] = {}
+    for group, name, seg in passes:
+        names.setdefault(name, []).append((group, seg))
+    out: list[tuple[str, str, Any]] = []
+    for name, parts in names.items():
+        good = [(g, s) for g, s in parts if not isinstance(s, Exception)]
+        if not good:
+            out.append(("", name, parts[0][1]))
+            continue
+        keys = set.intersection(*(set(s.attributes) for _, s in good))
+        out.append(
+            (
+                "",
+                name,
+                Segments(
+                    ids=np.concatenate(
+                        [
+                            np.array([f"{g}:{i}" for i in s.ids.tolist()], dtype=object)
+                            for g, s in good
+                        ]
+                    ),
+                    start=np.concatenate([s.start for _, s in good]),
+                    end=np.concatenate([s.end for _, s in good]),
+                    attributes={
+                        k: np.concatenate([np.asarray(s.attributes[k]) for _, s in good])
+                        for k in sorted(keys)
+                    },
+                    crs=good[0][1].crs,
+                ),
+            )
+        )
     return out
 
 

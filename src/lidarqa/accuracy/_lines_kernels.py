@@ -1,4 +1,4 @@
-"""Kernels of the line-segment matching (ALGORITHMS.md §3.1): pair distances and candidate pairs.
+"""Kernels of the line-segment matching (:ref:`alg-lines`): pair distances and candidate pairs.
 
 Everything here works on prepared arrays: segment midpoints ``c`` (n, 3), unit
 directions ``u`` (n, 3) and lengths ``L`` (n,), in a common local origin.
@@ -135,7 +135,7 @@ def pair_distances(
 def broadcast_distances(ct, ut, lt, cm, um, lm, *, weight: float, rotate_test: bool):
     """Plain-NumPy reference of the pair distance, broadcasting over leading axes.
 
-    The obvious formulation of ALGORITHMS.md §3.1 (rotate, project on the long
+    The obvious formulation of :ref:`alg-lines` (rotate, project on the long
     axis, compare sorted intervals); the numba kernel is tested against it.
     """
     cross = np.cross(ut, um)

@@ -4,8 +4,8 @@ Measured points (building corners from :func:`lidarqa.geometry.corners.extract_c
 targets picked in a cloud, ...) are matched with surveyed check points, optionally
 transformed onto them by least squares from a set of *control* points
 (:mod:`lidarqa.accuracy.transforms`), and the residuals of the remaining *check*
-points are summarised per axis (mean = bias, standard deviation, RMSE, max |residual|),
-horizontally (RMSE_H) and in 3D (RMSE_3D, the P-RMSE of Fang & Huang, ALGORITHMS.md §5.3).
+points are summarised per axis (mean = bias, standard deviation, RMSE, max ``|residual|``),
+horizontally (RMSE_H) and in 3D (RMSE_3D, the P-RMSE of Fang & Huang, :ref:`alg-rmse`).
 
 Residuals are always *measured (after transformation) minus check*: a positive dz
 means the data lie above the check point.
@@ -58,8 +58,13 @@ from typing import Any
 
 import numpy as np
 
-from .._validate import as_points, check_choice, check_positive
-from ..errors import DegenerateGeometryError, InvalidPointsError, OptionError
+from .._validate import MAX_COORDINATE, as_points, check_choice, check_positive
+from ..errors import (
+    DegenerateGeometryError,
+    InvalidPointsError,
+    NothingToMeasureError,
+    OptionError,
+)
 from ..io.vector import PointSet
 from .transforms import TRANSFORMS, TransformFit, estimate_transform
 
@@ -132,7 +137,7 @@ class ResidualStats:
 
 
 def residual_statistics(residuals: Any, *, ddof: int = 0) -> ResidualStats:
-    """Mean, standard deviation, RMSE and max |residual| per axis, RMSE_H and RMSE_3D.
+    """Mean, standard deviation, RMSE and max ``|residual|`` per axis, RMSE_H and RMSE_3D.
 
     Parameters
     ----------
@@ -140,7 +145,7 @@ def residual_statistics(residuals: Any, *, ddof: int = 0) -> ResidualStats:
         Residuals dx, dy, dz (m). A column that is entirely NaN (e.g. no
         horizontal residuals in a vertical-only check) gives NaN statistics.
     ddof : int, default 0
-        RMSE divisor is n - ddof (ALGORITHMS.md §5.3: n by default).
+        RMSE divisor is n - ddof (:ref:`alg-rmse`: n by default).
 
     Returns
     -------
@@ -501,6 +506,13 @@ def _check_finite(ps: PointSet, name: str, *, need_z: bool = True) -> None:
         ids = ", ".join(str(v) for v in ps.ids[bad][:5])
         raise InvalidPointsError(
             f"{name} has {int(bad.sum())} point(s) with NaN or infinite coordinates (id {ids})"
+        )
+    huge = (np.abs(cols) > MAX_COORDINATE).any(axis=1)
+    if huge.any():  # squared distances of such values overflow: corrupt data, not coordinates
+        ids = ", ".join(str(v) for v in ps.ids[huge][:5])
+        raise InvalidPointsError(
+            f"{name} has {int(huge.sum())} point(s) with coordinates beyond "
+            f"±{MAX_COORDINATE:g} (id {ids})"
         )
 
 
@@ -924,6 +936,21 @@ def _barycentric(tri_xy: np.ndarray, p: np.ndarray) -> np.ndarray:
     return w
 
 
+def _xy_ordered(simplices: np.ndarray, vxy: np.ndarray) -> np.ndarray:
+    """Each triangle's vertex indices sorted by the vertices' (x, y).
+
+    The arithmetic on a triangle (weights relative to its first vertex, the sum
+    of weighted heights) then does not depend on the order Qhull listed the
+    vertices in, which changes with the point subset that was triangulated.
+    """
+    s = np.asarray(simplices)
+    if s.size == 0:
+        return s
+    xy = vxy[s]
+    order = np.lexsort((xy[..., 1], xy[..., 0]), axis=-1)
+    return np.take_along_axis(s, order, axis=-1)
+
+
 def _locate(
     simplices: np.ndarray, vxy: np.ndarray, pxy: np.ndarray, k: int = 12
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -1113,6 +1140,8 @@ def vertical_check(
         NaN coordinates, duplicate check ids, classification of the wrong length.
     DegenerateGeometryError
         Fewer than 3 ground points, or ground points all collinear in XY.
+    NothingToMeasureError
+        No check point could be compared (all outside the TIN or in sparse ground).
 
     Notes
     -----
@@ -1196,10 +1225,13 @@ def vertical_check(
                 ) from None
             tri = None
         if tri is not None:
-            simp, w = _locate(tri.simplices, gs[:, :2], c[:, :2])
+            # each triangle's vertices in XY order: the weights and the interpolated height are
+            # then the same bits whatever subset (chunk) was triangulated or its origin
+            simplices = _xy_ordered(tri.simplices, gs[:, :2])
+            simp, w = _locate(simplices, gs[:, :2], c[:, :2])
             inside = simp >= 0
             if inside.any():
-                verts = tri.simplices[simp[inside]]
+                verts = simplices[simp[inside]]
                 tin_z[inside] = np.sum(w[inside] * gs[verts, 2], axis=1)
                 vxy = gs[verts, :2]
                 edges = np.stack(
@@ -1241,13 +1273,16 @@ def vertical_check(
             f"{n_flag} of {m} check point(s) flagged (outside the TIN or in sparse ground) "
             "and left out"
         )
+    if n_ok == 0:
+        # Nothing to measure is an error, never an RMSE of NaN over 0 check points.
+        kinds, counts = np.unique(flag, return_counts=True)
+        why = ", ".join(f"{c} {k}" for k, c in zip(kinds.tolist(), counts.tolist(), strict=True))
+        raise NothingToMeasureError(
+            f"none of the {m} check point(s) could be compared with the ground TIN ({why}); "
+            "do the check points lie inside the cloud, in the same CRS?"
+        )
     res = np.column_stack([np.full(n_ok, np.nan), np.full(n_ok, np.nan), dz[order][ok]])
-    if n_ok:
-        stats = residual_statistics(res)
-    else:
-        nan3 = np.full(3, np.nan)
-        stats = ResidualStats(0, nan3, nan3, nan3, nan3, math.nan, math.nan)
-        warn.append("no check point could be compared with the ground TIN")
+    stats = residual_statistics(res)
     nssda = nssda_accuracy(math.nan, math.nan, float(stats.rmse[2]), n_check=n_ok)
     asprs = asprs2023_accuracy(
         math.nan, math.nan, float(stats.rmse[2]), n_check=n_ok, checkpoint_rmse_v=checkpoint_rmse_v

@@ -1,6 +1,6 @@
 """Height quality by error propagation, TIN precision and w-tests (Oude Elberink & Vosselman).
 
-ALGORITHMS.md §6. Map points (x, y) get a height from a least-squares plane
+:ref:`alg-heights`. Map points (x, y) get a height from a least-squares plane
 ``z = −x·p1 − y·p2 + p3`` fitted, in coordinates centred on the laser points,
 to the laser points within a search radius that grows until enough points are
 found. Their predicted precision is
@@ -123,7 +123,7 @@ def laser_block_sigma(
 
 
 def model_sigma(distance: Any, *, curvature: float = CURVATURE) -> np.ndarray | float:
-    """Model (idealisation) σ = e_max/3 with e_max = κ·s²/2 (§6.3).
+    """Model (idealisation) σ = e_max/3 with e_max = κ·s²/2 (:ref:`alg-heights`).
 
     Parameters
     ----------
@@ -175,7 +175,9 @@ def critical_value(alpha: float = 0.001) -> float:
 def tin_sigma(
     weights: Any, sigmas: Any, *, correlation: float = 0.0, covariance: Any = None
 ) -> np.ndarray | float:
-    """σ of a TIN-interpolated height from the vertex σ's and barycentric weights (§6.4).
+    """σ of a TIN-interpolated height from the vertex σ's and barycentric weights.
+
+    Method: :ref:`alg-heights`.
 
     σ_h² = Σ w_k²σ_k² + 2ρ Σ_{k<l} w_k w_l σ_k σ_l, or wᵀCw with a full 3x3
     covariance C.
@@ -261,7 +263,9 @@ def fit_plane_height(
     eq8_diagonal: bool = False,
     posterior: bool = False,
 ) -> PlaneHeight:
-    """Fit z = −x·p1 − y·p2 + p3 to laser points and predict the height at a map point (§6.1).
+    """Fit z = −x·p1 − y·p2 + p3 to laser points and predict the height at a map point.
+
+    Method: :ref:`alg-heights`.
 
     Parameters
     ----------
@@ -275,7 +279,7 @@ def fit_plane_height(
         Use the paper's eq. 8 (Δx²σ²_p1 + Δy²σ²_p2 + σ²_p3), which omits the
         p1–p2 covariance, instead of the full form aᵀQa.
     posterior : bool, default False
-        Use σ̂² = rᵀr/(n−3) instead of `sigma_point`².
+        Use σ̂² = rᵀr/(n−3) instead of `sigma_point` squared.
 
     Returns
     -------
@@ -443,8 +447,9 @@ def map_point_heights(
     largest_segment: bool = False,
     labels: Any = None,
 ) -> MapPointHeights:
-    """Height and error budget of every map point from the laser points around it (§6.1–6.3).
+    """Height and error budget of every map point from the laser points around it.
 
+    Method: :ref:`alg-heights`.
     The laser points within `radius` (horizontal distance) are used; where there
     are fewer than `min_points`, the radius grows as radius·growth**j up to
     `max_radius` (``growth=None``: exactly to the distance of the
@@ -514,6 +519,12 @@ def map_point_heights(
         tree, mxy[q_order] - origin, radius=r, max_radius=rmax, min_points=k, growth=growth
     )
     group, index = q_order[q_group], order[q_index]
+    if len(index):
+        # entries by map point, then by the laser point's (x, y, z): the sums of each fit run in
+        # the same order whatever subset of the cloud (a chunk of a catalog) was searched
+        p = pts[index]
+        canon = np.lexsort((p[:, 2], p[:, 1], p[:, 0], group))
+        group, index = group[canon], index[canon]
     r_used, n_found = np.empty(m), np.empty(m, dtype=np.int64)
     r_used[q_order], n_found[q_order] = q_r, q_n
     enough_before = np.bincount(group, minlength=m) >= k
@@ -602,7 +613,7 @@ class TinInterpolation:
 def interpolate_tin(
     vertices: Any, sigma: Any, query_xy: Any, *, correlation: float = 0.0, covariance: Any = None
 ) -> TinInterpolation:
-    """Interpolate heights and precisions in a Delaunay TIN (§6.4).
+    """Interpolate heights and precisions in a Delaunay TIN (:ref:`alg-heights`).
 
     Parameters
     ----------
@@ -661,7 +672,7 @@ def interpolate_tin(
 
 @dataclass(frozen=True, eq=False)
 class WTestResult:
-    """w-tests and iterative data snooping (§6.5).
+    """w-tests and iterative data snooping (:ref:`alg-heights`).
 
     Attributes
     ----------
@@ -708,7 +719,7 @@ class WTestResult:
 def w_test(
     dh: Any, sigma_dh: Any, *, alpha: float = 0.001, estimate_offset: bool = False
 ) -> WTestResult:
-    """w_i = Δh_i/σ_Δh,i with iterative data snooping at level α₀ (§6.5).
+    """w_i = Δh_i/σ_Δh,i with iterative data snooping at level α₀ (:ref:`alg-heights`).
 
     Entries with a NaN Δh or σ are not tested (w NaN, never an outlier).
 
@@ -807,7 +818,7 @@ class HeightComparison:
 def compare_heights(
     model_height: Any, model_sigma: Any, reference_z: Any, *, sigma_ref: float = SIGMA_REF
 ) -> HeightComparison:
-    """Δh statistics of model against reference heights (§6.5).
+    """Δh statistics of model against reference heights (:ref:`alg-heights`).
 
     Parameters
     ----------
@@ -947,8 +958,9 @@ def assess_heights(
     largest_segment: bool = False,
     labels: Any = None,
 ) -> HeightReport:
-    """Predict map point heights and precisions, and test them against reference points (§6).
+    """Predict map point heights and precisions, and test them against reference points.
 
+    Method: :ref:`alg-heights`.
     Map point heights come from :func:`map_point_heights`; the fitted map
     points form a Delaunay TIN in which heights and σ are interpolated to the
     reference points (:func:`interpolate_tin`); the differences are summarised

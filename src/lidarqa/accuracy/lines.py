@@ -5,7 +5,7 @@ Poreba & Goulette (2013) compare a Test set of 3D line segments with a Model
 perpendicular components; Gao & Leung 2002, Chen et al. 2003), an automatic
 threshold at the knee of the sorted nearest distances, a one-to-many
 correspondence matrix, and the length-weighted oriented / symmetric modified
-LHD. Spec, resolved ambiguities and test vectors: ALGORITHMS.md §3.
+LHD. The method, and the choices made where the paper is open: :ref:`alg-lines`.
 
 Lengths are in the data's units (metres for the usual projected CRSs).
 
@@ -99,7 +99,7 @@ def _check_weight(weight: float) -> float:
 def segment_distance(t: Any, m: Any, *, weight: float = 10.0, rotate: str = "shorter") -> tuple:
     """Distance between 3D line segments: angle, parallel, perpendicular components and total.
 
-    ALGORITHMS.md §3.1 ([S-PG] eqs. 3–5): ``dθ = min(L_t, L_m)·sinθ``; the shorter
+    :ref:`alg-lines` ([S-PG] eqs. 3–5): ``dθ = min(L_t, L_m)·sinθ``; the shorter
     segment (or the test one with ``rotate="test"``) is rotated about its midpoint
     parallel to the other; ``d∥`` aligns the nearer pair of end points (0 when one
     interval contains the other) and ``d⊥`` is the distance between the parallel
@@ -184,7 +184,7 @@ def segment_distances(
 
 @dataclass(frozen=True, eq=False)
 class Threshold:
-    """The automatic threshold of one direction (ALGORITHMS.md §3.2).
+    """The automatic threshold of one direction (:ref:`alg-lines-threshold`).
 
     Attributes
     ----------
@@ -241,7 +241,7 @@ def _peaks(v: np.ndarray, sens: float) -> list[tuple[int, float]]:
 
 
 def auto_threshold(nearest: Any, *, sensitivity: float = 0.1) -> Threshold:
-    """Automatic correspondence threshold from nearest distances ([S-PG] §2.3, ALGORITHMS.md §3.2).
+    """Automatic correspondence threshold from nearest distances (:ref:`alg-lines-threshold`).
 
     Sorts the nearest distances, takes second differences, runs a peak detector
     with the a-priori `sensitivity` on ``[0] + Δ² + [min(Δ²) − sens − 1]`` and
@@ -566,7 +566,7 @@ def match_segments(
     cutoff: float | None = None,
     progress: Any = None,
 ) -> LineMatch:
-    """Match a test set of 3D segments to a model set, both ways ([S-PG]; ALGORITHMS.md §3).
+    """Match a test set of 3D segments to a model set, both ways ([S-PG]; :ref:`alg-lines`).
 
     Parameters
     ----------
@@ -651,10 +651,11 @@ def match_segments(
     report(progress, 0.4)
 
     # exact nearest distances, both directions
+    # (no pair within the cutoff leaves ii/jj empty: every index is then -1)
     near_tm, karg = _k.group_min(ii, comp[:, 3], p)
-    arg_tm = np.where(karg >= 0, jj[np.maximum(karg, 0)], -1)
+    arg_tm = np.where(karg >= 0, jj[np.maximum(karg, 0)] if len(jj) else -1, -1)
     near_mt, karg = _k.group_min(jj, dmt, q)
-    arg_mt = np.where(karg >= 0, ii[np.maximum(karg, 0)], -1)
+    arg_mt = np.where(karg >= 0, ii[np.maximum(karg, 0)] if len(ii) else -1, -1)
     todo_t = np.flatnonzero(~(near_tm <= c0))
     if len(todo_t):
         b, a = _nearest_exact(

@@ -6,13 +6,13 @@ onto *target* coordinates (e.g. total-station check points):
 ``"none"``
     No transformation; residuals are the raw coordinate differences.
 ``"similarity2d"``
-    2D similarity plus a height shift (Fang & Huang eq. 6)::
+    2D similarity plus a height shift (Fang & Huang eq. 6, :ref:`alg-transforms`)::
 
         x2 = a*x1 - b*y1 + c,   y2 = b*x1 + a*y1 + d,   z2 = z1 + e
 
     Needs >= 2 points not coincident in XY. Scale = sqrt(a²+b²), rotation = atan2(b, a).
 ``"helmert"``
-    3D similarity (7-parameter Helmert) ``X2 = t + s·R·X1``.
+    3D similarity (7-parameter Helmert) ``X2 = t + s·R·X1`` (:ref:`alg-transforms`).
     Needs >= 3 non-collinear points.
 ``"helmert-fixed-scale"``
     The same with s = 1 (6-parameter rigid-body transformation).
@@ -41,8 +41,8 @@ coordinates are the observations, all with the same (unknown) variance σ0², th
 source coordinates are taken as error-free. The Helmert estimate starts from the
 closed-form Horn/Umeyama solution and is refined by Gauss-Newton, whose final
 design matrix gives the parameter covariance ``σ0²·(AᵀA)⁻¹`` (linearised at the
-solution). Every computation is done in centred coordinates, so UTM-sized
-coordinates lose no precision.
+solution). Every computation is done in centred coordinates (:ref:`alg-conventions`),
+so UTM-sized coordinates lose no precision.
 """
 
 from __future__ import annotations
@@ -70,7 +70,7 @@ __all__ = [
 #: The transformation models accepted by :func:`estimate_transform`.
 TRANSFORMS = ("none", "similarity2d", "helmert", "helmert-fixed-scale")
 
-#: Tolerance for degenerate configurations (m, or dimensionless for ratios).
+#: Tolerance of the conventions (docs: Algorithms, Conventions) (m, or dimensionless for ratios).
 EPS = 1e-9
 
 
@@ -289,7 +289,7 @@ def fit_similarity2d(source: Any, target: Any) -> TransformFit:
 
     Notes
     -----
-    Closed form with centred coordinates: with
+    Closed form with centred coordinates (:ref:`alg-transforms`): with
     S = Σ(x1'²+y1'²), a = Σ(x1'x2'+y1'y2')/S, b = Σ(x1'y2'-y1'x2')/S,
     c = x̄2 - a·x̄1 + b·ȳ1, d = ȳ2 - b·x̄1 - a·ȳ1, e = mean(z2-z1). This is the
     least-squares solution of the linear model; its normal matrix in centred
@@ -446,7 +446,7 @@ def fit_helmert(
 
     Notes
     -----
-    Start: Horn/Umeyama (closed-form SVD solution). Refinement: Gauss-Newton on the
+    Start: Horn/Umeyama (:ref:`alg-transforms`). Refinement: Gauss-Newton on the
     centred model ``X2' = s·R·X1' + t'`` with R updated multiplicatively,
     R ← exp([δ]×)·R, so the design matrix rows are ``[I, -s[R·x1']×, R·x1']``.
     The covariance of (t', δ, s) is σ0²(AᵀA)⁻¹ with σ0² = vᵀv/(3n-u); it is

@@ -18,8 +18,8 @@ from pathlib import Path
 from typing import Any
 
 import click
-import numpy as np
 
+from .._json import to_jsonable
 from .._version import __version__
 from ..io._atomic import atomic_path, check_distinct, check_output
 
@@ -40,6 +40,8 @@ __all__ = [
     "classes_option",
     "source_id_option",
     "input_crs",
+    "target_options",
+    "check_targets",
 ]
 
 #: Suffixes of text outputs that get a ``.prj`` CRS sidecar.
@@ -52,6 +54,8 @@ class Settings:
     verbose: int = 0
     overwrite: bool = False
     json_path: str | None = None
+    # accuracy targets given on the command line: metric -> (results key, limit)
+    targets: dict[str, tuple[str, float]] | None = None
 
 
 def settings(ctx: click.Context | None = None) -> Settings:
@@ -161,6 +165,58 @@ def input_crs(value: str | None) -> Any:
     return parse_crs(value)
 
 
+def target_options(**metrics: tuple[str, str]) -> Callable[[Callable[..., Any]], Any]:
+    """Add ``--target-METRIC LIMIT`` options (upper limits, in the results' units).
+
+    ``metrics`` maps a metric name to ``(results key, description)``. The limits
+    land in :func:`settings`; :func:`finish` checks them against the results,
+    records the verdicts in the JSON document, and ends the command with
+    :class:`~lidarqa.errors.TargetNotMetError` (exit status 4) when one is missed.
+    """
+
+    def store(metric: str, key: str) -> Callable[[click.Context, click.Parameter, Any], Any]:
+        def callback(ctx: click.Context, param: click.Parameter, value: Any) -> Any:
+            if value is not None:
+                if not (value >= 0 and math.isfinite(value)):
+                    raise click.BadParameter(f"must be a finite number >= 0, got {value}")
+                s = settings(ctx)
+                s.targets = {**(s.targets or {}), metric: (key, float(value))}
+            return value
+
+        return callback
+
+    def decorate(func: Callable[..., Any]) -> Callable[..., Any]:
+        for metric, (key, what) in reversed(list(metrics.items())):
+            func = click.option(
+                f"--target-{metric.replace('_', '-')}",
+                type=float,
+                default=None,
+                expose_value=False,
+                callback=store(metric, key),
+                help=f"Pass only if {what} is at most this (exit status 4 otherwise).",
+            )(func)
+        return func
+
+    return decorate
+
+
+def check_targets(results: Mapping[str, Any]) -> list[dict[str, Any]]:
+    """Verdicts of the command-line targets against `results` (see :func:`target_options`)."""
+    from ..errors import NothingToMeasureError
+
+    out = []
+    for metric, (key, limit) in (settings().targets or {}).items():
+        value = results.get(key)
+        try:
+            v = abs(float(value))
+        except (TypeError, ValueError):
+            v = math.nan
+        if not math.isfinite(v):
+            raise NothingToMeasureError(f"target {metric}: {key} could not be computed")
+        out.append({"metric": metric, "value": v, "target": limit, "passed": v <= limit})
+    return out
+
+
 def parse_int_list(value: str | None) -> list[int] | None:
     """Parse ``"1,7,9"`` into ``[1, 7, 9]`` (None stays None)."""
     if value is None or value == "":
@@ -187,34 +243,6 @@ class _IntList(click.ParamType):
 
 
 INT_LIST = _IntList()
-
-
-def to_jsonable(obj: Any) -> Any:
-    """Convert numpy/dataclass/Path values to plain JSON types; NaN and inf become None."""
-    import dataclasses
-
-    if obj is None or isinstance(obj, bool | str):
-        return obj
-    if isinstance(obj, int | np.integer):
-        return int(obj)
-    if isinstance(obj, float | np.floating):
-        f = float(obj)
-        return f if math.isfinite(f) else None
-    if isinstance(obj, np.bool_):
-        return bool(obj)
-    if isinstance(obj, np.ndarray):
-        return [to_jsonable(v) for v in obj.tolist()]
-    if isinstance(obj, Path):
-        return str(obj)
-    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
-        return {f.name: to_jsonable(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
-    if isinstance(obj, Mapping):
-        return {str(k): to_jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple | set | frozenset):
-        return [to_jsonable(v) for v in obj]
-    if hasattr(obj, "to_dict"):
-        return to_jsonable(obj.to_dict())
-    return str(obj)
 
 
 def json_document(command: str, inputs: Any, parameters: Mapping[str, Any], results: Any) -> dict:
@@ -265,9 +293,24 @@ def prepare_outputs(*outputs: str | Path | None, inputs: tuple = ()) -> None:
 def finish(command: str, *, inputs: Any, parameters: Mapping[str, Any], results: Any) -> dict:
     """Write the ``--json`` document if asked; return it."""
     s = settings()
+    verdicts = check_targets(results) if s.targets and isinstance(results, Mapping) else []
+    if verdicts:
+        results = {**results, "targets": verdicts}
     doc = json_document(command, inputs, parameters, results)
     if s.json_path:
         write_json(doc, s.json_path, overwrite=s.overwrite)
+    failed = [v for v in verdicts if not v["passed"]]
+    for v in verdicts:
+        echo(
+            f"target {v['metric']:<8} {fmt_number(v['value'], 4)} <= {fmt_number(v['target'], 4)}"
+            f"  {'PASS' if v['passed'] else 'FAIL'}"
+        )
+    if failed:
+        from ..errors import TargetNotMetError
+
+        raise TargetNotMetError(
+            ", ".join(f"{v['metric']} {v['value']:.4g} > {v['target']:.4g}" for v in failed)
+        )
     return doc
 
 

@@ -34,6 +34,8 @@ def _run(
             r.verdict, ""
         )
         echo(f"  {r.analysis:<{width}}  {verdict:<5}  {r.headline}")
+        for caveat in r.caveats:  # what qualifies the verdict goes right under it
+            echo(f"  {'':<{width}}  {'':<5}  warning: {caveat}")
     echo(f"Report: {run.html_path}")
     echo(f"JSON:   {run.json_path}")
     doc = run.document
@@ -58,6 +60,15 @@ def _run(
             + "; ".join(f"{k}: {v}" for k, v in run.errors.items())
             + f" (details in {run.html_path})"
         )
+    failed = [r.analysis for r in run.summary if r.verdict == "fail"]
+    if failed:
+        # Complete run, report written: exit status 4 lets CI pipelines gate on the targets.
+        from ..errors import TargetNotMetError
+
+        raise TargetNotMetError(
+            f"{len(failed)} analysis(es) missed their target: {', '.join(failed)} "
+            f"(details in {run.html_path})"
+        )
 
 
 @click.command()
@@ -77,7 +88,7 @@ def assess(config: str, out: str) -> None:
     The config names the inputs, the analyses (info, ground, edges, lines,
     checkpoints, heights) and their parameters (same names as the commands'
     options). It is validated completely before any work starts. A minimal
-    config (see lidarqa/data/demo.toml for every analysis):
+    config:
 
     \b
         [inputs.clouds]
@@ -85,6 +96,10 @@ def assess(config: str, out: str) -> None:
         [ground]
         cloud = "tile"
         target_total = 0.05
+
+    Every key is listed in the documentation (Reference > Assessment config).
+    `lidarqa demo` runs a config that uses every analysis; its report shows
+    that config.
     """
     _run(config, out, "assess")
 
@@ -102,7 +117,7 @@ def assess(config: str, out: str) -> None:
 def demo(out: str) -> None:
     """Assess the bundled IGN LiDAR HD tile (IGN – LiDAR HD, Licence Ouverte 2.0).
 
-    Runs the bundled config (lidarqa/data/demo.toml): ground filtering scored
+    Runs a bundled config (shown in the report): ground filtering scored
     against IGN's classes, building edges per flight strip and their
     repeatability, height quality against held-apart ground points, and a
     vertical check against points of the other strip.

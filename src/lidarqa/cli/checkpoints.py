@@ -9,6 +9,7 @@ import click
 
 from ..accuracy.transforms import TRANSFORMS
 from ..units import param_unit
+from ._catalog_jobs import catalog_options, wants_catalog
 from ._common import (
     INT_LIST,
     Steps,
@@ -21,6 +22,7 @@ from ._common import (
     prepare_outputs,
     settings,
     source_id_option,
+    target_options,
 )
 
 
@@ -91,7 +93,7 @@ def _scaled(xyz: Any, fh: float, fv: float) -> Any:
 
 
 @click.command()
-@click.argument("measured", type=click.Path(dir_okay=False))
+@click.argument("measured", nargs=-1, required=True, type=click.Path())
 @click.argument("check", type=click.Path(dir_okay=False))
 @click.option(
     "--transform",
@@ -168,9 +170,16 @@ def _scaled(xyz: Any, fh: float, fv: float) -> Any:
     "inputs (a CSV in a .prj file next to it).",
 )
 @crs_option
+@catalog_options
+@target_options(
+    rmse_z=("rmse_z", "the vertical RMSE (m)"),
+    rmse_h=("rmse_h", "the horizontal RMSE (m)"),
+    rmse_3d=("rmse_3d", "the 3D RMSE (m)"),
+    mean_z=("mean_z", "the absolute mean vertical error (m)"),
+)
 @common_options
 def checkpoints(
-    measured: str,
+    measured: tuple[str, ...],
     check: str,
     transform: str,
     control_ids: str | None,
@@ -185,6 +194,7 @@ def checkpoints(
     checkpoint_rmse_v: float,
     output: str | None,
     crs: str | None,
+    **cat_opts: Any,
 ) -> None:
     """Accuracy of MEASURED points against surveyed CHECK points.
 
@@ -193,6 +203,10 @@ def checkpoints(
     and max |residual|, RMSE_H, RMSE_3D, the ASPRS Edition 2 (2023) accuracy
     with the check-point survey accuracy folded in, and NSSDA 95 % figures.
     Residuals are MEASURED (transformed) minus CHECK, in metres.
+
+    With --vertical, MEASURED may be a catalog (several files, a folder, a
+    glob, a .vpc): each check point is compared in the chunk whose core holds
+    it, reading only those chunks; the figures equal one whole-area run.
     """
     from ..errors import OptionError
     from ..io.crs import crs_name, ensure_same_crs
@@ -210,6 +224,17 @@ def checkpoints(
     if control_ids and control_file:
         raise OptionError("give --control-ids or --control-file, not both")
     given = input_crs(crs)
+    if wants_catalog(measured, cat_opts):
+        if not vertical:
+            raise OptionError("a catalog of clouds (several files, a folder, a glob, a .vpc) "
+                              "needs --vertical")
+        from ._catalog_jobs import vertical_on_catalog
+
+        vertical_on_catalog(measured, check, output, classes=classes, max_edge=max_edge,
+                            checkpoint_rmse_v=checkpoint_rmse_v, cat_opts=cat_opts,
+                            summary=_summary)
+        return
+    measured = measured[0]
     prepare_outputs(output, inputs=(measured, check, control_file))
     steps = Steps()
     notes: list[str] = []

@@ -10,6 +10,7 @@ from typing import Any
 import click
 import numpy as np
 
+from ._catalog_jobs import catalog_options, pop_catalog_options, wants_catalog
 from ._common import (
     CRS_HELP,
     INT_LIST,
@@ -27,7 +28,7 @@ _OUT_SUFFIXES = (".csv", ".gpkg", ".geojson", ".json")
 
 def _selection_options(func: Callable[..., Any]) -> Callable[..., Any]:
     opts = [
-        click.argument("path", type=click.Path(dir_okay=False)),
+        click.argument("paths", nargs=-1, required=True, type=click.Path()),
         click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
                      help="Output file: .csv, .gpkg or .geojson (by extension)."),
         click.option("--classes", type=INT_LIST, default=None,
@@ -49,7 +50,30 @@ def _selection_options(func: Callable[..., Any]) -> Callable[..., Any]:
     ]
     for opt in reversed(opts):
         func = opt(func)
-    return func
+    return catalog_options(func)
+
+
+_SEGMENT_KEYS = ("grow_radius", "grow_dist", "seed_method", "min_segment_size", "max_rmse")
+
+
+def _on_catalog(kind: str, paths: tuple[str, ...], output: str, classes: Any, source_id: Any,
+                opts: dict[str, Any], options: dict[str, Any]) -> bool:
+    """Run on a catalog (several files, a folder, a glob, a .vpc); False for one file."""
+    cat = pop_catalog_options(opts)
+    if not wants_catalog(paths, cat):
+        return False
+    from ._catalog_jobs import features_on_catalog
+
+    _check_suffix(output)
+    features_on_catalog(kind, paths, output, classes=classes, source_id=source_id,
+                        segment_options={k: opts[k] for k in _SEGMENT_KEYS if k in opts},
+                        options=options, cat_opts=cat)
+    return True
+
+
+def _one(paths: tuple[str, ...]) -> str:
+    """The single file of a non-catalog run."""
+    return paths[0]
 
 
 def _check_suffix(output: str) -> None:
@@ -115,15 +139,22 @@ def _inputs(path: str, classes: Any, source_id: Any, n: int, crs: Any) -> dict[s
 @click.command()
 @_selection_options
 @common_options
-def planes(path: str, output: str, classes: list[int] | None, source_id: list[int] | None,
-           **opts: Any) -> None:
+def planes(paths: tuple[str, ...], output: str, classes: list[int] | None,
+           source_id: list[int] | None, **opts: Any) -> None:
     """Segment a point cloud into planes; write one point per plane (at its centroid).
 
     Columns: id, x, y, z (centroid), nx, ny, nz, rho (n·p = rho), n_points,
     n_inliers, rmse (m), sigma_rho (m), sigma_normal_deg, n_adjacent.
+
+    PATHS is one file, or a catalog (several files, a folder, a glob, a .vpc):
+    then the area is cut into chunks with buffers and a plane is kept by the
+    chunk whose core holds its centroid (column ``chunk``), so it is reported once.
     """
     from ..io.vector import PointSet, write_points
 
+    if _on_catalog("planes", paths, output, classes, source_id, opts, {}):
+        return
+    path = _one(paths)
     _check_suffix(output)
     prepare_outputs(output, inputs=(path,))
     steps = Steps()
@@ -163,12 +194,17 @@ def planes(path: str, output: str, classes: list[int] | None, source_id: list[in
 @click.option("--min-length", type=float, default=0.5, show_default=True,
               help="Drop edges shorter than this (m).")
 @common_options
-def edges(path: str, output: str, classes: list[int] | None, source_id: list[int] | None,
-          near_dist: float, min_angle: float, min_length: float, **opts: Any) -> None:
+def edges(paths: tuple[str, ...], output: str, classes: list[int] | None,
+          source_id: list[int] | None, near_dist: float, min_angle: float, min_length: float,
+          **opts: Any) -> None:
     """Extract 3D edges: intersections of adjacent planes bounded by their points.
 
     CSV columns: id,x1,y1,z1,x2,y2,z2, plane_a, plane_b, angle_deg, support_a,
     support_b, sigma_line (m, at the midpoint), sigma_line_max, length (m).
+
+    PATHS is one file, or a catalog (several files, a folder, a glob, a .vpc):
+    then an edge is kept by the chunk whose core holds its midpoint (column
+    ``chunk``), so an edge crossing a chunk border is reported once.
     """
     from .._validate import check_positive, check_range
     from ..geometry.edges import edges_from_segmentation
@@ -179,6 +215,10 @@ def edges(path: str, output: str, classes: list[int] | None, source_id: list[int
         check_positive(near_dist, "--near-dist")
     check_range(min_angle, "--min-angle", 0.0, 90.0)
     check_positive(min_length, "--min-length", allow_zero=True)
+    if _on_catalog("edges", paths, output, classes, source_id, opts,
+                   {"near_dist": near_dist, "min_angle": min_angle, "min_length": min_length}):
+        return
+    path = _one(paths)
     prepare_outputs(output, inputs=(path,))
     steps = Steps()
     sub, xyz, f = _load(path, classes, source_id, steps, opts.pop("crs", None))
@@ -219,12 +259,16 @@ def edges(path: str, output: str, classes: list[int] | None, source_id: list[int
 @click.option("--max-dist", type=float, default=1.0, show_default=True,
               help="The corner must lie within this distance (m) of each plane's points.")
 @common_options
-def corners(path: str, output: str, classes: list[int] | None, source_id: list[int] | None,
-            min_det: float, min_angle: float, max_dist: float, **opts: Any) -> None:
+def corners(paths: tuple[str, ...], output: str, classes: list[int] | None,
+            source_id: list[int] | None, min_det: float, min_angle: float, max_dist: float,
+            **opts: Any) -> None:
     """Extract corners: intersections of three mutually adjacent planes.
 
     CSV columns: id,x,y,z, plane_a, plane_b, plane_c, det, min_angle_deg,
     sigma_x, sigma_y, sigma_z (m).
+
+    PATHS is one file, or a catalog (several files, a folder, a glob, a .vpc):
+    then a corner is kept by the chunk whose core holds it (column ``chunk``).
     """
     from .._validate import check_positive, check_range
     from ..geometry.corners import corners_from_segmentation
@@ -234,6 +278,10 @@ def corners(path: str, output: str, classes: list[int] | None, source_id: list[i
     check_range(min_det, "--min-det", 0.0, 1.0)
     check_range(min_angle, "--min-angle", 0.0, 90.0)
     check_positive(max_dist, "--max-dist")
+    if _on_catalog("corners", paths, output, classes, source_id, opts,
+                   {"min_det": min_det, "min_angle": min_angle, "max_dist": max_dist}):
+        return
+    path = _one(paths)
     prepare_outputs(output, inputs=(path,))
     steps = Steps()
     sub, xyz, f = _load(path, classes, source_id, steps, opts.pop("crs", None))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import click
 
+from ._catalog import is_catalog
 from ._common import (
     INT_LIST,
     Steps,
@@ -17,14 +18,15 @@ from ._common import (
 
 
 @click.command()
-@click.argument("path", type=click.Path(dir_okay=False))
+@click.argument("paths", nargs=-1, required=True, type=click.Path())
 @click.option(
     "-o",
     "--output",
     required=True,
-    type=click.Path(dir_okay=False),
+    type=click.Path(),
     help="Output cloud (.las/.laz, or .csv/.txt text with a .prj CRS file): every point, input "
-    "order, all dimensions; coordinates to the input's precision (its LAS scale).",
+    "order, all dimensions; coordinates to the input's precision (its LAS scale). "
+    "For a catalog (folder, glob, .vpc or several files): the output folder.",
 )
 @click.option(
     "--method",
@@ -35,10 +37,18 @@ from ._common import (
 )
 @click.option(
     "--preset",
-    type=click.Choice(["als", "mls"]),
-    default=None,
-    help="Parameter set: als (airborne, ~1 pt/m2) or mls (Lin & Zhang Table 1, the default); "
-    "explicit options override it.",
+    type=click.Choice(["auto", "als", "mls"]),
+    default="auto",
+    show_default=True,
+    help="Parameter set: auto (measured from the cloud: density, returns, sensor), "
+    "als (airborne, ~1 pt/m2) or mls (Lin & Zhang Table 1); explicit options override it.",
+)
+@click.option(
+    "--sensor",
+    type=click.Choice(["auto", "als", "mls"]),
+    default="auto",
+    show_default=True,
+    help="With --preset auto: airborne (als) or mobile (mls) scan, if known; auto measures it.",
 )
 @click.option(
     "--cell-size", type=float, default=None, help="Seed grid cell size (m) [default: 60]."
@@ -104,12 +114,42 @@ from ._common import (
     help="With --evaluate: reference classes left out, e.g. 1,7,9.",
 )
 @crs_option
+@click.option(
+    "--chunk-size",
+    type=float,
+    default=None,
+    help="Catalog: chunk side, m (default: from the point density, aligned with the tiles).",
+)
+@click.option(
+    "--buffer",
+    type=float,
+    default=None,
+    help="Catalog: margin read around each chunk, m (default: max(60, cell size)).",
+)
+@click.option(
+    "--workers",
+    type=int,
+    default=None,
+    help="Catalog: local worker processes (default: one per core; 1 = serial, no Dask).",
+)
+@click.option(
+    "--scheduler",
+    default=None,
+    help="Catalog: Dask scheduler address (tcp://host:port) or 'serial'.",
+)
+@click.option(
+    "--resume", is_flag=True, help="Catalog: re-use the chunks finished by an interrupted run."
+)
+@click.option(
+    "--skip-bad", is_flag=True, help="Catalog: leave out bad tiles (listed) instead of failing."
+)
 @common_options
 def ground(
-    path,
+    paths,
     output,
     method,
     preset,
+    sensor,
     cell_size,
     max_terrain_angle,
     iter_angle,
@@ -125,11 +165,21 @@ def ground(
     evaluate,
     ignore_classes,
     crs,
+    chunk_size,
+    buffer,
+    workers,
+    scheduler,
+    resume,
+    skip_bad,
 ) -> None:
-    """Classify ground points of PATH and write them (class 2) to OUTPUT.
+    """Classify ground points of PATHS and write them (class 2) to OUTPUT.
 
     Points that were class 2 but are not ground become class 1; all other
     classes are kept. Existing ground labels are never used as input.
+
+    PATHS is one file, or a catalog: a folder, a glob pattern, a .vpc virtual point
+    cloud or several files. A catalog is filtered chunk by chunk with a buffer and
+    OUTPUT is a folder receiving one file per input tile plus a .vpc of them.
     """
     import warnings
 
@@ -140,6 +190,52 @@ def ground(
     from ..io import read, write
 
     given_crs = input_crs(crs)
+    catalog_opts = {
+        "--chunk-size": chunk_size,
+        "--buffer": buffer,
+        "--workers": workers,
+        "--scheduler": scheduler,
+        "--resume": resume or None,
+        "--skip-bad": skip_bad or None,
+    }
+    if is_catalog(paths) or any(v is not None for v in catalog_opts.values()):
+        from ._catalog import ground_on_catalog
+
+        ground_on_catalog(
+            paths,
+            output,
+            method=method,
+            preset=preset,
+            sensor=sensor,
+            params={
+                k: v
+                for k, v in {
+                    "cell_size": cell_size,
+                    "max_terrain_angle": max_terrain_angle,
+                    "iter_angle": iter_angle,
+                    "iter_distance": iter_distance,
+                    "min_edge_length": min_edge_length,
+                    "mirror": False if no_mirror else None,
+                    "accept_ratio": accept_ratio,
+                    "orientation_thr": orientation_thr,
+                    "scatter_thr": scatter_thr,
+                    "grow_radius": grow_radius,
+                }.items()
+                if v is not None
+            },
+            all_returns=all_returns,
+            exclude_classes=exclude_classes,
+            evaluate=evaluate,
+            ignore_classes=ignore_classes,
+            chunk_size=chunk_size,
+            buffer=buffer,
+            workers=workers,
+            scheduler=scheduler,
+            resume=resume,
+            skip_bad=skip_bad,
+        )
+        return
+    path = paths[0]
     prepare_outputs(output, inputs=(path,))
     params = {
         k: v
@@ -171,6 +267,14 @@ def ground(
     steps = Steps()
     with steps("Reading " + path):
         cloud = read(path, crs=given_crs)
+    from ..ground import kernels_cached
+
+    if not kernels_cached():
+        click.echo(
+            "First run: compiling the ground filter's kernels (about 20-30 s, once; "
+            "they are cached for later runs)",
+            err=True,
+        )
     with (
         steps(f"Filtering ({method}, {len(cloud):,} points)") as progress,
         warnings.catch_warnings(record=True) as caught,
@@ -185,6 +289,7 @@ def ground(
             ignore_classes=ignore_classes,
             preset=preset,
             progress=progress,
+            sensor=sensor,
             **params,
         )
     for w in caught:
@@ -197,7 +302,24 @@ def ground(
         write(cloud, output, overwrite=True)
     res = result.to_dict()
     echo(f"{path} -> {output}")
-    echo(f"  method          {method}")
+    echo(f"  method          {method} (preset {preset})")
+    m = result.measures
+    if m is not None:
+        echo(
+            f"  measured        {m.density:.2f} pts/m2 (spacing {m.spacing:.2f} m), "
+            f"sensor {m.sensor}, multi-return share "
+            + (f"{m.multi_return_share:.2f}" if m.has_returns else "n/a")
+            + f", slope median/p90 {m.slope_median:.1f}/{m.slope_p90:.1f} deg, "
+            f"largest object {m.largest_object_diameter:.0f} m"
+        )
+        echo(f"  regime          {result.regime}")
+    src = result.parameter_sources
+    shown = {k: v for k, v in result.parameters.items() if src.get(k) != "default"}
+    if shown:
+        echo(
+            "  parameters      "
+            + ", ".join(f"{k}={v} ({result.parameter_sources[k]})" for k, v in shown.items())
+        )
     echo(
         f"  points          {res['n_points']:,} ({res['n_candidates']:,} candidates, "
         f"returns: {res['return_handling']})"
@@ -219,6 +341,10 @@ def ground(
         parameters={
             "method": method,
             "preset": preset,
+            "sensor": sensor,
+            "regime": result.regime,
+            "measured": res["measured"],
+            "parameter_sources": result.parameter_sources,
             "last_returns_only": not all_returns,
             "exclude_classes": list(exclude_classes or []),
             "ignore_classes": list(ignore_classes or []),

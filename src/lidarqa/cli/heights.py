@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
 from typing import Any
 
@@ -19,6 +20,7 @@ from ..accuracy.heights import (
     SIGMA_REF,
     SIGMA_STRIP,
 )
+from ._catalog_jobs import catalog_options, wants_catalog
 from ._common import (
     INT_LIST,
     Steps,
@@ -99,6 +101,45 @@ def _output_rows(report: Any, map_ids: np.ndarray, ref_ids: np.ndarray, crs: Any
     return PointSet(ids=_ids(map_ids, ref_ids), xyz=xyz, attributes=attrs, crs=crs)
 
 
+class _SigmaStrip(click.ParamType):
+    name = "FLOAT|auto"
+
+    def convert(self, value: Any, param: Any, ctx: Any) -> float | str:
+        if isinstance(value, float) or value == "auto":
+            return value
+        try:
+            return float(value)
+        except (TypeError, ValueError):
+            self.fail(f"expected a number (m) or 'auto', got {value!r}", param, ctx)
+
+
+def _measured_e4(pc: Any) -> float:
+    """E4 from the overlaps of the cloud's strips (ground and buildings, last returns)."""
+    from ..accuracy.swaths import assess_swaths, last_return_mask, surface_class_mask
+    from ..errors import DegenerateGeometryError, EstimationError, InvalidPointsError
+    from ..io.crs import z_to_metres_factor
+
+    sid = pc.point_source_id
+    if sid is None:
+        raise InvalidPointsError(
+            "--sigma-strip auto needs the cloud's point_source_id (flight strips); it has none"
+        )
+    keep = last_return_mask(pc.fields, len(pc)) & surface_class_mask(pc.classification, len(pc))
+    xyz = pc.xyz[keep].copy()
+    xyz[:, 2] *= z_to_metres_factor(pc.crs)
+    try:
+        rep = assess_swaths(xyz, np.asarray(sid)[keep].astype(np.int64), return_grids=False)
+    except (InvalidPointsError, DegenerateGeometryError) as exc:
+        raise type(exc)(f"--sigma-strip auto: {exc}") from exc
+    if not np.isfinite(rep.e4):
+        raise EstimationError(
+            "--sigma-strip auto: the strip offsets could not be estimated ("
+            + "; ".join(rep.flags or ("too few matched planes",))
+            + ")"
+        )
+    return float(rep.e4)
+
+
 def _fmt(v: float, scale: float = 1.0, unit: str = "m") -> str:
     """Metres to the millimetre (the unit policy: metres everywhere); % with one decimal."""
     if v is None or not np.isfinite(v):
@@ -146,10 +187,11 @@ def _fmt(v: float, scale: float = 1.0, unit: str = "m") -> str:
 )
 @click.option(
     "--sigma-strip",
-    type=float,
+    type=_SigmaStrip(),
     default=SIGMA_STRIP,
     show_default=True,
-    help="E4: strip adjustment noise (m).",
+    help="E4: strip adjustment noise (m), or 'auto': measured from the CLOUD's overlapping "
+    "strips (point_source_id), as in 'lidarqa swaths'.",
 )
 @click.option(
     "--sigma-ref",
@@ -223,6 +265,7 @@ def _fmt(v: float, scale: float = 1.0, unit: str = "m") -> str:
     "and per reference point, told apart by the 'kind' column.",
 )
 @crs_option
+@catalog_options
 @common_options
 def heights(
     cloud: str,
@@ -234,7 +277,7 @@ def heights(
     sigma_point: float,
     sigma_gps: float,
     sigma_ins: float,
-    sigma_strip: float,
+    sigma_strip: float | str,
     sigma_ref: float,
     curvature: float,
     correlation: float,
@@ -248,6 +291,7 @@ def heights(
     largest_segment: bool,
     output: str | None,
     crs: str | None,
+    **cat_opts: Any,
 ) -> None:
     """Height quality of map points by error propagation, tested with w-tests.
 
@@ -256,7 +300,16 @@ def heights(
     CLOUD's laser points around it and a predicted σ (plane + laser block +
     model). Heights and σ are interpolated in a TIN of the map points to the
     REFERENCE points (id,x,y,z), and Δh/σ_Δh is w-tested (Oude Elberink &
-    Vosselman).
+    Vosselman). With road polygons as MAP the 3D roads are reconstructed first
+    (as by ``lidarqa roads``): each polygon gets the laser points of its own
+    height level, and each reference point is tested against the level it
+    lies on, so a point on a road under a bridge is not compared with the deck
+    (--correlation, --eq8, --posterior and --largest-segment apply to point maps).
+
+    CLOUD may be a catalog (a folder, a glob, a .vpc): each map point is
+    fitted, and each reference point interpolated, in the chunk whose core
+    holds it (the buffer must exceed --max-radius plus the map point spacing);
+    the w-tests then run once over all reference points, as for one file.
     """
     from ..accuracy.heights import assess_heights, read_map_points
     from ..errors import OptionError
@@ -268,30 +321,53 @@ def heights(
     given = input_crs(crs)
     prepare_outputs(output, inputs=(cloud, map_path, reference))
     steps = Steps()
-    with steps("Reading " + cloud):
-        pc = read(cloud, crs=given)
-        if classes or source_id:
-            pc = pc.select(classes=classes, source_id=source_id)
-            if len(pc) == 0:
-                raise OptionError(
-                    f"{cloud} has no points with --classes {classes} --source-id {source_id}"
-                )
-        require_metric_xy(pc.crs, cloud, "the search radius and the plane fits need")
-        xyz = pc.xyz.copy()
-        xyz[:, 2] *= z_to_metres_factor(pc.crs)
-    with steps("Reading map and reference points"):
-        mp = read_map_points(map_path, spacing=spacing, crs=given)
-        ref = _read_reference(reference, given)
-        _check_crs(pc.crs, mp.crs, ("cloud", "map"))
-        _check_crs(pc.crs, ref.crs, ("cloud", "reference"))
-        _check_crs(mp.crs, ref.crs, ("map", "reference"))
-        ref_xyz = ref.xyz.copy()
-        ref_xyz[:, 2] *= z_to_metres_factor(ref.crs if ref.crs is not None else pc.crs)
-    with steps(f"Fitting {len(mp):,} map points, testing {len(ref):,} reference points"):
-        report = assess_heights(
+    on_catalog = wants_catalog((cloud,), cat_opts)
+    sigma_strip_source = "given"
+    if on_catalog:
+        from ..tiling import open_catalog
+
+        if largest_segment:
+            raise OptionError("--largest-segment is not available on a catalog")
+        if sigma_strip == "auto":
+            raise OptionError(
+                "--sigma-strip auto measures the strip offsets of one file; on a catalog give "
+                "the value (e.g. from `lidarqa swaths`)"
+            )
+        with steps("Reading the headers of " + cloud):
+            cat = open_catalog([cloud], skip_bad=bool(cat_opts.get("skip_bad")))
+        pc: Any = type("Header", (), {"crs": cat.crs})()
+    else:
+        with steps("Reading " + cloud):
+            pc = read(cloud, crs=given)
+        if sigma_strip == "auto":
+            with steps("Measuring E4 from the strip overlaps"):
+                sigma_strip = _measured_e4(pc)
+            sigma_strip_source = "measured (strip offsets)"
+            echo(f"E4 (σ_strip) measured from the strip overlaps: {sigma_strip:.3f} m")
+        with steps("Selecting points"):
+            if classes or source_id:
+                pc = pc.select(classes=classes, source_id=source_id)
+                if len(pc) == 0:
+                    raise OptionError(
+                        f"{cloud} has no points with --classes {classes} --source-id {source_id}"
+                    )
+            require_metric_xy(pc.crs, cloud, "the search radius and the plane fits need")
+            xyz = pc.xyz.copy()
+            xyz[:, 2] *= z_to_metres_factor(pc.crs)
+    if _is_polygon_map(map_path) and on_catalog:
+        echo("note: on a catalog, polygons are tested as boundary points on one level "
+             "(road levels need one cloud: `lidarqa roads`)")
+    elif _is_polygon_map(map_path):
+        return _heights_by_levels(
+            steps,
+            pc,
             xyz,
-            mp.xyz[:, :2],
-            ref_xyz,
+            cloud,
+            map_path,
+            reference,
+            output,
+            classes=classes,
+            spacing=spacing,
             radius=radius,
             max_radius=max_radius,
             min_points=min_points,
@@ -301,17 +377,63 @@ def heights(
             sigma_strip=sigma_strip,
             sigma_ref=sigma_ref,
             curvature=curvature,
-            correlation=correlation,
             alpha=alpha,
             estimate_offset=estimate_offset,
-            eq8_diagonal=eq8_diagonal,
-            posterior=posterior,
-            largest_segment=largest_segment,
+        )
+    with steps("Reading map and reference points"):
+        mp = read_map_points(map_path, spacing=spacing, crs=given)
+        ref = _read_reference(reference, given)
+        _check_crs(pc.crs, mp.crs, ("cloud", "map"))
+        _check_crs(pc.crs, ref.crs, ("cloud", "reference"))
+        _check_crs(mp.crs, ref.crs, ("map", "reference"))
+        ref_xyz = ref.xyz.copy()
+        ref_xyz[:, 2] *= z_to_metres_factor(ref.crs if ref.crs is not None else pc.crs)
+    options = dict(
+        radius=radius,
+        max_radius=max_radius,
+        min_points=min_points,
+        sigma_point=sigma_point,
+        sigma_gps=sigma_gps,
+        sigma_ins=sigma_ins,
+        sigma_strip=sigma_strip,
+        sigma_ref=sigma_ref,
+        curvature=curvature,
+        correlation=correlation,
+        alpha=alpha,
+        estimate_offset=estimate_offset,
+        eq8_diagonal=eq8_diagonal,
+        posterior=posterior,
+    )
+    catalog_run = None
+    if on_catalog:
+        from ._catalog_jobs import heights_on_catalog
+
+        report, catalog_run = heights_on_catalog(cat, mp.xyz[:, :2], ref_xyz, classes=classes,
+                                                 options=options, cat_opts=cat_opts)
+    else:
+        with steps(f"Fitting {len(mp):,} map points, testing {len(ref):,} reference points"):
+            report = assess_heights(xyz, mp.xyz[:, :2], ref_xyz, largest_segment=largest_segment,
+                                    **options)
+    done = report.to_dict()
+    n_fitted = done["map_points"]["n"] - done["map_points"]["n_failed"]
+    if n_fitted == 0 or (len(ref) and done["comparison"]["n"] == 0):
+        # Nothing to measure is an error (exit 1), never a table of n/a with exit 0. An
+        # empty reference file is allowed: the map points' sigmas are then the result.
+        from ..errors import NothingToMeasureError
+
+        raise NothingToMeasureError(
+            f"none of the {len(mp):,} map point(s) could be fitted"
+            if n_fitted == 0
+            else f"none of the {len(ref):,} reference point(s) could be compared "
+            f"({report.n_outside:,} outside the TIN of the fitted map points); do the map and "
+            "reference points lie inside the cloud, in the same CRS?"
         )
     if output is not None:
         from ..io.vector import write_points
+        from ._catalog_jobs import reproducible_vectors
 
-        with steps("Writing " + output):
+        stamp = reproducible_vectors() if on_catalog else contextlib.nullcontext()
+        with steps("Writing " + output), stamp:
             rows = _output_rows(report, mp.ids, ref.ids, pc.crs or mp.crs or ref.crs)
             write_points(rows, output, overwrite=settings().overwrite, layer="heights")
     res = report.to_dict()
@@ -333,10 +455,133 @@ def heights(
     if report.flags:
         echo("flags             " + ", ".join(report.flags))
     params = dict(report.parameters)
-    params.update(classes=classes, source_id=source_id, spacing=spacing, crs=crs)
+    params.update(
+        classes=classes,
+        source_id=source_id,
+        spacing=spacing,
+        crs=crs,
+        sigma_strip_source=sigma_strip_source,
+    )
+    if catalog_run is not None:
+        from ._catalog_jobs import _echo_run, _run_summary
+
+        _echo_run(catalog_run)
+        res["catalog"] = _run_summary(catalog_run)
+        params.update({k: v for k, v in cat_opts.items() if v not in (None, False)})
     finish(
         "heights",
         inputs={"cloud": cloud, "map": map_path, "reference": reference, "output": output},
         parameters=params,
         results=res,
+    )
+    if catalog_run is not None:
+        from ._catalog_jobs import _failed_exit
+
+        _failed_exit(catalog_run)
+
+
+def _is_polygon_map(path: str) -> bool:
+    p = Path(path)
+    if p.suffix.lower() not in (".gpkg", ".geojson", ".json") or not p.is_file():
+        return False
+    try:
+        import pyogrio
+
+        return "polygon" in str(pyogrio.read_info(str(p)).get("geometry_type") or "").lower()
+    except Exception:
+        return False
+
+
+def _heights_by_levels(
+    steps: Any,
+    pc: Any,
+    xyz: np.ndarray,
+    cloud: str,
+    map_path: str,
+    reference: str,
+    output: str | None,
+    *,
+    classes: Any,
+    spacing: float,
+    alpha: float,
+    sigma_ref: float,
+    estimate_offset: bool,
+    **opts: Any,
+) -> None:
+    """``lidarqa heights`` with road polygons: test each reference point on its own level."""
+    from ..accuracy.roads import compare_road_heights, read_road_polygons, reconstruct_roads
+    from ..io.crs import z_to_metres_factor
+    from ..io.vector import PointSet
+    from .roads import check_map_crs
+
+    with steps("Reading road polygons and reference points"):
+        polys, ids, crs = read_road_polygons(map_path)
+        ref = _read_reference(reference)
+        check_map_crs(pc.crs, crs, polys, map_path)
+        _check_crs(pc.crs, ref.crs, ("cloud", "reference"))
+        ref_xyz = ref.xyz.copy()
+        ref_xyz[:, 2] *= z_to_metres_factor(ref.crs if ref.crs is not None else pc.crs)
+    with steps(f"Reconstructing {len(polys):,} road polygons on their height levels"):
+        rec = reconstruct_roads(xyz, polys, ids=ids, spacing=spacing, **opts)
+    with steps(f"Testing {len(ref):,} reference points on their levels"):
+        comp = compare_road_heights(
+            rec, ref_xyz, sigma_ref=sigma_ref, alpha=alpha, estimate_offset=estimate_offset
+        )
+    mp = rec.map_points
+    if output is not None:
+        from ..io.vector import write_points
+
+        m, r = len(mp), len(ref_xyz)
+        nan_m, nan_r = np.full(m, np.nan), np.full(r, np.nan)
+        zero_m, zero_r = np.zeros(m, dtype=np.int64), np.zeros(r, dtype=np.int64)
+        attrs = {
+            "kind": np.array(["map"] * m + ["reference"] * r, dtype=object),
+            "road": np.concatenate([mp.road, comp.road]),
+            "height": np.concatenate([mp.height, nan_r]),
+            "sigma": np.concatenate([mp.sigma, nan_r]),
+            "sigma_plane": np.concatenate([mp.sigma_plane, nan_r]),
+            "sigma_block": np.concatenate([mp.sigma_block, nan_r]),
+            "sigma_model": np.concatenate([mp.sigma_model, nan_r]),
+            "n_points": np.concatenate([mp.n_points, zero_r]),
+            "failed": np.concatenate([mp.failed.astype(np.int64), zero_r]),
+            "reason": np.concatenate([mp.reason.astype(str), np.full(r, "")]).astype(object),
+            "model_height": np.concatenate([nan_m, comp.height]),
+            "model_sigma": np.concatenate([nan_m, comp.sigma]),
+            "dh": np.concatenate([nan_m, comp.comparison.dh]),
+            "sigma_dh": np.concatenate([nan_m, comp.comparison.sigma_dh]),
+            "w": np.concatenate([nan_m, comp.w.w]),
+            "outlier": np.concatenate([zero_m, comp.w.outlier.astype(np.int64)]),
+        }
+        xyz_out = np.vstack([np.column_stack([mp.xy_laser, mp.height]), ref_xyz]).reshape(-1, 3)
+        rows = PointSet(
+            ids=_ids(np.arange(m), ref.ids),
+            xyz=xyz_out,
+            attributes=attrs,
+            crs=pc.crs or crs or ref.crs,
+        )
+        with steps("Writing " + output):
+            write_points(rows, output, overwrite=settings().overwrite, layer="heights")
+    res_roads = rec.to_dict()
+    res = comp.to_dict()
+    c, w = res["comparison"], res["w"]
+    dx, dy = res_roads["shift"]
+    echo(
+        f"road levels       {res_roads['n_roads']:,} road(s) from {len(polys):,} polygons; "
+        f"map shift dx {dx:+.3f} m, dy {dy:+.3f} m"
+    )
+    echo(f"map points        {res_roads['n_map_points']:,} ({res_roads['n_failed']:,} not fitted)")
+    echo(f"  σ mean / p95    {_fmt(res_roads['sigma_mean'])} / {_fmt(res_roads['sigma_p95'])}")
+    echo(f"reference points  {len(ref):,} ({c['n']:,} compared on their level)")
+    echo(f"  Δh mean / std   {_fmt(c['mean'])} / {_fmt(c['std'])}")
+    echo(f"  RMS / max |Δh|  {_fmt(c['rms'])} / {_fmt(c['max_abs'])}")
+    echo(f"w-tests           k = {w['critical']:.4f}, {w['n_outliers']:,} outlier(s)")
+    std = w["std"]
+    echo(f"  std(w)          {'n/a' if not np.isfinite(std) else f'{std:.3f}'}")
+    params = dict(rec.parameters)
+    params.update(classes=classes, sigma_ref=sigma_ref, alpha=alpha, levels=True)
+    finish(
+        "heights",
+        inputs={"cloud": cloud, "map": map_path, "reference": reference, "output": output},
+        parameters=params,
+        results={"roads": res_roads, **res},
     )

@@ -17,13 +17,30 @@ from ._common import (
 
 
 @click.command()
-@click.argument("path", type=click.Path(dir_okay=True))
+@click.argument("paths", nargs=-1, required=True, type=click.Path(dir_okay=True))
+@click.option(
+    "--skip-bad", is_flag=True, help="Catalog: leave out bad tiles (listed) instead of failing."
+)
+@click.option(
+    "--strips",
+    is_flag=True,
+    help="Catalog: also count the points of each strip (point source id); reads every point.",
+)
 @crs_option
 @common_options
-def info(path: str, crs: str | None) -> None:
-    """Describe a point cloud: points, bounds, CRS, classes, strips, density, returns."""
-    from ..io.info import describe
+def info(paths: tuple[str, ...], skip_bad: bool, strips: bool, crs: str | None) -> None:
+    """Describe a point cloud: points, bounds, CRS, classes, strips, density, returns.
 
+    With a catalog (a folder, glob pattern, .vpc or several files): a summary from the
+    file headers (tiles, points, bounds, CRS, strips, gaps, overlaps, default chunks).
+    """
+    from ..io.info import describe
+    from ._catalog import info_on_catalog, is_catalog
+
+    if is_catalog(paths) or skip_bad or strips:
+        info_on_catalog(paths, skip_bad=skip_bad, strips=strips)
+        return
+    path = paths[0]
     given = input_crs(crs)
     prepare_outputs(inputs=(path,))
     with Steps()("Reading " + path):

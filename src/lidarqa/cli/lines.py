@@ -10,6 +10,7 @@ from typing import Any
 import click
 
 from ..units import format_decimal
+from ._catalog_jobs import catalog_options, wants_catalog
 from ._common import (
     CRS_HELP,
     INT_LIST,
@@ -294,7 +295,7 @@ def _write_pairs(r: Any, path: Any) -> None:
 
 
 @click.command()
-@click.argument("files", nargs=-1, required=True, type=click.Path(dir_okay=False))
+@click.argument("files", nargs=-1, required=True, type=click.Path())
 @click.option(
     "--by-source-id",
     is_flag=True,
@@ -306,12 +307,35 @@ def _write_pairs(r: Any, path: Any) -> None:
     default=None,
     help="With --by-source-id: only these strips, e.g. 4320,4330.",
 )
+@click.option(
+    "--pool",
+    is_flag=True,
+    help="With --by-source-id: one pass per strip across all FILES (neighbouring tiles of one "
+    "survey), so each strip pair is compared once over the whole block.",
+)
+@click.option(
+    "--outlines",
+    is_flag=True,
+    help="Also use roof-plane outlines (stand-ins for roof-wall and step edges, which airborne "
+    "scans leave without a wall plane): many more lines per strip pair on small tiles; on dense "
+    "strips they can blur the automatic threshold.",
+)
+@click.option(
+    "--shared-threshold",
+    is_flag=True,
+    help="One automatic threshold for every pair: the median of the pairs' own automatic "
+    "thresholds (passes of one survey get the same answer).",
+)
 @_matching_options
+@catalog_options
 @common_options
 def repeatability(
     files: tuple[str, ...],
     by_source_id: bool,
     source_id: list[int] | None,
+    pool: bool,
+    outlines: bool,
+    shared_threshold: bool,
     weight: float,
     sensitivity: float,
     threshold: float | None,
@@ -319,21 +343,48 @@ def repeatability(
     denominator: str,
     classes: list[int] | None,
     crs: str | None,
+    **cat_opts: Any,
 ) -> None:
     """Compare every pair of passes both ways: a table like Poreba & Goulette's Table 1.
 
     Passes are FILES (segment files or clouds, all compared with each other), or with
-    --by-source-id the flight strips of each cloud (compared within each file). The
-    final LHD of each pair is marked with *.
+    --by-source-id the flight strips of each cloud (compared within each file; with
+    --pool, across all files: neighbouring tiles of a survey hold too few shared edges
+    each for a stable automatic threshold). The final LHD of each pair is marked with *.
+
+    With --by-source-id, FILES may be a catalog (several clouds, a folder, a
+    glob, a .vpc): the strips are then compared over the whole block, each
+    strip's edges found chunk by chunk (an edge once, by its midpoint's chunk).
     """
-    from ..accuracy._lines_io import load_passes
+    from ..accuracy._lines_io import load_passes, pool_passes
     from ..accuracy.lines import match_segments
     from ..errors import CRSMismatchError, LidarQAError, OptionError
 
     given = input_crs(crs)
-    prepare_outputs(inputs=files)
     if source_id is not None and not by_source_id:
         raise OptionError("--source-id selects strips and needs --by-source-id")
+    if pool and not by_source_id:
+        raise OptionError("--pool joins the strips of several files and needs --by-source-id")
+    # Several named files without catalog options keep the per-file (or --pool) comparison;
+    # a folder, a glob, a .vpc or any catalog option compares the strips over the whole block.
+    named_files = len(files) > 1 and not any(v not in (None, False) for v in cat_opts.values())
+    if by_source_id and wants_catalog(files, cat_opts) and not named_files:
+        from ._catalog_jobs import repeatability_on_catalog
+
+        if outlines or shared_threshold:
+            raise OptionError(
+                "--outlines and --shared-threshold are not available on a catalog yet"
+            )
+
+        repeatability_on_catalog(
+            files, classes=classes, source_id=source_id,
+            match_options={"weight": weight, "sensitivity": sensitivity, "threshold": threshold,
+                           "rotate": rotate, "denominator": denominator},
+            cat_opts=cat_opts, print_rows=lambda rows: _print_rows(rows, threshold, pool=True))
+        return
+    if any(v not in (None, False) for v in cat_opts.values()):
+        raise OptionError("catalog options apply to repeatability --by-source-id only")
+    prepare_outputs(inputs=files)
     steps = Steps()
     with steps("Reading passes and extracting edges") as progress:
         passes = load_passes(
@@ -343,7 +394,10 @@ def repeatability(
             source_id=source_id,
             crs=given,
             progress=progress,
+            edge_options={"outlines": True} if outlines else None,
         )
+    if pool:
+        passes = pool_passes(passes)
     groups: dict[str, list] = {}
     for group, name, seg in passes:
         groups.setdefault(group, []).append((name, seg))
@@ -353,6 +407,31 @@ def repeatability(
             f"repeatability needs at least two passes, got {len(passes)}"
             + ("" if by_source_id else " (use --by-source-id for the strips of one file)")
         )
+    if shared_threshold and threshold is not None:
+        raise OptionError("--shared-threshold computes the threshold; do not also give --threshold")
+    if shared_threshold:
+        import numpy as np
+
+        knees = []
+        for _, (_, a), (_, b) in steps.track(todo, "Finding each pair's threshold"):
+            if isinstance(a, Exception) or isinstance(b, Exception):
+                continue
+            try:
+                r0 = match_segments(a, b, weight=weight, sensitivity=sensitivity, rotate=rotate)
+            except LidarQAError:
+                continue
+            knees += [
+                t
+                for t, ok in (
+                    (r0.threshold_tm, r0.threshold_found_tm),
+                    (r0.threshold_mt, r0.threshold_found_mt),
+                )
+                if ok
+            ]
+        if not knees:
+            raise OptionError("--shared-threshold: no pair has an automatic threshold (no knee)")
+        threshold = float(np.median(knees))
+        echo(f"shared threshold δ = {threshold:.3f} m: median of {len(knees)} pair thresholds")
     rows: list[dict] = []
     for group, (na, a), (nb, b) in steps.track(todo, "Matching pass pairs"):
         row: dict[str, Any] = (
@@ -382,6 +461,37 @@ def repeatability(
         row.update(r.to_dict())
         rows.append(row)
 
+    _print_rows(rows, threshold, pool=pool)
+    if rows and all("error" in r for r in rows):
+        # Nothing to measure is an error (exit 1), never a table of n/a with exit 0.
+        from ..errors import NothingToMeasureError
+
+        raise NothingToMeasureError(
+            f"none of the {len(rows)} pair(s) of passes could be compared (reasons above)"
+        )
+    finish(
+        "repeatability",
+        inputs={"files": list(files)},
+        parameters={
+            "by_source_id": by_source_id,
+            "source_id": source_id,
+            "pool": pool,
+            "weight": weight,
+            "sensitivity": sensitivity,
+            "threshold": threshold,
+            "shared_threshold": shared_threshold,
+            "outlines": outlines,
+            "rotate": rotate,
+            "denominator": denominator,
+            "classes": classes,
+            "crs": crs,
+        },
+        results=rows,
+    )
+
+
+def _print_rows(rows: list[dict], threshold: float | None, *, pool: bool = False) -> None:
+    """The repeatability table on stdout."""
     width = max([28] + [len(_row_name(r)) + 2 for r in rows])
     head = (
         f"{'Data sets':<{width}}{'p':>6}{'q':>6}{'pairs T→M':>11}{'pairs M→T':>11}"
@@ -412,22 +522,19 @@ def repeatability(
         "* final modified LHD of the pair"
         + ("; ! threshold fell back (no knee found)" if fallback else "")
     )
-    finish(
-        "repeatability",
-        inputs={"files": list(files)},
-        parameters={
-            "by_source_id": by_source_id,
-            "source_id": source_id,
-            "weight": weight,
-            "sensitivity": sensitivity,
-            "threshold": threshold,
-            "rotate": rotate,
-            "denominator": denominator,
-            "classes": classes,
-            "crs": crs,
-        },
-        results=rows,
-    )
+    few = [r for r in rows if "error" not in r and min(r["p"], r["q"]) < _FEW_SEGMENTS]
+    if threshold is None and few and not pool:
+        # A knee among a handful of nearest distances is a guess: on the IGN 50 m tiles
+        # (10-20 edges per strip) it ranged from 0.10 to 0.82 m between neighbouring tiles.
+        echo(
+            f"note: {len(few)} pair(s) with fewer than {_FEW_SEGMENTS} segments on a side: their "
+            "automatic thresholds are unstable; use --pool (tiles of one survey), "
+            "--shared-threshold or --threshold"
+        )
+
+
+#: Fewer segments than this on either side of a pair: the automatic threshold is flagged.
+_FEW_SEGMENTS = 30
 
 
 def _row_name(row: dict) -> str:

@@ -1,7 +1,5 @@
 """Data bundled with lidarqa (see ``ATTRIBUTION.md`` beside this file)."""
 
-from __future__ import annotations
-
 from importlib import resources
 from pathlib import Path
 

@@ -1,4 +1,6 @@
-"""Planes, plane segmentation, edges (plane-pair segments) and corners (ALGORITHMS.md §1.2, §4).
+"""Planes, plane segmentation, edges (plane-pair segments) and corners.
+
+Methods: :ref:`alg-segmentation`, :ref:`alg-planes`, :ref:`alg-edges`, :ref:`alg-corners`.
 
 >>> from lidarqa.geometry import fit_plane, segment_planes, extract_edges, extract_corners
 """

@@ -431,7 +431,8 @@ def surface_growing_kernel(pts, trial_order, knn, knn_k, method, seed_dist, min_
         sx = sy = sz = sxx = sxy = sxz = syy = syz = szz = 0.0
         tail = 0
         for a in range(m):
-            if flag[a]:
+            # a neighbour list may name a point twice (ties on degenerate input): queue it once
+            if flag[a] and labels[cand[a]] != lab:
                 j = cand[a]
                 labels[j] = lab
                 queue[tail] = j
@@ -509,7 +510,8 @@ def _knn_one(pts, i, k, rmax, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, 
             for dy in range(-r, r + 1):
                 jx = cx[i] + dx
                 jy = cy[i] + dy
-                if jx < 0 or jy < 0:
+                # past the last row a key would wrap into the next x column (same cells twice)
+                if jx < 0 or jy < 0 or jy >= nyz // nz:
                     continue
                 base = jx * nyz + jy * nz
                 z0 = cz[i] - r

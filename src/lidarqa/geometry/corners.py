@@ -1,4 +1,4 @@
-"""Corners as intersections of three planes ([S-FH] eq. 4; ALGORITHMS.md §4.3)."""
+"""Corners as intersections of three planes ([S-FH] eq. 4; :ref:`alg-corners`)."""
 
 from __future__ import annotations
 
@@ -26,7 +26,7 @@ class Corner:
     xyz : ndarray of shape (3,)
         The corner (m).
     det : float
-        |det N| of the unit normals (volume of their parallelepiped, <= 1).
+        ``|det N|`` of the unit normals (volume of their parallelepiped, <= 1).
     min_angle_deg : float
         Smallest angle (degrees, in [0, 90]) between two of the planes.
     covariance : ndarray of shape (3, 3)
@@ -90,7 +90,7 @@ def corner_from_planes(
     min_angle: float = 10.0,
     normal_uncertainty: bool = True,
 ) -> Corner:
-    """Intersect three planes: solve ``N x = rho`` with conditioning checks (§4.3).
+    """Intersect three planes: solve ``N x = rho`` with conditioning checks (:ref:`alg-corners`).
 
     Parameters
     ----------
@@ -102,7 +102,7 @@ def corner_from_planes(
         Standard deviations (m) of the offsets; overrides the PlaneFit
         uncertainties.
     min_det : float, default 0.1
-        Smallest |det N| of the unit normals accepted.
+        Smallest ``|det N|`` of the unit normals accepted.
     min_angle : float, default 10.0
         Smallest angle (degrees) accepted between any two planes.
     normal_uncertainty : bool, default True
@@ -113,14 +113,14 @@ def corner_from_planes(
     Returns
     -------
     Corner
-        The corner, |det N|, the smallest pair angle and ``Σ_x = N⁻¹ D N⁻ᵀ`` with D
+        The corner, ``|det N|``, the smallest pair angle and ``Σ_x = N⁻¹ D N⁻ᵀ`` with D
         the diagonal of plane position variances (NaN without any uncertainty).
 
     Raises
     ------
     DegenerateGeometryError
         "near-parallel" (two planes closer than `min_angle`) or "near-coplanar
-        normals" (|det N| < `min_det`, e.g. three planes sharing a direction).
+        normals" (``|det N|`` < `min_det`, e.g. three planes sharing a direction).
 
     Examples
     --------
@@ -265,7 +265,7 @@ def extract_corners(
     segmentation : PlaneSegmentation, optional
         Computed with :func:`segment_planes` (`segment_options`) when omitted.
     min_det : float, default 0.1
-        Smallest |det N| of the three unit normals.
+        Smallest ``|det N|`` of the three unit normals.
     min_angle : float, default 10.0
         Smallest angle (degrees) between any two of the planes.
     max_dist : float, default 1.0

@@ -1,4 +1,4 @@
-"""Edges as intersections of adjacent planes, bounded by their support (ALGORITHMS.md §4.2)."""
+"""Edges as intersections of adjacent planes, bounded by their support (:ref:`alg-edges`)."""
 
 from __future__ import annotations
 
@@ -101,7 +101,7 @@ def plane_pair_segment(
     min_support: int = 5,
     return_reason: bool = False,
 ) -> PlanePairSegment | None | tuple[PlanePairSegment | None, str]:
-    """Intersect two planes and bound the line by their supporting points (§4.2).
+    """Intersect two planes and bound the line by their supporting points (:ref:`alg-edges`).
 
     Parameters
     ----------
@@ -297,6 +297,90 @@ def edges_from_segmentation(
     return edges, skipped
 
 
+def _simplify_closed(poly: np.ndarray, tolerance: float) -> np.ndarray:
+    """Douglas-Peucker on a closed 2-D polygon (vertex order kept); indices of kept vertices."""
+    n = len(poly)
+    keep = np.zeros(n, dtype=bool)
+    d = np.linalg.norm(poly[:, None] - poly[None], axis=2)
+    i, j = (int(v) for v in np.unravel_index(int(d.argmax()), d.shape))
+    keep[[i, j]] = True
+    stack = [(i, j), (j, i)]
+    while stack:
+        a, b = stack.pop()
+        idx = [(a + k) % n for k in range(1, (b - a) % n)]
+        if not idx:
+            continue
+        v = poly[b] - poly[a]
+        w = poly[idx] - poly[a]
+        dist = np.abs(v[0] * w[:, 1] - v[1] * w[:, 0]) / max(float(np.hypot(*v)), 1e-12)
+        k = int(np.argmax(dist))
+        if dist[k] > tolerance:
+            m = idx[k]
+            keep[m] = True
+            stack += [(a, m), (m, b)]
+    return np.flatnonzero(keep)
+
+
+def outline_segments(
+    points: np.ndarray,
+    seg: PlaneSegmentation,
+    *,
+    min_length: float = 2.0,
+    tolerance: float = 0.3,
+    min_points: int = 30,
+    max_slope: float = 75.0,
+) -> list[tuple[np.ndarray, np.ndarray, int, int]]:
+    """Outline sides of each non-vertical plane segment: ``[(start, end, plane, n_points)]``.
+
+    Airborne scans rarely sample walls, so roof-wall and step edges have no
+    second plane to intersect with. The outline of a roof plane stands in for
+    them: the 2-D convex hull of the plane's inliers, simplified (Douglas-Peucker,
+    `tolerance` m), each side of at least `min_length` m lifted onto the plane.
+    The sides lie up to about half a point spacing inside the true outline, and
+    a concave roof gets its hull's chord: outlines suit strip-to-strip
+    repeatability, where both strips see the same roof the same way.
+    """
+    from scipy.spatial import ConvexHull, QhullError
+
+    rows = []
+    nz_min = math.cos(math.radians(max_slope))
+    for k in range(len(seg.normal)):
+        m = (seg.labels == k) & seg.inliers
+        n = seg.normal[k]
+        if m.sum() < min_points or abs(n[2]) < nz_min:
+            continue
+        xy = points[m, :2]
+        try:
+            hull = ConvexHull(xy)
+        except QhullError:
+            continue
+        poly = xy[hull.vertices]
+        v = poly[_simplify_closed(poly, tolerance)]
+        for a, b in zip(v, np.roll(v, -1, axis=0), strict=True):
+            if np.hypot(*(b - a)) < min_length:
+                continue
+            ends = np.array([a, b])
+            z = (seg.rho[k] - ends @ n[:2]) / n[2]
+            rows.append((np.r_[a, z[0]], np.r_[b, z[1]], k, int(m.sum())))
+    return rows
+
+
+def _near_any(start: np.ndarray, end: np.ndarray, edges: Segments, dist: float) -> bool:
+    """Whether segment start-end runs along one of `edges` (midpoint within `dist`, < 10°)."""
+    if len(edges) == 0:
+        return False
+    mid = 0.5 * (start + end)
+    d = end - start
+    d = d / max(float(np.linalg.norm(d)), 1e-12)
+    e = edges.end - edges.start
+    length = np.maximum(np.linalg.norm(e, axis=1), 1e-12)
+    u = e / length[:, None]
+    t = np.clip(np.einsum("ij,ij->i", mid - edges.start, u), 0.0, length)
+    gap = np.linalg.norm(mid - (edges.start + t[:, None] * u), axis=1)
+    parallel = np.abs(u @ d) >= math.cos(math.radians(10.0))
+    return bool(np.any((gap <= dist) & parallel))
+
+
 def extract_edges(
     points: Any,
     *,
@@ -308,6 +392,7 @@ def extract_edges(
     min_support: int = 5,
     min_length: float = 0.5,
     crs: Any = None,
+    outlines: bool = False,
     **segment_options: Any,
 ) -> Segments:
     """3D edges of a cloud: intersections of adjacent planes bounded by their support.
@@ -334,6 +419,12 @@ def extract_edges(
         Shorter edges (m) are dropped.
     crs : pyproj.CRS, optional
         Stored on the result.
+    outlines : bool, default False
+        Also return the outline sides of roof planes (:func:`outline_segments`),
+        which stand in for roof-wall and step edges that airborne scans leave
+        without a wall plane; the result then has a ``kind`` attribute
+        (``"intersection"`` or ``"outline"``). Outline sides along an
+        intersection edge are dropped.
     **segment_options
         Passed to :func:`~lidarqa.geometry.segmentation.segment_planes`.
 
@@ -362,4 +453,30 @@ def extract_edges(
     edges, _ = edges_from_segmentation(pts, segmentation, near_dist=near_dist, min_angle=min_angle,
                                        q_lo=q_lo, q_hi=q_hi, min_support=int(min_support),
                                        min_length=min_length, crs=crs)
+    if outlines:
+        edges = _with_outlines(pts, segmentation, edges, near_dist)
     return edges
+
+
+def _with_outlines(pts: np.ndarray, seg: PlaneSegmentation, edges: Segments,
+                   near_dist: float) -> Segments:
+    rows = [r for r in outline_segments(pts, seg)
+            if not _near_any(r[0], r[1], edges, max(2.0 * near_dist, 0.5))]
+    n0, n1 = len(edges), len(rows)
+    start = np.vstack([edges.start, np.array([r[0] for r in rows]).reshape(n1, 3)])
+    end = np.vstack([edges.end, np.array([r[1] for r in rows]).reshape(n1, 3)])
+    nan = np.full(n1, np.nan)
+    extra = {
+        "plane_a": np.array([r[2] for r in rows], dtype=np.int64),
+        "plane_b": np.full(n1, -1, dtype=np.int64),
+        "angle_deg": nan,
+        "support_a": np.array([r[3] for r in rows], dtype=np.int64),
+        "support_b": np.zeros(n1, dtype=np.int64),
+        "sigma_line": nan,
+        "sigma_line_max": nan,
+        "length": np.linalg.norm(end[n0:] - start[n0:], axis=1),
+    }
+    attrs = {k: np.concatenate([edges.attributes[k], extra[k]]) for k in edges.attributes}
+    attrs["kind"] = np.array(["intersection"] * n0 + ["outline"] * n1, dtype=object)
+    return Segments(ids=np.arange(n0 + n1, dtype=np.int64), start=start, end=end,
+                    attributes=attrs, crs=edges.crs)

@@ -1,4 +1,4 @@
-"""Plane fitting: total least squares, explicit z, iterative rejection, RANSAC (ALGORITHMS.md §4.1).
+"""Plane fitting: total least squares, explicit z, iterative rejection, RANSAC (:ref:`alg-planes`).
 
 Every fit works in coordinates centred on the bounding-box middle of its points
 (so UTM-sized coordinates lose no precision) and reports the plane as a unit

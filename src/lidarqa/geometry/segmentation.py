@@ -1,4 +1,4 @@
-"""Surface-growing segmentation and plane segmentation (ALGORITHMS.md §1.2).
+"""Surface-growing segmentation and plane segmentation (:ref:`alg-segmentation`).
 
 :func:`surface_growing` labels points into smooth planar segments (seed surfaces
 grown by proximity and distance to the segment plane). :func:`segment_planes`
@@ -31,6 +31,8 @@ def _check_int(value: Any, name: str, lo: int) -> int:
         raise OptionError(f"{name} must be an integer, got {value!r}") from exc
     if v != value or v < lo:
         raise OptionError(f"{name} must be an integer >= {lo}, got {value!r}")
+    if v > 2**62:  # the numeric kernels take 64-bit integers
+        raise OptionError(f"{name} {value!r} is too large")
     return v
 
 
@@ -98,7 +100,8 @@ def surface_growing(
     hough_angle_step : float, default 3.0
         Angular step (degrees) of the Hough normal directions (tilt and azimuth).
     grow_radius : float, default 0.5
-        Neighbourhood radius (m, 3D) of growing.
+        Neighbourhood radius (m, 3D) of growing. A radius taking in more than
+        1000 points on average is refused (OptionError): growing is local.
     grow_dist : float, default 0.2
         Maximum distance (m) of a joining point to the segment plane.
     refit_growth : float, default 0.2
@@ -108,7 +111,7 @@ def surface_growing(
     seed_method : {"pca", "hough", "ransac"}, default "pca"
         How the seed plane is found in the neighbourhood: one total-least-squares
         fit plus one refit on its inliers ("pca", fastest), a 3D Hough transform
-        over normal directions and ρ bins ("hough", §1.2), or 200 three-point
+        over normal directions and ρ bins ("hough", :ref:`alg-segmentation`), or 200 three-point
         RANSAC hypotheses ("ransac", randomised by `seed` and the trial point).
     seed : int, default 0
         Random seed for ``seed_method="ransac"``.
@@ -155,6 +158,7 @@ def surface_growing(
     if n < 3:
         return labels_out
     perm, pts = canonical_points(pts_in)
+    _check_neighbourhood(pts, grow_radius, "grow_radius")
     labels_out[perm] = _grow_sorted(pts, k_seed, seed_dist, min_seed_points, hough_angle_step,
                                     grow_radius, grow_dist, refit_growth, min_segment_size,
                                     seed_method, seed, refine_boundaries, progress=progress)
@@ -192,6 +196,35 @@ def _grow_sorted(pts: np.ndarray, k_seed: int, seed_dist: float, min_seed_points
     if refine_boundaries and labels.max() >= 1:
         labels = _refine_boundaries(pts, labels, grow_radius, grow_dist, grid)
     return labels
+
+
+# A neighbourhood radius is local: past this mean number of neighbours per point the
+# growing and contact searches become quadratic (minutes and gigabytes on a small tile).
+MAX_MEAN_NEIGHBOURS = 1000
+
+
+def _check_neighbourhood(pts: np.ndarray, radius: float, name: str) -> None:
+    """Refuse a user-given radius that takes in more than MAX_MEAN_NEIGHBOURS points on average.
+
+    Counted exactly on an evenly spread sample of at most 256 points.
+    """
+    from scipy.spatial import cKDTree
+
+    n = len(pts)
+    if n <= MAX_MEAN_NEIGHBOURS:
+        return
+    sample = pts[np.linspace(0, n - 1, min(n, 256)).astype(np.int64)]
+    tree = cKDTree(pts)
+    mean = float(tree.query_ball_point(sample, radius, return_length=True).mean())
+    if mean > MAX_MEAN_NEIGHBOURS:
+        # the radius that takes in about the allowed number, for the message
+        dist, _ = tree.query(sample, k=MAX_MEAN_NEIGHBOURS)
+        usable = float(np.median(dist[:, -1]))
+        raise OptionError(
+            f"{name} {radius:g} m takes in ~{mean:,.0f} neighbours per point "
+            f"(at most {MAX_MEAN_NEIGHBOURS} allowed): it must be a local radius, "
+            f"about {usable:.2g} m or less on this cloud"
+        )
 
 
 def _check_growing_options(k_seed, seed_dist, min_seed_points, hough_angle_step, grow_radius,
@@ -383,6 +416,7 @@ def segment_planes(
         Growing radius (m). None adapts it to the sampling: twice the median
         distance of a point to its 10th nearest neighbour, clipped to [0.5, 3] m
         (about 0.8 m at 20 pts/m² on surfaces, 1 m for an IGN LiDAR HD strip).
+        A given radius taking in more than 1000 points on average is refused.
     min_segment_size : int, default 30
         Smallest segment kept (points); smaller segments become -1.
     max_rmse : float or None, default 0.15
@@ -433,8 +467,12 @@ def segment_planes(
     spacing = _spacing_from_knn(pts, knn) if knn is not None else float("nan")
     if grow_radius is None:
         grow_radius = float(np.clip(2.0 * spacing, 0.5, 3.0)) if np.isfinite(spacing) else 0.5
+    else:
+        _check_neighbourhood(pts, grow_radius, "grow_radius")
     if adjacency_dist is None:
         adjacency_dist = grow_radius
+    elif adjacency_dist > grow_radius:
+        _check_neighbourhood(pts, adjacency_dist, "adjacency_dist")
     params.update(grow_radius=grow_radius, max_rmse=max_rmse, trim=trim,
                   adjacency_dist=adjacency_dist, min_contacts=min_contacts,
                   point_spacing=spacing if np.isfinite(spacing) else None)

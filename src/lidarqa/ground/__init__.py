@@ -1,8 +1,8 @@
 """Ground filtering: point-based and segment-based progressive TIN densification.
 
-- :class:`PTD` — Axelsson's progressive TIN densification (ALGORITHMS.md §1.1);
-- :class:`SegmentPTD` — Lin & Zhang's segment-based PTD (§1.3–1.4);
-- :func:`filter_errors` — ISPRS type I / type II / total error and Cohen's kappa (§2);
+- :class:`PTD` — Axelsson's progressive TIN densification (:ref:`alg-ptd`);
+- :class:`SegmentPTD` — Lin & Zhang's segment-based PTD (:ref:`alg-segment-ptd`);
+- :func:`filter_errors` — ISPRS type I / type II / total error and Cohen's kappa (:ref:`alg-isprs`);
 - :func:`classify_ground` — the library function behind ``lidarqa ground``: return
   handling, noise exclusion, filtering and (optionally) evaluation on a
   :class:`~lidarqa.io.PointCloud`.
@@ -17,8 +17,6 @@ Examples
 True
 """
 
-from __future__ import annotations
-
 import warnings
 from dataclasses import dataclass, field
 from typing import Any
@@ -27,6 +25,7 @@ import numpy as np
 
 from .._validate import check_choice
 from ..errors import DataQualityWarning, OptionError
+from .auto import DENSE_ALS, SENSORS, CloudMeasures, auto_parameters, measure_cloud
 from .features import SegmentFeatures, detect_object_segments, point_scatterness, segment_features
 from .metrics import FilterErrors, filter_errors, filter_errors_from_counts, filter_errors_from_file
 from .ptd import PTD, PTDResult, mirror_point, ptd_filter
@@ -52,12 +51,19 @@ __all__ = [
     "GroundResult",
     "classify_ground",
     "ground_candidates",
+    "kernels_cached",
     "relabel_classification",
     "METHODS",
     "NOISE_CLASSES",
     "ALS_PARAMS",
     "ALS_SEGMENT_PARAMS",
     "PRESETS",
+    "PRESET_CHOICES",
+    "CloudMeasures",
+    "measure_cloud",
+    "auto_parameters",
+    "SENSORS",
+    "DENSE_ALS",
 ]
 
 METHODS = ("segment-ptd", "ptd")
@@ -94,6 +100,8 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
     "mls": {"ptd": {}, "segment-ptd": {}},
     "als": {"ptd": ALS_PARAMS, "segment-ptd": ALS_SEGMENT_PARAMS},
 }
+#: every accepted `preset`: "auto" (the default) measures the cloud and chooses
+PRESET_CHOICES = ("auto", *PRESETS)
 
 
 @dataclass(frozen=True)
@@ -126,6 +134,10 @@ class GroundResult:
     n_excluded_noise: int = 0
     evaluation: FilterErrors | None = None
     warnings: tuple[str, ...] = field(default=())
+    preset: str | None = None
+    parameter_sources: dict = field(default_factory=dict)
+    measures: CloudMeasures | None = None
+    regime: str | None = None
 
     @property
     def n_ground(self) -> int:
@@ -144,6 +156,10 @@ class GroundResult:
             "n_excluded_noise": self.n_excluded_noise,
             "filter": self.details.to_dict() if self.details is not None else None,
             "warnings": list(self.warnings),
+            "preset": self.preset,
+            "regime": self.regime,
+            "measured": self.measures.to_dict() if self.measures is not None else None,
+            "parameter_sources": dict(self.parameter_sources),
         }
         if self.evaluation is not None:
             d.update(_evaluation_dict(self.evaluation))
@@ -153,6 +169,29 @@ class GroundResult:
 def _evaluation_dict(e: FilterErrors) -> dict[str, Any]:
     full = e.to_dict()
     return {k: full[k] for k in ("type_i", "type_ii", "total", "kappa", "n_evaluated", "confusion")}
+
+
+def kernels_cached() -> bool:
+    """True when numba's on-disk cache holds the ground filter's compiled kernels.
+
+    The kernels are compiled with ``cache=True``: the first run after installing
+    (or upgrading) spends 20-30 s compiling, later runs load them. The CLI uses
+    this to say so before a first run. A heuristic: it looks for the cache index
+    of the TIN kernels next to the source or under ``NUMBA_CACHE_DIR``.
+    """
+    import glob
+    import os
+    from pathlib import Path
+
+    here = Path(__file__).resolve().parent
+    dirs = [here / "__pycache__"]
+    env = os.environ.get("NUMBA_CACHE_DIR")
+    if env:
+        dirs.append(Path(env))
+    for d in dirs:
+        if glob.glob(str(d / "**" / "_tin._judge_kernel-*.nbi"), recursive=True):
+            return True
+    return False
 
 
 def ground_candidates(
@@ -230,7 +269,8 @@ def classify_ground(
     exclude_classes: Any = NOISE_CLASSES,
     evaluate: bool = False,
     ignore_classes: Any = None,
-    preset: str | None = None,
+    preset: str | None = "auto",
+    sensor: str = "auto",
     progress: Any = None,
     **params: Any,
 ) -> GroundResult:
@@ -253,9 +293,15 @@ def classify_ground(
         else object; `ignore_classes` left out) and attach :class:`FilterErrors`.
     ignore_classes : sequence of int, optional
         Reference classes excluded from the evaluation.
-    preset : {"als", "mls"}, optional
-        Start from :data:`PRESETS` ``[preset]`` (``"mls"`` = the library defaults);
-        explicit `params` override it.
+    preset : {"auto", "als", "mls"} or None, default "auto"
+        ``"auto"``: measure the candidates (density, returns, sensor, slopes,
+        object footprints, see :func:`measure_cloud`) and choose the parameters
+        from those figures (:func:`auto_parameters`). ``"als"``/``"mls"``: start
+        from :data:`PRESETS` ``[preset]``; None: the class defaults (= ``"mls"``).
+        Explicit `params` always override.
+    sensor : {"auto", "als", "mls"}, default "auto"
+        With ``preset="auto"``: the kind of acquisition if known (overrides the
+        measured one).
     progress : callable, optional
         Called with the estimated fraction of the work done (0..1), e.g. to show
         a progress bar; the filter itself never prints.
@@ -269,19 +315,41 @@ def classify_ground(
     from ..io import PointCloud
 
     check_choice(method, METHODS, "method")
+    check_choice(sensor, SENSORS, "sensor")
     if preset is not None:
-        check_choice(preset, tuple(PRESETS), "preset")
-        params = {**PRESETS[preset][method], **params}
+        check_choice(preset, PRESET_CHOICES, "preset")
     if not isinstance(cloud, PointCloud):
-        cloud = PointCloud(np.asarray(cloud, dtype=np.float64))
+        from .._validate import as_points
+
+        cloud = PointCloud(as_points(cloud, "cloud"))
+    cand, handling, n_noise, msgs = ground_candidates(
+        cloud, last_returns_only=last_returns_only, exclude_classes=exclude_classes
+    )
+    given = dict(params)
+    measures = None
+    regime = None
+    chosen: dict[str, Any] = {}
+    sources: dict[str, str] = {}
+    if preset == "auto":
+        fields = {
+            k: np.asarray(v)[cand]
+            for k, v in cloud.fields.items()
+            if k in ("return_number", "number_of_returns", "scan_angle", "scan_angle_rank")
+        }
+        measures = measure_cloud(cloud.xyz[cand], fields=fields)
+        chosen, sources, regime = auto_parameters(measures, method, sensor=sensor)
+    elif preset is not None:
+        chosen = dict(PRESETS[preset][method])
+        sources = dict.fromkeys(chosen, "preset")
+    params = {**chosen, **given}
     cls_type = SegmentPTD if method == "segment-ptd" else PTD
     try:
         filt = cls_type(**params)
     except TypeError as exc:
         raise OptionError(f"invalid parameter for method {method!r}: {exc}") from None
-    cand, handling, n_noise, msgs = ground_candidates(
-        cloud, last_returns_only=last_returns_only, exclude_classes=exclude_classes
-    )
+    sources = {
+        k: ("given" if k in given else sources.get(k, "default")) for k in filt.to_dict()
+    }
     details = filt.run(cloud.xyz, candidates=cand, progress=progress)
     ground = details.ground_mask
     evaluation = None
@@ -305,4 +373,8 @@ def classify_ground(
         n_excluded_noise=n_noise,
         evaluation=evaluation,
         warnings=tuple(msgs),
+        preset=preset,
+        parameter_sources=sources,
+        measures=measures,
+        regime=regime,
     )

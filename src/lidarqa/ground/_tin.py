@@ -29,7 +29,7 @@ __all__ = [
 
 @dataclass(frozen=True)
 class Criteria:
-    """The §1.1 acceptance thresholds, in radians and metres."""
+    """The acceptance thresholds of :ref:`alg-ptd`, in radians and metres."""
 
     iter_angle: float  # rad
     iter_distance: float  # m
@@ -275,7 +275,7 @@ def judge_points(
     check_frozen: bool = True,
     presorted: bool = False,
 ) -> PointTest:
-    """Run the §1.1 step 5b–f tests for candidate points `p` (M, 3) against `tin`.
+    """Run the densification tests of :ref:`alg-ptd` for candidate points `p` (M, 3) against `tin`.
 
     One compiled pass per point: locate its facet (walk), XY-duplicate test,
     frozen-triangle test, distance and iteration angle, sub-facet slopes, and
@@ -390,17 +390,19 @@ def _interleave(v: np.ndarray) -> np.ndarray:
 # ---------------------------------------------------------------- compiled kernels
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def _setup_kernel(vxyz, simp, nb, have_nb):  # pragma: no cover - numba
     """Orient triangles CCW (in place), fill adjacency ``nb`` unless given, facet geometry.
 
     ``nb[k, i]`` is the triangle across the side opposite vertex i (-1 on the hull),
-    found through the triangles incident to each vertex (no global sort).
+    found through the triangles incident to each vertex (no global sort). Every
+    triangle finds its own neighbours (no shared writes), so the loops run in
+    parallel and the result does not depend on the thread count.
     Returns (longest XY edge, upward unit normal, slope in rad) per triangle.
     """
     k = simp.shape[0]
     nv = vxyz.shape[0]
-    for t in range(k):
+    for t in prange(k):
         a, b, c = simp[t, 0], simp[t, 1], simp[t, 2]
         o = (vxyz[b, 0] - vxyz[a, 0]) * (vxyz[c, 1] - vxyz[a, 1]) - (vxyz[b, 1] - vxyz[a, 1]) * (
             vxyz[c, 0] - vxyz[a, 0]
@@ -424,11 +426,8 @@ def _setup_kernel(vxyz, simp, nb, have_nb):  # pragma: no cover - numba
                 v = simp[t, i]
                 inc[fill[v]] = 3 * t + i
                 fill[v] += 1
-        nb[:, :] = -2  # not yet known
-        for t in range(k):
+        for t in prange(k):
             for i in range(3):
-                if nb[t, i] != -2:
-                    continue
                 a = simp[t, (i + 1) % 3]
                 b = simp[t, (i + 2) % 3]
                 nb[t, i] = -1
@@ -438,12 +437,11 @@ def _setup_kernel(vxyz, simp, nb, have_nb):  # pragma: no cover - numba
                     pos = inc[q] - 3 * u
                     if simp[u, (pos + 1) % 3] == a and u != t:
                         nb[t, i] = u
-                        nb[u, (pos + 2) % 3] = t
                         break
     edge_max = np.empty(k)
     normal = np.empty((k, 3))
     slope = np.empty(k)
-    for t in range(k):
+    for t in prange(k):
         i0, i1, i2 = simp[t, 0], simp[t, 1], simp[t, 2]
         x0, y0, z0 = vxyz[i0, 0], vxyz[i0, 1], vxyz[i0, 2]
         ux, uy, uz = vxyz[i1, 0] - x0, vxyz[i1, 1] - y0, vxyz[i1, 2] - z0
@@ -572,7 +570,7 @@ def _judge_kernel(
     mirror_max,
     n_chunks,
 ):  # pragma: no cover - numba
-    """The §1.1 step 5b-f tests of each point against the TIN (see judge_points)."""
+    """The densification tests (:ref:`alg-ptd`) of each point against the TIN."""
     m = p.shape[0]
     tri = np.full(m, -1, np.int64)
     passed = np.zeros(m, np.bool_)

@@ -1,4 +1,4 @@
-"""Segment features and object-segment detection, ALGORITHMS.md §1.3.
+"""Segment features and object-segment detection, :ref:`alg-features`.
 
 Orientation (tilt of a segment's best-fit plane) and scatterness (mean
 per-point dimensionality sqrt(λ3/λ1) of the k nearest neighbours), after
@@ -33,7 +33,7 @@ class SegmentFeatures:
     Attributes
     ----------
     orientation : ndarray (S,)
-        arccos(|n_z|) of the segment plane, degrees in [0, 90] (nan for < 3 points).
+        ``arccos(|n_z|)`` of the segment plane, degrees in [0, 90] (nan for < 3 points).
     scatterness : ndarray (S,)
         Mean sqrt(λ3/λ1) of the point neighbourhoods, in [0, 1].
     size : ndarray (S,) int
@@ -117,7 +117,7 @@ def segment_features(
     return_number: Any = None,
     number_of_returns: Any = None,
 ) -> SegmentFeatures:
-    """Orientation and scatterness of every segment (§1.3).
+    """Orientation and scatterness of every segment (:ref:`alg-features`).
 
     Parameters
     ----------
@@ -196,7 +196,9 @@ def detect_object_segments(
     min_facade_points: int = 0,
     echo_ratio_thr: float | None = None,
 ) -> np.ndarray:
-    """Object flag per segment (§1.3): façade (orientation > o) or vegetation (scatterness > s).
+    """Object flag per segment: façade (orientation > o) or vegetation (scatterness > s).
+
+    Method: :ref:`alg-features`.
 
     Parameters
     ----------

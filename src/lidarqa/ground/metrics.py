@@ -1,4 +1,4 @@
-"""ISPRS filter-test error measures (Sithole & Vosselman 2004), ALGORITHMS.md §2.
+"""ISPRS filter-test error measures (Sithole & Vosselman 2004), :ref:`alg-isprs`.
 
 Type I (ground rejected), type II (object accepted as ground), total error and
 Cohen's kappa, from two boolean label arrays or from the four counts of the

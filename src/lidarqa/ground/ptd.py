@@ -1,4 +1,4 @@
-"""Point-based progressive TIN densification (Axelsson 2000), ALGORITHMS.md §1.1.
+"""Point-based progressive TIN densification (Axelsson 2000), :ref:`alg-ptd`.
 
 Seeds are the lowest points of a coarse grid; a Delaunay TIN is built from them
 and densified iteratively with points close to a facet (distance) that make
@@ -132,7 +132,7 @@ class PTD(TINParameters):
     max_iter : int, default 100
     edge_mode : {"freeze", "reduce"}, default "freeze"
     min_gain_frac : float, default 0.0
-        Stop early when an iteration adds fewer than this fraction of |G|.
+        Stop early when an iteration adds fewer than this fraction of ``|G|``.
     final_distance : float, default 0.0
         After densification, candidates within this distance (m) of the final TIN
         are ground too (never inserted). 0 disables. DECISION: at ALS noise levels
@@ -306,7 +306,7 @@ def densify(
     min_gain_frac: float = 0.0,
     progress: ProgressCallback | None = None,
 ) -> TIN:
-    """Point-wise progressive densification of `st`; returns the final TIN.
+    """Point-wise progressive densification (:ref:`alg-ptd`) of `st`; returns the final TIN.
 
     The TIN grows by insertion (startinpy) instead of being rebuilt each iteration;
     if startinpy merges two vertices (closer than 1e-7 m) it falls back to rebuilding.

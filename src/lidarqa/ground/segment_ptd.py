@@ -1,8 +1,8 @@
-"""Segment-based progressive TIN densification (Lin & Zhang 2014/2015), ALGORITHMS.md §1.4.
+"""Segment-based progressive TIN densification (Lin & Zhang 2014/2015), :ref:`alg-segment-ptd`.
 
-The cloud is segmented into planar surfaces (surface growing, §1.2), object
+The cloud is segmented into planar surfaces (surface growing, :ref:`alg-segmentation`), object
 segments (façades, vegetation) are removed by orientation and scatterness
-(§1.3), and the PTD framework of §1.1 then decides per *segment*: segments
+(:ref:`alg-features`), and the PTD framework (:ref:`alg-ptd`) then decides per *segment*: segments
 holding a seed point are ground, and an undecided segment becomes ground when
 enough of its points pass the point-wise PTD tests against the current TIN.
 Lower parts of objects are rejected with their segment; terrain patches that
@@ -84,6 +84,7 @@ def default_grow_radius(points: np.ndarray, *, factor: float = 2.5, floor: float
     divided by the cell area (robust to scan-line patterns and to empty areas).
     Never below `floor`.
     """
+    points = as_points(points)
     n = points.shape[0]
     if n < 2:
         return floor
@@ -119,7 +120,7 @@ class SegmentPTD(TINParameters):
         A segment with a smaller fraction of passing points is entirely non-ground;
         between `reject_ratio` and `accept_ratio` its points keep their point-wise result.
     seed_segments : bool, default True
-        Every segment holding a seed point is ground as a whole (§1.4 step 2);
+        Every segment holding a seed point is ground as a whole (:ref:`alg-segment-ptd`);
         False: seed segments are judged by the vote like the others.
     min_tested : int, default 3
         Segments with fewer tested points (inside the TIN) stay undecided.
@@ -330,7 +331,7 @@ class SegmentPTD(TINParameters):
         candidates : ndarray of bool, shape (N,), optional
             Points allowed to be ground (others are ignored and never ground).
         object_segments : ndarray of bool, shape (S,), optional
-            Object flag per segment; default: orientation / scatterness rule (§1.3).
+            Object flag per segment; default: orientation / scatterness rule (:ref:`alg-features`).
         progress : callable, optional
             Called with the estimated fraction of the work done (0..1).
         """
@@ -368,7 +369,7 @@ def segment_ptd(
     candidates: Any = None,
     **params: Any,
 ) -> np.ndarray:
-    """Functional form of §1.4: ground mask from points, segment labels and object flags."""
+    """Ground mask from points, segment labels and object flags (:ref:`alg-segment-ptd`)."""
     return (
         SegmentPTD(**params)
         .run(points, labels=labels, candidates=candidates, object_segments=object_mask_by_segment)
@@ -385,11 +386,55 @@ def _argmin_per_group(
     group number of point i (groups numbered in ascending key order). One stable
     integer sort and a linear numba scan; independent of the input order.
     """
+    value = np.ascontiguousarray(value, dtype=np.float64)
+    n_keys = int(key.max()) + 1 if key.size else 0
+    if 0 < n_keys <= 4 * key.size + 1024:  # small key range: one linear pass, no sort
+        return _group_argmin_dense(
+            np.ascontiguousarray(key, dtype=np.int64), value,
+            np.ascontiguousarray(p, dtype=np.float64), n_keys,
+        )
     order = np.argsort(key, kind="stable")
     return _group_argmin_scan(
         key[order], order, np.ascontiguousarray(value, dtype=np.float64),
         np.ascontiguousarray(p, dtype=np.float64),
     )
+
+
+@njit(cache=True)
+def _group_argmin_dense(key, value, p, n_keys):  # pragma: no cover - numba
+    # same winners as the sorted scan: smallest value, then x, y, z; full ties keep
+    # the smallest index (points are visited in index order)
+    n = key.size
+    best = np.full(n_keys, -1, np.int64)
+    for i in range(n):
+        k = key[i]
+        b = best[k]
+        if b < 0:
+            best[k] = i
+            continue
+        vi, vb = value[i], value[b]
+        if vi < vb or (
+            vi == vb
+            and (
+                p[i, 0] < p[b, 0]
+                or (p[i, 0] == p[b, 0] and (
+                    p[i, 1] < p[b, 1] or (p[i, 1] == p[b, 1] and p[i, 2] < p[b, 2])
+                ))
+            )
+        ):
+            best[k] = i
+    rank = np.full(n_keys, -1, np.int64)
+    winners = np.empty(n_keys, np.int64)
+    g = 0
+    for k in range(n_keys):
+        if best[k] >= 0:
+            rank[k] = g
+            winners[g] = best[k]
+            g += 1
+    inv = np.empty(n, np.int64)
+    for i in range(n):
+        inv[i] = rank[key[i]]
+    return winners[:g], inv
 
 
 @njit(cache=True)

@@ -4,8 +4,6 @@
 ``.csv``/``.txt``/``.xyz``/``.pts`` as text tables, ``.ply`` as PLY.
 """
 
-from __future__ import annotations
-
 import os
 from pathlib import Path
 from typing import Any

@@ -14,9 +14,18 @@ import numpy as np
 
 from ..errors import InvalidPointsError, LasReadError, WriteError
 from ._atomic import atomic_path, check_input, check_output
+from ._lasheader import check_las_header
 from .pointcloud import PointCloud
 
-__all__ = ["LasSource", "LasReader", "read_las", "write_las", "open_las", "las_header_summary"]
+__all__ = [
+    "LasSource",
+    "LasReader",
+    "read_las",
+    "write_las",
+    "open_las",
+    "las_header_summary",
+    "rewrite_las_classification",
+]
 
 _XYZ = ("X", "Y", "Z", "x", "y", "z")
 
@@ -62,7 +71,9 @@ def _laspy():
 
 
 def _check_input(path: str | os.PathLike) -> Path:
-    return check_input(path, error=LasReadError)
+    p = check_input(path, error=LasReadError)
+    check_las_header(p)  # before laspy trusts any count or offset
+    return p
 
 
 def _check_record_count(p: Path, header: Any) -> None:
@@ -453,3 +464,64 @@ def las_header_summary(cloud_or_reader: Any) -> dict[str, Any]:
         "generating_software": str(getattr(header, "generating_software", "")).strip("\x00 "),
         "n_vlrs": len(header.vlrs),
     }
+
+
+# --- streaming rewrite (catalog outputs) ----------------------------------------------------
+
+
+def rewrite_las_classification(
+    src: str | os.PathLike,
+    dst: str | os.PathLike,
+    new_classes: Any,
+    *,
+    overwrite: bool = False,
+    compress: bool | None = None,
+    step: int = 1_000_000,
+) -> Path:
+    """Copy LAS/LAZ `src` to `dst` with a new classification, streaming (constant memory).
+
+    ``new_classes(start, classification) -> ndarray`` receives the record number of the
+    first point of each piece and the piece's classification values, and returns the new
+    values. Every other dimension, the header, its VLRs and the point order are kept;
+    COPC VLRs are dropped (the output is a plain LAS/LAZ). Written atomically.
+    """
+    laspy = _laspy()
+    p = _check_input(src)
+    target = check_output(dst, overwrite=overwrite)
+    if compress is None:
+        compress = target.suffix.lower() == ".laz"
+    with atomic_path(target, overwrite=overwrite) as tmp:
+        try:
+            with laspy.open(str(p)) as reader:
+                header = copy.deepcopy(reader.header)
+                header.vlrs = type(header.vlrs)(
+                    [v for v in header.vlrs if str(v.user_id).strip("\x00") != "copc"]
+                )
+                evlrs = list(getattr(reader, "evlrs", None) or [])
+                with (
+                    tmp.open("wb") as fh,
+                    laspy.open(
+                        fh, mode="w", header=header, do_compress=bool(compress), closefd=False
+                    ) as writer,
+                ):
+                    start = 0
+                    for points in reader.chunk_iterator(int(step)):
+                        cls = np.asarray(points.classification)
+                        new = np.asarray(new_classes(start, cls))
+                        if not np.array_equal(new, cls):
+                            points.classification = new.astype(cls.dtype, copy=False)
+                        writer.write_points(points)
+                        start += len(points)
+                    evlrs = [e for e in evlrs if str(e.user_id).strip("\x00") != "copc"]
+                    if evlrs:
+                        writer.write_evlrs(type(header.vlrs)(evlrs))
+                if start != int(reader.header.point_count):
+                    raise LasReadError(
+                        f"input {p}: header declares {reader.header.point_count} points "
+                        f"but {start} could be read"
+                    )
+        except (LasReadError, WriteError):
+            raise
+        except Exception as exc:
+            raise WriteError(f"cannot write {target}: {_reason(exc)}") from exc
+    return target

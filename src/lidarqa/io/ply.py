@@ -36,13 +36,25 @@ def read_ply(path: str | os.PathLike) -> PointCloud:
     from ._atomic import check_input
 
     p = check_input(path)
-    with p.open("rb") as fh:
+    try:
+        return _read_ply(p)
+    except (ValueError, IndexError, OverflowError, TypeError, UnicodeError) as exc:
+        if isinstance(exc, ReadError | InvalidPointsError):
+            raise
+        raise ReadError(f"input {p} is not a valid PLY file: {str(exc)[:160]}") from None
+
+
+def _read_ply(p: os.PathLike) -> PointCloud:  # noqa: C901, PLR0912
+    size = os.path.getsize(p)
+    with open(p, "rb") as fh:  # noqa: PTH123
         if fh.readline().strip() != b"ply":
             raise ReadError(f"input {p} is not a PLY file (no 'ply' magic)")
         fmt = None
         elements: list[tuple[str, int, list[tuple[str, str]]]] = []
         while True:
-            line = fh.readline()
+            line = fh.readline(65536)
+            if fh.tell() > 1_000_000:
+                raise ReadError(f"input {p}: PLY header longer than 1 MB")
             if not line:
                 raise ReadError(f"input {p}: PLY header has no end_header")
             tok = line.decode("ascii", "replace").split()
@@ -51,8 +63,15 @@ def read_ply(path: str | os.PathLike) -> PointCloud:
             if tok[0] == "format":
                 fmt = tok[1]
             elif tok[0] == "element":
-                elements.append((tok[1], int(tok[2]), []))
+                count = int(tok[2])
+                if count < 0 or count > size:
+                    raise ReadError(
+                        f"input {p}: PLY element {tok[1]!r} count {count} is impossible"
+                    )
+                elements.append((tok[1], count, []))
             elif tok[0] == "property":
+                if not elements:
+                    raise ReadError(f"input {p}: PLY property before any element")
                 if tok[1] == "list":
                     if elements and elements[-1][0] == "vertex":
                         raise ReadError(f"input {p}: list properties on vertices are not supported")
@@ -67,6 +86,8 @@ def read_ply(path: str | os.PathLike) -> PointCloud:
             raise ReadError(f"input {p}: the first PLY element must be 'vertex'")
         _, n, props = elements[0]
         names = [name.lower() for name, _ in props]
+        if len(set(names)) != len(names):
+            raise ReadError(f"input {p}: duplicate vertex property names")
         for c in ("x", "y", "z"):
             if c not in names:
                 raise ReadError(f"input {p}: vertex element has no {c!r} property")

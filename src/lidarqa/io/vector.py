@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from .._validate import MAX_COORDINATE
 from ..errors import InvalidPointsError, ReadError, WriteError
 from ..units import format_coordinate, format_decimal
 from ._atomic import atomic_path, check_input, check_output
@@ -159,24 +160,72 @@ def _convert_column(values: list[str]) -> np.ndarray:
     return arr
 
 
-def _read_csv_table(p: Path) -> dict[str, np.ndarray]:
+MAX_CSV_BYTES = 2_000_000_000  # a vector table beyond 2 GB is not a point or segment list
+
+
+def _decode(p: Path) -> str:
+    """The text of a CSV file: UTF-8 (with or without BOM), UTF-16 with BOM, else Latin-1.
+
+    Coordinates are ASCII in every one of these, so only free-text columns
+    (names, comments) depend on the guess; a Latin-1 fallback is announced.
+    """
+    import codecs
+    import warnings
+
+    from ..errors import DataQualityWarning
+
+    size = p.stat().st_size
+    if size > MAX_CSV_BYTES:
+        raise ReadError(f"input {p} is {size / 1e9:.1f} GB; too large for a vector table")
+    data = p.read_bytes()
+    if data.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
+        try:
+            return data.decode("utf-16")
+        except UnicodeDecodeError as exc:
+            raise ReadError(f"input {p} is not valid UTF-16 text: {exc.reason}") from None
     try:
-        with p.open("r", encoding="utf-8-sig", newline="") as fh:
-            sample = fh.read(4096)
-            fh.seek(0)
-            delim = ";" if sample.count(";") > sample.count(",") else ","
-            rows = [
-                r
-                for r in csv.reader(fh, delimiter=delim)
-                if r and not r[0].lstrip().startswith("#")
-            ]
-    except UnicodeDecodeError as exc:  # a spreadsheet export in Latin-1 or UTF-16
-        raise ReadError(
-            f"cannot read {p} as text ({exc.reason} at byte {exc.start})" + dialect_hint(p)
-        ) from exc
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        warnings.warn(
+            f"{p} is not UTF-8 (byte {data[exc.start:exc.start + 1]!r} at offset {exc.start}); "
+            "read as Latin-1",
+            DataQualityWarning,
+            stacklevel=4,
+        )
+        return data.decode("latin-1")
+
+
+def _read_csv_table(p: Path) -> dict[str, np.ndarray]:
+    import io
+
+    text = _decode(p)
+    if "\x00" in text:
+        raise ReadError(f"input {p} contains NUL bytes: not a text table")
+    sample = text[:4096]
+    delim = ";" if sample.count(";") > sample.count(",") else ","
+    try:
+        rows = [
+            r
+            for r in csv.reader(io.StringIO(text, newline=""), delimiter=delim)
+            if r and not r[0].lstrip().startswith("#")
+        ]
+    except csv.Error as exc:  # a field beyond csv's size limit, a stray quote, ...
+        raise ReadError(f"input {p} is not a readable CSV table: {exc}") from None
     if not rows:
         raise ReadError(f"input {p} has no rows")
     header = [h.strip().lower() for h in rows[0]]
+    seen: set[str] = set()
+    for h in header:
+        if h in seen:
+            raise ReadError(f"input {p}: column {h!r} appears more than once in the header")
+        seen.add(h)
+    if "" in seen:
+        # a trailing delimiter gives an unnamed, empty column: drop it; refuse one with values
+        k = header.index("")
+        if any(len(r) > k and r[k].strip() for r in rows[1:]):
+            raise ReadError(f"input {p}: column {k + 1} has values but no name in the header")
+        rows = [r[:k] + r[k + 1 :] for r in rows]
+        header = header[:k] + header[k + 1 :]
     body = rows[1:]
     for i, r in enumerate(body, start=2):
         if len(r) != len(header):
@@ -274,6 +323,11 @@ def read_segments(path: str | os.PathLike, *, crs: Any = None) -> Segments:
         for i, g in enumerate(geoms):
             if g is None or g.is_empty:
                 continue
+            if g.geom_type not in ("LineString", "MultiLineString"):
+                raise ReadError(
+                    f"input {p}: feature {base_ids[i]} is a {g.geom_type}; line segments need "
+                    "LineString Z features"
+                )
             if not g.has_z:
                 raise ReadError(
                     f"input {p}: feature {base_ids[i]} has no z (LineString Z expected)"
@@ -296,6 +350,8 @@ def read_segments(path: str | os.PathLike, *, crs: Any = None) -> Segments:
         attrs = {n: np.asarray(field_data[j])[rows_a] for j, n in enumerate(names) if n != "id"}
     if len(start) and not (np.isfinite(start).all() and np.isfinite(end).all()):
         raise InvalidPointsError(f"input {p} has segments with NaN or infinite coordinates")
+    if len(start) and max(np.abs(start).max(), np.abs(end).max()) > MAX_COORDINATE:
+        raise InvalidPointsError(f"input {p} has coordinates beyond ±{MAX_COORDINATE:g}")
     _check_unique(ids, p)
     crs = resolve_crs(crs, given, p)
     return Segments(ids=ids, start=start, end=end, attributes=attrs, crs=crs)
@@ -368,6 +424,8 @@ def read_points(path: str | os.PathLike, *, require_z: bool = True, crs: Any = N
     finite = np.isfinite(xyz[:, :2]).all() and (not require_z or np.isfinite(xyz[:, 2]).all())
     if len(xyz) and not finite:
         raise InvalidPointsError(f"input {p} has points with NaN or infinite coordinates")
+    if len(xyz) and np.nanmax(np.abs(xyz)) > MAX_COORDINATE:
+        raise InvalidPointsError(f"input {p} has coordinates beyond ±{MAX_COORDINATE:g}")
     _check_unique(np.asarray(ids), p)
     crs = resolve_crs(crs, given, p)
     return PointSet(ids=np.asarray(ids), xyz=xyz, attributes=attrs, crs=crs)

@@ -10,8 +10,6 @@ See :mod:`lidarqa.report.config` for the config layout and
 matplotlib (``pip install 'lidarqa[report]'``).
 """
 
-from __future__ import annotations
-
 from .config import AssessmentConfig, load_config, parse_config
 from .run import AssessmentRun, assess, check_out_dir, demo_config_path, run_assessment
 

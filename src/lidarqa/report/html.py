@@ -16,6 +16,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from .labels import labelled_rows
+
 __all__ = ["Figure", "Table", "Section", "SummaryRow", "Report", "render_html", "fmt"]
 
 
@@ -38,6 +40,7 @@ class Table:
     note: str = ""
     #: Fixed decimals for every decimal number (e.g. 3: metres to the mm), else :func:`fmt`.
     decimals: int | None = None
+    code_columns: tuple[int, ...] = ()  # columns shown as code (config / JSON keys)
 
 
 @dataclass(frozen=True)
@@ -49,6 +52,7 @@ class SummaryRow:
     headline: str
     verdict: str  # "pass", "fail", "n/a", "error"
     detail: str = ""
+    caveats: tuple[str, ...] = ()  # warnings that qualify the verdict (e.g. sample size)
 
 
 @dataclass
@@ -65,6 +69,8 @@ class Section:
     notes: list[str] = field(default_factory=list)
     outputs: list[str] = field(default_factory=list)
     error: str | None = None
+    verdict: str = "n/a"
+    caveats: list[str] = field(default_factory=list)
 
 
 @dataclass
@@ -81,6 +87,7 @@ class Report:
     versions: dict[str, Any]
     attribution: str | None = None
     config_text: str | None = None
+    section_titles: dict[str, str] = field(default_factory=dict)
 
 
 def _is_float(v: Any) -> bool:
@@ -175,10 +182,31 @@ code, pre { font-family: ui-monospace, SFMono-Regular, Menlo, Consolas, monospac
             font-size: .85rem; }
 pre { background: var(--head); padding: .6rem; overflow-x: auto; white-space: pre; }
 footer { margin-top: 2.5rem; color: var(--muted); font-size: .85rem; }
+#summary-bar { position: sticky; top: 0; z-index: 10; background: var(--bg);
+               border-bottom: 1px solid var(--line); padding: .35rem 0; margin: 0 0 .5rem;
+               display: flex; flex-wrap: wrap; gap: .2rem .9rem; white-space: nowrap;
+               font-size: .85rem; }
+#summary-bar a { color: var(--fg); text-decoration: none; display: inline-flex;
+                 align-items: center; gap: .25rem; }
+#summary-bar .bar-name { display: inline-block; max-width: 10rem; overflow: hidden;
+                         text-overflow: ellipsis; vertical-align: middle; }
+#summary-bar .bar-title { font-weight: 600; color: var(--muted); }
+section { scroll-margin-top: 6rem; }  /* below a summary bar of up to three lines */
+details > summary { cursor: pointer; list-style-position: outside; }
+details > summary h2 { display: inline; border: 0; margin: 0; padding: 0; }
+details.section { border-top: 1px solid var(--line); margin-top: 1.6rem; padding-top: .6rem; }
+details.section > summary { font-size: 1.25rem; }
+details.section > summary .verdict { margin-left: .6rem; vertical-align: middle; }
+details.params { margin: .3rem 0; }
+details.params > summary { font-weight: 600; }
+.caveat { color: #8a5a00; font-size: .85rem; margin: .2rem 0; white-space: normal; }
+.caveat::before { content: "⚠ "; }
+td.verdict-cell { white-space: normal; min-width: 7rem; }
 @media (max-width: 40rem) { body { font-size: 14px; padding: 0 .6rem 2rem; }
   h1 { font-size: 1.25rem; }
-  th, td { padding: .3rem .45rem; } }
-@media print { .table-wrap { overflow: visible; } }
+  th, td { padding: .3rem .45rem; }
+  #summary-bar { flex-wrap: nowrap; overflow-x: auto; } }
+@media print { .table-wrap { overflow: visible; } #summary-bar { position: static; } }
 """
 
 
@@ -230,7 +258,8 @@ def _table(t: Table, *, numeric_right: bool = True) -> str:
             else:
                 text = fmt(v)
             cls = ' class="num"' if num else (' class="wrap"' if len(text) > 60 else "")
-            cells.append(f"<td{cls}>{_e(text)}</td>")
+            shown = f"<code>{_e(text)}</code>" if j in t.code_columns else _e(text)
+            cells.append(f"<td{cls}>{shown}</td>")
         out.append("<tr>" + "".join(cells) + "</tr>")
     out.append("</tbody></table></div>")
     if t.note:
@@ -255,12 +284,23 @@ def _verdict(v: str) -> str:
     return f'<span class="verdict {cls}">{_e(label)}</span>'
 
 
-def _flatten(prefix: str, value: Any, rows: list[tuple[str, Any]]) -> None:
-    if isinstance(value, dict) and value:
-        for k, v in value.items():
-            _flatten(f"{prefix}.{k}" if prefix else str(k), v, rows)
-    else:
-        rows.append((prefix, value))
+def _parameter_rows(params: dict[str, Any]) -> list[list[Any]]:
+    """Label rows of one analysis' parameters; a nested copy equal to the top level is dropped."""
+    rows = labelled_rows(params, none="auto")
+    seen = {r[2].split(".")[-1]: r[1] for r in rows if r[2].count(".") == 1}
+    out = []
+    for label, value, path in rows:
+        parts = path.split(".")
+        if len(parts) > 2 and parts[0] == "parameters" and seen.get(parts[-1], object()) == value:
+            continue  # e.g. parameters.filter.cell_size repeating parameters.cell_size
+        if parts[0] == "targets":  # as written in the config
+            key = "target_" + ".".join(parts[1:])
+        elif parts[0] in ("options", "parameters"):
+            key = ".".join(parts[1:])
+        else:
+            key = path
+        out.append([label, value, key])
+    return out
 
 
 def render_html(report: Report) -> str:
@@ -284,6 +324,17 @@ def render_html(report: Report) -> str:
         parts.append(f'<div class="attribution">Data: {_e(report.attribution)}</div>')
     parts.append("</header>")
 
+    # A compact summary that stays at the top of the window while scrolling.
+    bar = ['<nav id="summary-bar" aria-label="Summary"><span class="bar-title">Summary</span>']
+    for row in report.summary:
+        mark = ' <span title="see the warnings beside the verdict">⚠</span>' if row.caveats else ""
+        bar.append(
+            f'<a href="#{_e(row.anchor)}" title="{_e(row.analysis)}">'
+            f'<span class="bar-name">{_e(row.analysis)}</span> {_verdict(row.verdict)}{mark}</a>'
+        )
+    bar.append("</nav>")
+    parts.append("".join(bar))
+
     # Summary verdict table first.
     parts.append('<section id="summary"><h2 style="border-top:0;margin-top:.5rem">Summary</h2>')
     parts.append(
@@ -292,9 +343,11 @@ def render_html(report: Report) -> str:
         "</tr></thead><tbody>"
     )
     for row in report.summary:
+        caveats = "".join(f'<div class="caveat">{_e(c)}</div>' for c in row.caveats)
         parts.append(
             f'<tr><td class="name"><a href="#{_e(row.anchor)}">{_e(row.analysis)}</a></td>'
-            f'<td>{_verdict(row.verdict)}</td><td class="wrap">{_e(row.headline)}</td>'
+            f'<td class="verdict-cell">{_verdict(row.verdict)}{caveats}</td>'
+            f'<td class="wrap">{_e(row.headline)}</td>'
             f'<td class="wrap">{_e(row.detail)}</td></tr>'
         )
     parts.append("</tbody></table></div>")
@@ -306,9 +359,14 @@ def render_html(report: Report) -> str:
     )
 
     for s in report.sections:
-        parts.append(f'<section id="{_e(s.id)}"><h2>{_e(s.title)}</h2>')
+        parts.append(
+            f'<section id="{_e(s.id)}" class="analysis"><details class="section" open>'
+            f"<summary><h2>{_e(s.title)}</h2>{_verdict(s.verdict)}</summary>"
+        )
         if s.headline:
             parts.append(f'<p class="headline"><strong>{_e(s.headline)}</strong></p>')
+        for c in s.caveats:  # beside the verdict they qualify
+            parts.append(f'<p class="caveat">{_e(c)}</p>')
         if s.error:
             parts.append(f'<p class="error-box">This analysis failed: {_e(s.error)}</p>')
         for p in s.paragraphs:
@@ -327,18 +385,31 @@ def render_html(report: Report) -> str:
                 + ", ".join(f'<a href="{_e(o)}"><code>{_e(o)}</code></a>' for o in s.outputs)
                 + "</p>"
             )
-        parts.append("</section>")
+        parts.append("</details></section>")
 
-    # Parameters and provenance at the end.
-    parts.append('<section id="parameters"><h2>Parameters</h2>')
+    # Parameters and provenance at the end, folded.
+    parts.append(
+        '<section id="parameters"><details class="section"><summary><h2>Parameters</h2>'
+        "</summary>"
+        '<p class="muted">Every option and library parameter each analysis ran with, defaults '
+        "included. Lengths in metres, angles in degrees; fractions are shown in percent. The key "
+        "is the name in the config file and in report.json.</p>"
+    )
     for sid, params in report.parameters.items():
-        rows: list[tuple[str, Any]] = []
-        _flatten("", params, rows)
+        rows = _parameter_rows(params)
+        title = report.section_titles.get(sid, sid) if report.section_titles else sid
+        parts.append(f'<details class="params"><summary>{_e(title)}</summary>')
         parts.append(
-            _table(Table(sid, ["parameter", "value"], [list(r) for r in rows]), numeric_right=False)
+            _table(
+                Table("", ["parameter", "value", "key"], rows, code_columns=(2,)),
+                numeric_right=False,
+            )
         )
-    parts.append("</section>")
-    parts.append('<section id="provenance"><h2>Provenance</h2>')
+        parts.append("</details>")
+    parts.append("</details></section>")
+    parts.append(
+        '<section id="provenance"><details class="section"><summary><h2>Provenance</h2></summary>'
+    )
     parts.append(
         _table(
             Table("", ["item", "value"], [list(r) for r in report.provenance]), numeric_right=False
@@ -381,7 +452,7 @@ def render_html(report: Report) -> str:
             numeric_right=False,
         )
     )
-    parts.append("</section>")
+    parts.append("</details></section>")
     foot = "Generated by lidarqa. This page is self-contained: it needs no network access."
     if report.attribution:
         foot += f" Data: {report.attribution}."

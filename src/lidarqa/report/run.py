@@ -26,7 +26,8 @@ from typing import Any
 
 from .._version import __version__
 from ..errors import LidarQAError, OutputExistsError, WriteError
-from .config import ANALYSIS_TARGETS, AnalysisItem, AssessmentConfig, load_config
+from . import _registry
+from .config import AnalysisItem, AssessmentConfig, load_config
 from .html import Report, Section, SummaryRow, fmt, render_html
 
 __all__ = [
@@ -35,11 +36,15 @@ __all__ = [
     "check_out_dir",
     "demo_config_path",
     "assess",
+    "SCHEMA_VERSION",
     "REPORT_HTML",
     "REPORT_JSON",
     "OUTPUTS_DIR",
 ]
 
+#: version of the report.json layout (docs: Reference, report.json): MINOR for new keys, MAJOR
+#: for removed or renamed keys or changed units
+SCHEMA_VERSION = "1.0"
 REPORT_HTML = "report.html"
 REPORT_JSON = "report.json"
 OUTPUTS_DIR = "outputs"
@@ -75,9 +80,18 @@ def check_out_dir(out_dir: str | os.PathLike, *, overwrite: bool = False) -> Pat
     ``outputs/`` exist and `overwrite` is false, and :class:`WriteError` when
     the path is a file.
     """
+    if str(out_dir).strip() == "":
+        raise WriteError("the output folder name is empty")
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise WriteError(f"output {out} exists and is not a folder")
+    # the nearest existing ancestor must be a writable folder (the rest is created)
+    from ..io._atomic import check_output_dir
+
+    anc = out
+    while not anc.exists() and anc != anc.parent:
+        anc = anc.parent
+    check_output_dir(anc if anc.exists() else Path("."))
     if not overwrite:
         for name in (REPORT_HTML, REPORT_JSON, OUTPUTS_DIR):
             if (out / name).exists():
@@ -126,13 +140,25 @@ def _lookup(results: dict[str, Any], path: tuple[str, ...]) -> Any:
     return v
 
 
+def _measured(value: float | None, unit: str) -> str:
+    """A measured value with the digits the section headlines use: mm for metres, 0.01 for %."""
+    if value is None or value != value:
+        return "–"
+    if unit == "%":
+        return f"{value:.2f}"
+    if unit == "" and float(value).is_integer():
+        return f"{int(value)}"  # counts (edges found)
+    return f"{value:.3f}"  # metres to the mm; κ to three decimals
+
+
 def _verdict(item: AnalysisItem, results: dict[str, Any]) -> tuple[str, str, list[dict[str, Any]]]:
     """pass / fail / n/a against the configured targets, a text and the per-target records."""
     if not item.targets:
         return "n/a", "", []
-    specs = {t.metric: t for t in ANALYSIS_TARGETS[item.kind].values()}
+    specs = {t.metric: t for t in _registry.specs()[item.kind].targets.values()}
     records = []
     texts = []
+    missing: list[str] = []
     ok_all = True
     for metric, target in item.targets.items():
         t = specs[metric]
@@ -144,6 +170,8 @@ def _verdict(item: AnalysisItem, results: dict[str, Any]) -> tuple[str, str, lis
         if metric == "mean_z" and value_f is not None:
             value_f = abs(value_f)
         if value_f is None or value_f != value_f:
+            # Nothing to measure (0 check points, no matched pair): an error, not a NaN verdict.
+            missing.append(t.label)
             ok = False
         elif t.direction == "max":
             ok = value_f <= target
@@ -154,7 +182,7 @@ def _verdict(item: AnalysisItem, results: dict[str, Any]) -> tuple[str, str, lis
         unit = f" {t.unit}" if t.unit else ""
         shown = None if value_f is None else value_f * t.scale
         texts.append(
-            f"{t.label} {fmt(shown)}{unit} {op} {fmt(target * t.scale)}{unit}: "
+            f"{t.label} {_measured(shown, t.unit)}{unit} {op} {fmt(target * t.scale)}{unit}: "
             f"{'pass' if ok else 'FAIL'}"
         )
         records.append(
@@ -166,16 +194,26 @@ def _verdict(item: AnalysisItem, results: dict[str, Any]) -> tuple[str, str, lis
                 "passed": ok,
             }
         )
+    if missing:
+        return (
+            "error",
+            f"nothing to measure: {', '.join(missing)} could not be computed",
+            records,
+        )
     return ("pass" if ok_all else "fail"), "; ".join(texts), records
 
 
 def _input_records(config: AssessmentConfig, progress: _Progress) -> dict[str, dict[str, Any]]:
     from ..io.crs import crs_epsg, crs_name
-    from .analyses import sha256_file
+    from ._context import sha256_file
+    from .catalog_analyses import catalog_record, is_catalog_path
 
     out = {}
     with progress("Hashing inputs"):
         for name, spec in config.inputs.items():
+            if spec.kind == "clouds" and is_catalog_path(spec.path):
+                out[name] = catalog_record(name, spec)
+                continue
             crs = spec.effective_crs
             out[name] = {
                 "name": name,
@@ -190,7 +228,7 @@ def _input_records(config: AssessmentConfig, progress: _Progress) -> dict[str, d
 
 
 def _resolved_params(item: AnalysisItem) -> dict[str, Any]:
-    from .analyses import library_params
+    from ._registry import library_params
 
     try:
         defaults = library_params(item.kind, item.options)
@@ -237,17 +275,26 @@ def run_assessment(
     leaving `out_dir` as it was.
     """
     from .. import show_versions
-    from .analyses import ANALYSES, RunContext
+    from ._context import RunContext
+    from ._registry import ANALYSES, specs
+    from .catalog_analyses import catalog_analysis
+
+    specs()  # load the analysis modules
 
     if not isinstance(config, AssessmentConfig):
         config = load_config(config)
     out = check_out_dir(out_dir, overwrite=overwrite)
     created = not out.exists()
     out.mkdir(parents=True, exist_ok=True)
+    from ..io._atomic import note_created, register_temp, unregister_temp
+
+    if created:
+        note_created(out)  # removed with everything in it if the command fails or is stopped
     progress = _Progress(steps)
     started = _dt.datetime.now(_dt.UTC)
     t0 = time.perf_counter()
     work = Path(tempfile.mkdtemp(prefix=".lidarqa-run-", dir=out))
+    register_temp(work)  # removed by the signal handler too
     try:
         inputs = _input_records(config, progress)
         ctx = RunContext(config, work, step=progress)
@@ -258,6 +305,7 @@ def run_assessment(
         errors: dict[str, str] = {}
         tracebacks: dict[str, str] = {}
         verdicts: dict[str, Any] = {}
+        caveats: dict[str, list[str]] = {}
         timings: dict[str, float] = {}
         for item in config.analyses:
             ta = time.perf_counter()
@@ -265,7 +313,7 @@ def run_assessment(
             section = Section(id=item.id, title=item.title, kind=item.kind)
             try:
                 with progress(item.title):
-                    res = ANALYSES[item.kind](ctx, item)
+                    res = (catalog_analysis(ctx, item) or ANALYSES[item.kind])(ctx, item)
             except (KeyboardInterrupt, SystemExit):
                 raise
             except Exception as exc:  # one failing analysis must not lose the others
@@ -278,6 +326,7 @@ def run_assessment(
                 results[item.id] = None
                 summary.append(SummaryRow(item.title, item.id, "failed: " + message, "error", ""))
                 verdicts[item.id] = {"verdict": "error", "targets": []}
+                section.verdict = "error"
             else:
                 params = {**params, **res.parameters}
                 results[item.id] = res.results
@@ -288,7 +337,18 @@ def run_assessment(
                 section.notes = res.notes
                 section.outputs = ctx.outputs.get(item.id, [])
                 verdict, detail, records = _verdict(item, res.results)
-                summary.append(SummaryRow(item.title, item.id, res.headline, verdict, detail))
+                if verdict == "error":
+                    errors[item.id] = detail
+                    section.error = detail
+                section.verdict = verdict
+                section.caveats = list(res.caveats)
+                if res.caveats:
+                    caveats[item.id] = list(res.caveats)
+                summary.append(
+                    SummaryRow(
+                        item.title, item.id, res.headline, verdict, detail, tuple(res.caveats)
+                    )
+                )
                 verdicts[item.id] = {"verdict": verdict, "targets": records}
             timings[item.id] = round(time.perf_counter() - ta, 3)
             parameters[item.id] = {
@@ -311,10 +371,11 @@ def run_assessment(
             attribution = DEMO_TILE_ATTRIBUTION
         config_record: dict[str, Any] = {"content": config.raw}
         if config.path is not None:
-            from .analyses import sha256_file
+            from ._context import sha256_file
 
             config_record.update(path=str(config.path), sha256=sha256_file(config.path))
         doc = {
+            "schema_version": SCHEMA_VERSION,
             "lidarqa_version": __version__,
             "command": command,
             "title": config.title,
@@ -326,6 +387,7 @@ def run_assessment(
             "parameters": parameters,
             "results": results,
             "verdicts": verdicts,
+            "warnings": caveats,
             "errors": errors,
             "skipped": [{"kind": k, "title": t, "reason": r} for k, t, r in config.skipped],
             "outputs": {k: v for k, v in ctx.outputs.items()},
@@ -374,12 +436,13 @@ def run_assessment(
             ],
             versions=versions,
             attribution=attribution,
+            section_titles={item.id: item.title for item in config.analyses},
             config_text=(
                 config.path.read_text(encoding="utf-8") if config.path is not None else None
             ),
         )
         with progress("Writing the report"):
-            from ..cli._common import to_jsonable
+            from .._json import to_jsonable
 
             (work / REPORT_JSON).write_text(
                 json.dumps(to_jsonable(doc), indent=2, allow_nan=False) + "\n", encoding="utf-8"
@@ -394,6 +457,7 @@ def run_assessment(
         raise
     finally:
         shutil.rmtree(work, ignore_errors=True)
+        unregister_temp(work)
     return AssessmentRun(
         out_dir=out,
         html_path=out / REPORT_HTML,

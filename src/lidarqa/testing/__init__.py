@@ -8,6 +8,11 @@ Scenes (every maker takes ``seed=`` and returns a :class:`Scene`):
 - :func:`make_terrain_scene`: bare terrain with break lines (ground tests).
 - :func:`make_plane_pair`, :func:`make_corner`: two planes at a given angle,
   three planes at a corner.
+- :func:`make_strip_scene`: overlapping flight strips over ground and hip roofs
+  with known per-strip offsets and height noise (:class:`StripScene`).
+- :func:`make_interchange`: two roads crossing on two levels (deck, ramps, cars,
+  sparse points under the deck), map polygons shifted, paint-strip references
+  (returns an :class:`InterchangeScene`).
 
 A :class:`Scene` holds ``points``, ``classification`` (ASPRS), ``is_ground``,
 ``object_id``, ``plane_id``, ``planes`` (:class:`TruePlane`), ``edges``
@@ -16,8 +21,10 @@ A :class:`Scene` holds ``points``, ``classification`` (ASPRS), ``is_ground``,
 model (``scene.ground_z(xy)``). :func:`rigid_motion` moves points and truth
 together; :func:`score_edges` / :func:`score_corners` score detections against
 the truth; :func:`sample_checkpoints` gives true ground check points;
-:mod:`lidarqa.testing.cases` has edge-case arrays. Hypothesis strategies live in
-``lidarqa.testing.strategies`` (needs the ``test`` extra; not imported here).
+:mod:`lidarqa.testing.cases` has edge-case arrays; :func:`write_tiles` /
+:func:`write_block` write scenes as tiled deliveries (catalog tests, benchmarks).
+Hypothesis strategies live in ``lidarqa.testing.strategies`` (needs the ``test``
+extra; not imported here).
 
 >>> from lidarqa.testing import make_building_scene
 >>> scene = make_building_scene(seed=1)
@@ -25,10 +32,9 @@ the truth; :func:`sample_checkpoints` gives true ground check points;
 (3, True)
 """
 
-from __future__ import annotations
-
 from . import cases
 from ._shapes import TerrainModel
+from .interchange import InterchangeScene, make_interchange
 from .scenes import (
     BuildingSpec,
     Scene,
@@ -44,6 +50,8 @@ from .scenes import (
     sample_checkpoints,
 )
 from .scoring import CornerScore, EdgeScore, score_corners, score_edges
+from .strips import StripScene, make_strip_scene
+from .tiles import write_block, write_tiles
 
 __all__ = [
     "Scene",
@@ -64,4 +72,10 @@ __all__ = [
     "EdgeScore",
     "CornerScore",
     "cases",
+    "write_tiles",
+    "write_block",
+    "StripScene",
+    "make_strip_scene",
+    "InterchangeScene",
+    "make_interchange",
 ]

@@ -1,0 +1,314 @@
+"""Catalog runs of planes/edges/corners, checkpoints --vertical and repeatability.
+
+Each command keeps its single-file path unchanged; a catalog input (several
+files, a folder, a glob pattern or a ``.vpc``) or any catalog option sends it
+here. The figures are those of one in-memory run over the whole area (see
+:mod:`lidarqa.tiling.jobs_api`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections import Counter
+from collections.abc import Callable, Iterator, Sequence
+from typing import Any
+
+import click
+import numpy as np
+
+from ._common import Steps, echo, finish, prepare_outputs, settings
+
+__all__ = [
+    "catalog_options",
+    "features_on_catalog",
+    "heights_on_catalog",
+    "reproducible_vectors",
+    "repeatability_on_catalog",
+    "vertical_on_catalog",
+    "wants_catalog",
+]
+
+_OPTION_NAMES = ("chunk_size", "buffer", "workers", "scheduler", "skip_bad")
+
+
+def catalog_options(func: Callable[..., Any]) -> Callable[..., Any]:
+    """``--chunk-size --buffer --workers --scheduler --skip-bad`` (as ``lidarqa ground``)."""
+    opts = [
+        click.option("--chunk-size", type=float, default=None,
+                     help="Catalog: chunk side, m (default: from the point density, aligned "
+                          "with the tiles)."),
+        click.option("--buffer", type=float, default=None,
+                     help="Catalog: margin read around each chunk, m (default 60; wider than "
+                          "the largest building)."),
+        click.option("--workers", type=int, default=None,
+                     help="Catalog: local worker processes (default: one per core; 1 = serial, "
+                          "no Dask)."),
+        click.option("--scheduler", default=None,
+                     help="Catalog: Dask scheduler address (tcp://host:port) or 'serial'."),
+        click.option("--skip-bad", is_flag=True,
+                     help="Catalog: leave out bad tiles (listed) instead of failing."),
+    ]
+    for opt in reversed(opts):
+        func = opt(func)
+    return func
+
+
+def wants_catalog(paths: Sequence[str], opts: dict[str, Any]) -> bool:
+    """A catalog input, or a catalog option given."""
+    from ._catalog import is_catalog
+
+    return is_catalog(paths) or any(opts.get(k) not in (None, False) for k in _OPTION_NAMES)
+
+
+def pop_catalog_options(opts: dict[str, Any]) -> dict[str, Any]:
+    """Remove the catalog options from a command's keyword arguments and return them."""
+    return {k: opts.pop(k, None) for k in _OPTION_NAMES}
+
+
+@contextlib.contextmanager
+def _engine(scheduler: str | None, workers: int | None) -> Iterator[Any]:
+    from ..tiling import Engine
+
+    if scheduler is None and workers == 1:
+        eng = Engine("serial")
+    else:
+        eng = Engine(scheduler, workers=workers)
+    from ._catalog import sigterm_as_interrupt
+
+    with sigterm_as_interrupt(), eng:
+        if eng.dashboard_link and not settings().quiet:
+            click.echo(f"Dask dashboard: {eng.dashboard_link}", err=True)
+        yield eng
+
+
+def _open(paths: Sequence[str], skip_bad: bool, steps: Steps) -> Any:
+    from ..tiling import open_catalog
+    from ._catalog import _bad_lines
+
+    with steps(f"Reading the headers of {', '.join(paths)}"):
+        catalog = open_catalog(list(paths), skip_bad=bool(skip_bad))
+    _bad_lines(catalog.bad)
+    return catalog
+
+
+def _common(cat_opts: dict[str, Any], eng: Any) -> dict[str, Any]:
+    return {"chunk_size": cat_opts.get("chunk_size"), "buffer": cat_opts.get("buffer"),
+            "engine": eng, "progress": not settings().quiet, "skip_failed": True}
+
+
+def _run_summary(run: Any) -> dict[str, Any]:
+    d = run.to_dict()
+    d["chunks"] = run.chunk_status()
+    d["bad_tiles"] = [{"path": str(p), "reason": str(r)} for p, r in run.catalog.bad]
+    return d
+
+
+def _echo_run(run: Any) -> None:
+    d = run.to_dict()
+    c = d["chunk_status"]
+    echo(f"  catalog         {d['n_tiles']} tile(s), {d['n_chunks']} chunk(s): "
+         + ", ".join(f"{v} {k}" for k, v in c.items() if v))
+    if run.failed:
+        click.echo("Failed chunks (their area is missing from the results): "
+                   + ", ".join(run.failed), err=True)
+
+
+def _failed_exit(run: Any) -> None:
+    if run.failed:
+        from ..errors import TilingError
+
+        raise TilingError(f"{len(run.failed)} chunk(s) failed: {', '.join(run.failed)} "
+                          "(the outputs hold every other chunk)")
+
+
+# ------------------------------------------------------------------ planes / edges / corners
+
+
+# The GeoPackage driver stamps the writing time into the file (gpkg_contents.last_change); a
+# catalog run's outputs must be byte-identical for any number of workers and any rerun, so its
+# vector outputs carry this fixed time instead (the run's time is in the --json record).
+FIXED_GPKG_TIME = "2000-01-01T00:00:00.000Z"
+
+
+@contextlib.contextmanager
+def reproducible_vectors() -> Iterator[None]:
+    """Write GeoPackages with :data:`FIXED_GPKG_TIME` inside the block (restored after)."""
+    try:
+        import pyogrio
+    except ImportError:  # no GIS extra: only CSV can be written, which has no time stamp
+        yield
+        return
+    before = pyogrio.get_gdal_config_option("OGR_CURRENT_DATE")
+    pyogrio.set_gdal_config_options({"OGR_CURRENT_DATE": FIXED_GPKG_TIME})
+    try:
+        yield
+    finally:
+        pyogrio.set_gdal_config_options({"OGR_CURRENT_DATE": before})
+
+
+def features_on_catalog(
+    kind: str,
+    paths: Sequence[str],
+    output: str,
+    *,
+    classes: Any,
+    source_id: Any,
+    segment_options: dict[str, Any],
+    options: dict[str, Any],
+    cat_opts: dict[str, Any],
+) -> None:
+    """``lidarqa planes|edges|corners CATALOG -o OUT``: each feature once (anchor-in-core)."""
+    from ..io.vector import write_points, write_segments
+    from ..tiling.jobs_api import catalog_features
+
+    prepare_outputs(output, inputs=tuple(paths))
+    steps = Steps()
+    catalog = _open(paths, cat_opts.get("skip_bad"), steps)
+    with _engine(cat_opts.get("scheduler"), cat_opts.get("workers")) as eng:
+        run = catalog_features(catalog, kind=kind, classes=classes, source_id=source_id,
+                               segment_options=segment_options, options=options,
+                               **_common(cat_opts, eng))
+    f = run.value
+    with steps(f"Writing {output}"), reproducible_vectors():
+        if kind == "edges":
+            write_segments(f, output, overwrite=settings().overwrite, layer=kind)
+        else:
+            write_points(f, output, overwrite=settings().overwrite, layer=kind)
+    results: dict[str, Any] = {f"n_{kind}": len(f), "output": output, "catalog": _run_summary(run)}
+    if kind == "edges":
+        results["total_length_m"] = float(f.lengths.sum()) if len(f) else 0.0
+    n_edge = int(np.sum(f.attributes["at_buffer_edge"])) if "at_buffer_edge" in f.attributes \
+        else 0
+    results["n_at_buffer_edge"] = n_edge
+    if n_edge:
+        click.echo(f"Warning: {n_edge} of {len(f)} {kind} come from planes that reach a chunk's "
+                   "buffer edge (column at_buffer_edge): a roof wider than --buffer may be cut "
+                   "there; widen --buffer", err=True)
+    per_chunk = Counter(f.attributes["chunk"].tolist()) if len(f) else Counter()
+    results["per_chunk"] = dict(sorted(per_chunk.items()))
+    echo(f"{len(f)} {kind} from {len(run.catalog.tiles)} tile(s) -> {output}")
+    _echo_run(run)
+    finish(kind, inputs={"paths": list(paths), "classes": classes, "source_id": source_id},
+           parameters={**run.extra.get("segment_options", {}), **run.extra.get("options", {}),
+                       "chunk_size": run.chunks[0].size if run.chunks else None,
+                       "buffer": (run.chunks[0].buffered[2] - run.chunks[0].core[2])
+                       if run.chunks else None,
+                       "workers": cat_opts.get("workers"), "scheduler": cat_opts.get("scheduler"),
+                       "rule": "anchor-in-core (corner point, edge midpoint, plane centroid)"},
+           results=results)
+    _failed_exit(run)
+
+
+# ------------------------------------------------------------------ checkpoints --vertical
+
+
+def vertical_on_catalog(
+    paths: Sequence[str],
+    check_path: str,
+    output: str | None,
+    *,
+    classes: Any,
+    max_edge: float | None,
+    checkpoint_rmse_v: float,
+    cat_opts: dict[str, Any],
+    summary: Callable[[dict, bool], None],
+) -> None:
+    """``lidarqa checkpoints CATALOG CHECK --vertical`` (reads only chunks with check points)."""
+    from ..io.crs import crs_name, ensure_same_crs
+    from ..io.vector import read_points, write_points
+    from ..tiling.jobs_api import catalog_vertical_check
+
+    prepare_outputs(output, inputs=(*paths, check_path))
+    steps = Steps()
+    with steps("Reading check points"):
+        chk = read_points(check_path)
+    catalog = _open(paths, cat_opts.get("skip_bad"), steps)
+    ensure_same_crs(catalog.crs, chk.crs, what=("MEASURED", "CHECK"))
+    crs = catalog.crs if catalog.crs is not None else chk.crs
+    with _engine(cat_opts.get("scheduler"), cat_opts.get("workers")) as eng:
+        run = catalog_vertical_check(catalog, chk, classes=tuple(classes) if classes else (2,),
+                                     max_edge=max_edge, checkpoint_rmse_v=checkpoint_rmse_v,
+                                     **_common(cat_opts, eng))
+    report = run.value
+    if output is not None:
+        with steps("Writing " + output), reproducible_vectors():
+            res = report.residual_points()
+            res.crs = chk.crs or crs
+            write_points(res, output, overwrite=settings().overwrite)
+    results = report.to_dict()
+    results["units"] = "m"
+    results["catalog"] = _run_summary(run)
+    summary(results, True)
+    _echo_run(run)
+    finish("checkpoints",
+           inputs={"measured": list(paths), "check": check_path},
+           parameters={"vertical": True, "classes": classes or [2],
+                       "max_edge": results["vertical"]["max_edge"],
+                       "checkpoint_rmse_v": checkpoint_rmse_v, "output": output,
+                       "crs": crs_name(crs), "chunk_size": cat_opts.get("chunk_size"),
+                       "buffer": cat_opts.get("buffer"), "workers": cat_opts.get("workers"),
+                       "scheduler": cat_opts.get("scheduler")},
+           results=results)
+    _failed_exit(run)
+
+
+# ------------------------------------------------------------------ heights
+
+
+def heights_on_catalog(
+    catalog: Any,
+    map_xy: Any,
+    reference_xyz: Any,
+    *,
+    classes: Any,
+    options: dict[str, Any],
+    cat_opts: dict[str, Any],
+) -> tuple[Any, Any]:
+    """``lidarqa heights CATALOG MAP REFERENCE``: (HeightReport, CatalogRun)."""
+    from ..tiling.jobs_api import catalog_heights
+
+    with _engine(cat_opts.get("scheduler"), cat_opts.get("workers")) as eng:
+        run = catalog_heights(catalog, map_xy, reference_xyz, classes=classes, options=options,
+                              **_common(cat_opts, eng))
+    return run.value, run
+
+
+# ------------------------------------------------------------------ repeatability
+
+
+def repeatability_on_catalog(
+    paths: Sequence[str],
+    *,
+    classes: Any,
+    source_id: Any,
+    match_options: dict[str, Any],
+    cat_opts: dict[str, Any],
+    print_rows: Callable[[list[dict]], None],
+) -> None:
+    """``lidarqa repeatability CATALOG --by-source-id``: every strip pair over the whole block."""
+    from ..tiling.jobs_api import catalog_repeatability
+
+    prepare_outputs(inputs=tuple(paths))
+    steps = Steps()
+    catalog = _open(paths, cat_opts.get("skip_bad"), steps)
+    with _engine(cat_opts.get("scheduler"), cat_opts.get("workers")) as eng:
+        run = catalog_repeatability(catalog, classes=classes, source_id=source_id,
+                                    match_options=match_options, **_common(cat_opts, eng))
+    rows = run.value
+    if not rows:
+        from ..errors import OptionError
+
+        raise OptionError(f"repeatability needs at least two strips with edges, got "
+                          f"{len(run.extra['strips'])}")
+    print_rows(rows)
+    _echo_run(run)
+    strips = {str(k): len(v) for k, v in run.extra["strips"].items()}
+    echo("  strips          " + ", ".join(f"{k} ({n} edges)" for k, n in strips.items()))
+    finish("repeatability", inputs={"files": list(paths)},
+           parameters={"by_source_id": True, "source_id": source_id, "classes": classes,
+                       **match_options, **run.extra["segment_options"],
+                       **run.extra["edge_options"], "chunk_size": cat_opts.get("chunk_size"),
+                       "buffer": cat_opts.get("buffer"), "workers": cat_opts.get("workers"),
+                       "scheduler": cat_opts.get("scheduler")},
+           results={"pairs": rows, "strips": strips, "catalog": _run_summary(run)})
+    _failed_exit(run)

@@ -1,0 +1,256 @@
+"""``lidarqa roads``: 3D roads from 2D map polygons, each on its own height level."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+import numpy as np
+
+from ..accuracy.heights import (
+    CURVATURE,
+    MAX_RADIUS,
+    MIN_POINTS,
+    RADIUS,
+    SIGMA_GPS,
+    SIGMA_INS,
+    SIGMA_POINT,
+    SIGMA_STRIP,
+)
+from ._common import INT_LIST, Steps, common_options, echo, finish, prepare_outputs, settings
+
+
+def _parse_shift(value: str | None) -> tuple[float, float] | None:
+    if value is None or value.strip().lower() == "auto":
+        return None
+    from ..errors import OptionError
+
+    try:
+        dx, dy = (float(v) for v in value.split(","))
+    except ValueError:
+        raise OptionError(f"--shift must be 'auto' or DX,DY in metres, got {value!r}") from None
+    return dx, dy
+
+
+def check_map_crs(cloud_crs: object, map_crs: object, polygons: np.ndarray, path: str) -> None:
+    """Cloud and map CRS must agree; say so when a projected map was read as WGS 84.
+
+    A GeoJSON file without a ``crs`` member is WGS 84 by definition, so a map
+    digitised in a projected CRS and saved that way reads as longitude/latitude.
+    """
+    import shapely
+
+    from ..errors import CRSMismatchError
+    from .heights import _check_crs
+
+    try:
+        _check_crs(cloud_crs, map_crs, ("cloud", "map"))
+    except CRSMismatchError as exc:
+        x0, y0, x1, y1 = shapely.total_bounds(polygons)
+        geographic = bool(getattr(map_crs, "is_geographic", False))
+        if geographic and not (-180 <= x0 <= x1 <= 180 and -90 <= y0 <= y1 <= 90):
+            raise CRSMismatchError(
+                f"{exc}. The map's coordinates are not longitude/latitude: {Path(path).name} "
+                "has no CRS of its own (a GeoJSON file without a 'crs' member is WGS 84 by "
+                "definition); store the map with its CRS, e.g. as a GeoPackage"
+            ) from exc
+        raise
+
+
+def _fmt_cm(v: float) -> str:
+    return "n/a" if v is None or not np.isfinite(v) else f"{v * 100:.1f} cm"
+
+
+@click.command()
+@click.argument("cloud", type=click.Path())
+@click.argument("map_path", metavar="MAP", type=click.Path())
+@click.option(
+    "-o",
+    "--output",
+    required=True,
+    type=click.Path(dir_okay=False),
+    help="GeoPackage with layers map_points, polygons_3d and tin.",
+)
+@click.option(
+    "--classes",
+    type=INT_LIST,
+    default="2,17",
+    show_default=True,
+    help="Laser point classes used (ground/road and bridge deck).",
+)
+@click.option(
+    "--spacing",
+    type=float,
+    default=10.0,
+    show_default=True,
+    help="Map points every this many metres along polygon boundaries.",
+)
+@click.option(
+    "--shift",
+    "shift",
+    default="auto",
+    show_default=True,
+    help="Map-to-laser shift DX,DY (m), or 'auto' to estimate it.",
+)
+@click.option(
+    "--max-shift",
+    type=float,
+    default=1.5,
+    show_default=True,
+    help="Largest map-to-laser shift searched (m).",
+)
+@click.option(
+    "--tolerance",
+    type=float,
+    default=0.5,
+    show_default=True,
+    help="Height difference (m) within which two parts belong to one level.",
+)
+@click.option(
+    "--min-area",
+    type=float,
+    default=20.0,
+    show_default=True,
+    help="Smooth segments smaller than this (m²) are dropped (cars, signs).",
+)
+@click.option(
+    "--radius",
+    type=float,
+    default=RADIUS,
+    show_default=True,
+    help="First search radius of the plane fits (m).",
+)
+@click.option(
+    "--max-radius",
+    type=float,
+    default=MAX_RADIUS,
+    show_default=True,
+    help="Largest search radius (m).",
+)
+@click.option(
+    "--min-points",
+    type=int,
+    default=MIN_POINTS,
+    show_default=True,
+    help="Laser points needed for a plane fit.",
+)
+@click.option(
+    "--sigma-point",
+    type=float,
+    default=SIGMA_POINT,
+    show_default=True,
+    help="E1: laser point height noise (m).",
+)
+@click.option(
+    "--sigma-gps", type=float, default=SIGMA_GPS, show_default=True, help="E2: GPS noise (m)."
+)
+@click.option(
+    "--sigma-ins", type=float, default=SIGMA_INS, show_default=True, help="E3: INS noise (m)."
+)
+@click.option(
+    "--sigma-strip",
+    type=float,
+    default=SIGMA_STRIP,
+    show_default=True,
+    help="E4: strip adjustment noise (m).",
+)
+@click.option(
+    "--curvature",
+    type=float,
+    default=CURVATURE,
+    show_default=True,
+    help="Maximum road curvature (1/m) of the model term.",
+)
+@common_options
+def roads(
+    cloud: str,
+    map_path: str,
+    output: str,
+    classes: list[int] | None,
+    spacing: float,
+    shift: str,
+    max_shift: float,
+    tolerance: float,
+    min_area: float,
+    radius: float,
+    max_radius: float,
+    min_points: int,
+    sigma_point: float,
+    sigma_gps: float,
+    sigma_ins: float,
+    sigma_strip: float,
+    curvature: float,
+) -> None:
+    """Reconstruct 3D roads: heights for the map polygons of MAP from the CLOUD.
+
+    Laser points are assigned to the road polygons at the right height level
+    (a road under a bridge gets the points of the lower level), neighbouring
+    polygons of one road are merged, and map points every --spacing m along the
+    boundaries get heights from least-squares planes with their predicted σ
+    (plane, laser block and model terms). The map-to-laser shift is estimated
+    unless given. Writes 3D map points, 3D polygons (one per level) and a TIN.
+    """
+    from ..accuracy.roads import read_road_polygons, reconstruct_roads, write_roads
+    from ..io import read
+    from ..io.crs import z_to_metres_factor
+
+    prepare_outputs(output, inputs=(cloud, map_path))
+    given = _parse_shift(shift)
+    steps = Steps()
+    with steps("Reading " + cloud):
+        pc = read(cloud)
+        if classes:
+            pc = pc.select(classes=classes)
+        xyz = pc.xyz.copy()
+        xyz[:, 2] *= z_to_metres_factor(pc.crs)
+    with steps("Reading map polygons"):
+        polys, ids, crs = read_road_polygons(map_path)
+        check_map_crs(pc.crs, crs, polys, map_path)
+    with steps(f"Reconstructing {len(polys):,} polygons from {len(xyz):,} points"):
+        rec = reconstruct_roads(
+            xyz,
+            polys,
+            ids=ids,
+            spacing=spacing,
+            shift=given,
+            max_shift=max_shift,
+            tolerance=tolerance,
+            min_area=min_area,
+            radius=radius,
+            max_radius=max_radius,
+            min_points=min_points,
+            sigma_point=sigma_point,
+            sigma_gps=sigma_gps,
+            sigma_ins=sigma_ins,
+            sigma_strip=sigma_strip,
+            curvature=curvature,
+        )
+    with steps("Writing " + output):
+        write_roads(rec, output, crs=pc.crs or crs, overwrite=settings().overwrite)
+    res = rec.to_dict()
+    dx, dy = res["shift"]
+    how = "estimated" if res["shift_estimated"] else "given"
+    if "shift_not_significant" in rec.flags:
+        how = "no significant shift in the data: map kept"
+    echo(f"map shift         dx {dx:+.3f} m, dy {dy:+.3f} m ({how})")
+    echo(
+        f"polygons          {res['n_polygons']:,} in {res['n_roads']:,} road(s); "
+        f"{res['polygons_grown']:,} grown from a neighbour, "
+        f"{res['polygons_without_points']:,} without points"
+    )
+    echo(f"other-level pts   {res['points_other_level']:,} (under/over the polygons, not used)")
+    echo(f"map points        {res['n_map_points']:,} ({res['n_failed']:,} without height)")
+    echo(f"  σ mean / p95    {_fmt_cm(res['sigma_mean'])} / {_fmt_cm(res['sigma_p95'])}")
+    echo(f"TIN triangles     {res['n_triangles']:,}")
+    for i in np.flatnonzero(rec.polygon_status.astype(str) != "ok"):
+        echo(f"  polygon {rec.polygon_ids[i]}: {rec.polygon_status[i]}")
+    if rec.flags:
+        echo("flags             " + ", ".join(rec.flags))
+    params = dict(rec.parameters)
+    params.update(classes=classes, shift=shift)
+    finish(
+        "roads",
+        inputs={"cloud": cloud, "map": map_path, "output": str(Path(output))},
+        parameters=params,
+        results=res,
+    )

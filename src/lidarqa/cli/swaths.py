@@ -1,0 +1,351 @@
+"""``lidarqa swaths``: relative accuracy of overlapping flight strips."""
+
+from __future__ import annotations
+
+import csv
+import io
+from pathlib import Path
+from typing import Any
+
+import click
+import numpy as np
+
+from ..accuracy.swaths import DEFAULT_QUALITY_LEVEL, QUALITY_LEVELS
+from ._common import INT_LIST, Steps, common_options, echo, finish, settings
+
+
+def load_strips(
+    files: tuple[str, ...],
+    *,
+    by_source_id: bool,
+    classes: list[int] | None,
+    all_returns: bool,
+) -> tuple[np.ndarray, np.ndarray, Any, dict[int, str]]:
+    """Read FILES into points, strip ids, CRS and a strip -> label map.
+
+    One strip per file, or per ``point_source_id`` with `by_source_id`. Keeps
+    last/single returns unless `all_returns`, and `classes` (default: ground
+    and buildings, :func:`~lidarqa.accuracy.swaths.surface_class_mask`). Heights
+    are in metres.
+    """
+    from ..accuracy.swaths import last_return_mask, surface_class_mask
+    from ..errors import InvalidPointsError
+    from ..io import read
+    from ..io.crs import ensure_same_crs, z_to_metres_factor
+
+    xyz, ids, crs, labels = [], [], None, {}
+    for k, path in enumerate(files):
+        pc = read(path)
+        if k == 0:
+            crs = pc.crs
+        else:
+            ensure_same_crs(crs, pc.crs, what=(files[0], path))
+        keep = np.ones(len(pc), dtype=bool) if all_returns else last_return_mask(pc.fields, len(pc))
+        cls = pc.classification
+        if cls is not None:
+            keep &= np.isin(cls, classes) if classes else surface_class_mask(cls, len(pc))
+        elif classes:
+            raise InvalidPointsError(f"{path} has no classification; cannot select --classes")
+        if by_source_id:
+            sid = pc.point_source_id
+            if sid is None:
+                raise InvalidPointsError(
+                    f"{path} has no point_source_id field: cannot split it into flight strips "
+                    "(give one file per strip instead of --by-source-id)"
+                )
+            sid = np.asarray(sid).astype(np.int64)
+            for s in np.unique(sid[keep]):
+                labels.setdefault(int(s), f"point_source_id {int(s)}")
+        else:
+            sid = np.full(len(pc), k + 1, dtype=np.int64)
+            labels[k + 1] = Path(path).name
+        p = pc.xyz[keep].copy()
+        p[:, 2] *= z_to_metres_factor(pc.crs)
+        xyz.append(p)
+        ids.append(sid[keep])
+    all_ids = np.concatenate(ids)
+    if by_source_id and len(all_ids) and not all_ids.any():
+        # LAS always has the field; 0 everywhere means the strips were never recorded
+        raise InvalidPointsError(
+            "point_source_id is 0 for every point: the file(s) do not record flight strips "
+            "(give one file per strip instead of --by-source-id)"
+        )
+    return np.vstack(xyz), all_ids, crs, labels
+
+
+def _csv(rows: list[dict[str, Any]]) -> str:
+    buf = io.StringIO()
+    if rows:
+        w = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: ("" if v is None else v) for k, v in r.items()})
+    return buf.getvalue()
+
+
+def _cm(v: float | None) -> str:
+    return "n/a" if v is None or not np.isfinite(v) else f"{v * 100:6.1f}"
+
+
+@click.command()
+@click.argument("files", nargs=-1, required=True, type=click.Path())
+@click.option(
+    "-o",
+    "--output",
+    "out_dir",
+    required=True,
+    type=click.Path(file_okay=False),
+    help="Output folder (created; must be empty unless --overwrite).",
+)
+@click.option(
+    "--by-source-id",
+    is_flag=True,
+    help="Strips are the point_source_id values (default: one strip per file).",
+)
+@click.option(
+    "--quality-level",
+    type=click.Choice(tuple(QUALITY_LEVELS)),
+    default=DEFAULT_QUALITY_LEVEL,
+    show_default=True,
+    help="USGS LBS / ASPRS relative accuracy thresholds for pass/fail.",
+)
+@click.option(
+    "--cell-size", type=float, default=None, help="Grid cell (m); default: ~16 points per strip."
+)
+@click.option("--min-points", type=int, default=8, show_default=True, help="Points per cell plane.")
+@click.option(
+    "--range-cell",
+    type=float,
+    default=None,
+    help="Cells (m) for the smooth-surface max − min; default: ~2 point spacings (USGS).",
+)
+@click.option(
+    "--max-roughness",
+    type=float,
+    default=0.05,
+    show_default=True,
+    help="Smooth surface: plane residual RMS at most this (m).",
+)
+@click.option(
+    "--max-slope",
+    type=float,
+    default=10.0,
+    show_default=True,
+    help="Smooth surface for dz: slope at most this (degrees).",
+)
+@click.option(
+    "--classes",
+    type=INT_LIST,
+    default=None,
+    help="Compare these classes [default: 2,6 (ground, buildings); all but noise if absent].",
+)
+@click.option("--all-returns", is_flag=True, help="Use every return, not only last/single.")
+@click.option("--rotations", is_flag=True, help="Also estimate small rotations per strip.")
+@click.option("--no-offsets", is_flag=True, help="Skip the strip offsets.")
+@click.option("--reference-strip", type=int, default=None, help="Strip held fixed in the network.")
+@click.option("--no-maps", is_flag=True, help="Do not write PNG maps (no matplotlib needed).")
+@click.option(
+    "--crs",
+    "crs_option",
+    default=None,
+    help="CRS of the DZ rasters for files that declare none (EPSG code or WKT); a file's own "
+    "CRS must agree with it.",
+)
+@common_options
+def swaths(
+    files: tuple[str, ...],
+    out_dir: str,
+    by_source_id: bool,
+    quality_level: str,
+    cell_size: float | None,
+    min_points: int,
+    range_cell: float | None,
+    max_roughness: float,
+    max_slope: float,
+    classes: list[int] | None,
+    all_returns: bool,
+    rotations: bool,
+    no_offsets: bool,
+    reference_strip: int | None,
+    no_maps: bool,
+    crs_option: str | None,
+) -> None:
+    """Relative accuracy of overlapping flight strips (swaths).
+
+    Per pair of overlapping strips: dz between local planes fitted in each strip
+    on smooth surfaces (RMSDz, mean, median, max, 95th percentile, area), a DZ
+    GeoTIFF and map; per strip: smooth-surface repeatability; strip offsets
+    (dx, dy, dz with σ) by least squares on matched planes, adjusted as a
+    network for more than two strips, and the measured strip noise E4 (use it
+    with ``lidarqa heights --sigma-strip``). Pass/fail follows the USGS Lidar
+    Base Specification / ASPRS Ed. 2 (2023) relative accuracy of the quality level.
+    """
+    from ..accuracy.swaths import assess_swaths
+    from ..errors import InvalidPointsError, OutputExistsError, WriteError
+    from ..io._atomic import atomic_path, check_output
+    from ..io.crs import ensure_same_crs, parse_crs
+    from ..io.raster import write_geotiff
+
+    s = settings()
+    given_crs = parse_crs(crs_option)
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise WriteError(f"output {out} exists and is not a folder")
+    if out.exists() and any(out.iterdir()) and not s.overwrite:
+        raise OutputExistsError(
+            f"output folder {out} is not empty; pass --overwrite to write into it"
+        )
+    if not out.parent.exists():
+        raise WriteError(f"output folder {out.parent} does not exist")
+    resolved = {Path(f).resolve() for f in files}
+    if out.resolve() in resolved:
+        raise WriteError(f"output {out} is also an input")
+    if s.json_path:
+        check_output(s.json_path, overwrite=s.overwrite)
+    if not by_source_id and len(files) == 1:
+        raise InvalidPointsError(
+            "one file is one flight strip: give one file per strip, or --by-source-id to split "
+            "the file by point_source_id"
+        )
+    if not no_maps:
+        from .._validate import require
+
+        require("matplotlib", "report")
+    from .._validate import require
+
+    require("rasterio", "raster")
+    steps = Steps()
+    with steps("Reading " + ", ".join(Path(f).name for f in files)):
+        xyz, sid, crs, labels = load_strips(
+            files, by_source_id=by_source_id, classes=classes, all_returns=all_returns
+        )
+    if given_crs is not None:
+        if crs is not None:  # the rasters are horizontal: compare horizontal parts
+            ensure_same_crs(_horizontal(crs), _horizontal(given_crs), what=(files[0], "--crs"))
+        else:
+            crs = given_crs
+    with steps(f"Comparing strips ({len(xyz):,} points, {len(np.unique(sid))} strips)"):
+        rep = assess_swaths(
+            xyz,
+            sid,
+            cell_size=cell_size,
+            min_points=min_points,
+            range_cell=range_cell,
+            max_roughness=max_roughness,
+            max_slope=max_slope,
+            quality_level=quality_level,
+            estimate_offsets=not no_offsets,
+            rotations=rotations,
+            reference_strip=reference_strip,
+        )
+    written: list[str] = []
+    out.mkdir(exist_ok=True)
+    with steps(f"Writing {out}"):
+        for g in rep.grids:
+            tif = out / f"dz_{g.strip_a}_{g.strip_b}.tif"
+            write_geotiff(
+                tif, g.dz, x0=g.x0, y1=g.y1, cell_size=g.cell_size, crs=crs, overwrite=s.overwrite
+            )
+            written.append(tif.name)
+            if not no_maps:
+                from ..report.analyses.swaths import plot_dz_map
+
+                png = out / f"dz_{g.strip_a}_{g.strip_b}.png"
+                data = plot_dz_map(g, vmax=rep.thresholds["max_abs"])
+                with atomic_path(png, overwrite=s.overwrite) as tmp:
+                    tmp.write_bytes(data)
+                written.append(png.name)
+        tables = {
+            "pairs.csv": [p.to_dict() for p in rep.pairs],
+            "repeatability.csv": [r.to_dict() for r in rep.repeatability],
+            "offsets.csv": [
+                {
+                    k: v
+                    for k, v in o.to_dict().items()
+                    if k not in ("rotations", "sigma_rotations", "sigma_robust")
+                }
+                | _rot_cols(o)
+                for o in (*rep.pair_offsets, *rep.network_offsets)
+            ],
+        }
+        for name, rows in tables.items():
+            if not rows:
+                continue
+            with atomic_path(out / name, overwrite=s.overwrite) as tmp:
+                tmp.write_text(_csv(rows), encoding="utf-8")
+            written.append(name)
+
+    lvl = rep.thresholds
+    echo(
+        f"quality level {rep.quality_level}: RMSDz ≤ {lvl['rmsdz'] * 100:.0f} cm, max |dz| ≤ "
+        f"{lvl['max_abs'] * 100:.0f} cm, repeatability ≤ {lvl['repeatability'] * 100:.0f} cm; "
+        f"cell {rep.cell_size:g} m"
+    )
+    echo(
+        f"{'pair':>13} {'overlap m²':>11} {'area m²':>9} {'RMSDz':>6} {'mean':>6} "
+        f"{'median':>6} {'p95':>6} {'max':>6}  (cm)"
+    )
+    for p in rep.pairs:
+        echo(
+            f"{p.strip_a:>6}-{p.strip_b:<6} {p.overlap_area:11,.0f} {p.area:9,.0f} {_cm(p.rmsdz)} "
+            f"{_cm(p.mean)} {_cm(p.median)} {_cm(p.p95_abs)} {_cm(p.max_abs)}  "
+            f"{'pass' if p.passed else 'FAIL'}"
+        )
+    for r in rep.repeatability:
+        if r.assessed:
+            echo(
+                f"strip {r.strip}: repeatability RMSE {_cm(r.rmse)} cm, median max−min "
+                f"{_cm(r.median_range)} cm ({r.range_cell:g} m cells) on {r.area:,.0f} m²  "
+                f"{'pass' if r.passed else 'FAIL'}"
+            )
+    for o in rep.network_offsets or rep.pair_offsets:
+        if o.strip_a == o.strip_b:  # the reference strip itself
+            continue
+        echo(
+            f"offset {o.strip_b} − {o.strip_a} ({o.method}): dx {o.dx * 100:+.1f} ± "
+            f"{o.sigma_dx * 100:.1f}, dy {o.dy * 100:+.1f} ± {o.sigma_dy * 100:.1f}, dz "
+            f"{o.dz * 100:+.1f} ± {o.sigma_dz * 100:.1f} cm"
+        )
+    if np.isfinite(rep.e4):
+        echo(
+            f"E4 (strip height noise) {rep.e4 * 100:.1f} cm; use: lidarqa heights ... "
+            f"--sigma-strip {rep.e4:.3f}"
+        )
+    for f in rep.flags:
+        echo("note: " + f)
+    echo(f"{'PASS' if rep.passed else 'FAIL'}; wrote {len(written)} file(s) to {out}")
+    finish(
+        "swaths",
+        inputs={"files": list(files), "strips": labels},
+        parameters=dict(
+            rep.parameters,
+            by_source_id=by_source_id,
+            classes=classes,
+            all_returns=all_returns,
+            crs=crs_option,
+        ),
+        results=dict(rep.to_dict(), outputs=written),
+    )
+
+
+def _horizontal(crs: Any) -> Any:
+    if getattr(crs, "is_compound", False) and crs.sub_crs_list:
+        return crs.sub_crs_list[0]
+    return crs
+
+
+def _rot_cols(o: Any) -> dict[str, Any]:
+    r = o.rotations or (None, None, None)
+    sr = o.sigma_rotations or (None, None, None)
+    rb = o.sigma_robust or (None, None, None)
+    return {
+        "sigma_robust_dx": rb[0],
+        "sigma_robust_dy": rb[1],
+        "sigma_robust_dz": rb[2],
+        "rot_x_deg": r[0],
+        "rot_y_deg": r[1],
+        "rot_z_deg": r[2],
+        "sigma_rot_x_deg": sr[0],
+        "sigma_rot_y_deg": sr[1],
+        "sigma_rot_z_deg": sr[2],
+    }

@@ -1,0 +1,284 @@
+"""Filter parameters from the cloud itself: measure, then choose (``preset="auto"``).
+
+:func:`measure_cloud` measures what the ground filters depend on — point density
+and spacing (per occupied area, so flight-strip overlaps and gaps do not bias it),
+the return structure, the kind of acquisition (airborne or mobile), terrain slope
+statistics and the largest object footprint — and :func:`auto_parameters` turns
+those figures into filter parameters with fixed rules. Every chosen value carries
+its provenance: ``"measured"`` (derived from a figure of this cloud),
+``"default"`` (the rule's fixed value) or ``"given"`` (an explicit option, which
+always wins).
+
+The rules, in short:
+
+- **Sensor.** Mobile scans (a scan angle range beyond ±60°, or more than
+  100 points/m² without a scan angle) get Lin & Zhang's Table 1 (the library
+  defaults). A `sensor` hint overrides the measurement.
+- **Density regime** (airborne). Below :data:`DENSE_ALS` points/m² a segment of a
+  few points cannot show whether it is vegetation (scatterness needs about ten
+  neighbours within a metre), so the sparse set switches scatterness off and
+  relies on steeper iteration angles and the raised/connection/below passes
+  (:data:`~lidarqa.ground.ALS_SEGMENT_PARAMS`). At :data:`DENSE_ALS` points/m² and
+  above the dense set keeps scatterness and the tight angles of Table 1: at
+  0.2–0.3 m spacing a 16° iteration angle accepts a point 0.1 m above its
+  neighbour regardless of what it is.
+- **Seed cell.** The largest object footprint (the diameter of the largest disc
+  inside a raised region of the lowest-point raster) is measured and reported, but
+  the seed cell stays at its default (60 m): on small extracts the footprint
+  measure cannot tell a hill from a roof, and seed cells sized from it were worse.
+- **Slopes** are measured and reported; the sparse set's steep iteration angle
+  and the raised/below passes already cover 30–45° slopes.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+
+from .._validate import check_choice
+
+__all__ = [
+    "CloudMeasures",
+    "measure_cloud",
+    "auto_parameters",
+    "SENSORS",
+    "DENSE_ALS",
+    "MLS_DENSITY",
+]
+
+SENSORS = ("auto", "als", "mls")
+#: points/m² from which airborne clouds get the dense parameter set
+DENSE_ALS = 4.0
+#: points/m² above which a cloud without a scan angle is taken for a mobile scan
+MLS_DENSITY = 100.0
+#: height (m) above the opened lowest-point surface from which a cell is "raised"
+_RAISED = 2.5
+#: opening window (m) for the terrain approximation of the footprint measure
+_OPEN_WINDOW = 150.0
+
+
+@dataclass(frozen=True)
+class CloudMeasures:
+    """Figures measured on the ground candidates of a cloud (see :func:`measure_cloud`).
+
+    Attributes
+    ----------
+    n_points : int
+        Candidate points measured.
+    density : float
+        Points per m² of occupied area (median of occupied grid cells).
+    spacing : float
+        Mean point spacing 1/sqrt(density), m.
+    occupied_area : float
+        Area of the occupied grid cells, m².
+    has_returns : bool
+        Return numbers were recorded.
+    multi_return_share : float
+        Share of points from pulses with more than one return (nan without returns).
+    scan_angle_max : float
+        Largest absolute scan angle, degrees (nan when not recorded).
+    sensor : str
+        ``"als"`` or ``"mls"`` as measured (before any hint).
+    slope_median, slope_p90 : float
+        Terrain slope statistics (degrees) of the opened lowest-point raster.
+    largest_object_diameter : float
+        Diameter (m) of the largest disc that fits inside a raised region (0 when none).
+    largest_object_area : float
+        Area (m²) of the largest raised region.
+    """
+
+    n_points: int
+    density: float
+    spacing: float
+    occupied_area: float
+    has_returns: bool
+    multi_return_share: float
+    scan_angle_max: float
+    sensor: str
+    slope_median: float
+    slope_p90: float
+    largest_object_diameter: float
+    largest_object_area: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            k: (None if isinstance(v, float) and not math.isfinite(v) else v)
+            for k, v in asdict(self).items()
+        }
+
+
+def _grid_density(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    """(density per m², occupied area m²) from a grid of about 50 points per cell.
+
+    `x`, `y` are contiguous and start at 0.
+    """
+    n = x.size
+    span = max(float(x.max()), 1e-9) * max(float(y.max()), 1e-9)
+    cell = math.sqrt(50.0 * span / n)
+    if not cell > 0:
+        return math.nan, 0.0
+    i = (x / cell).astype(np.int64)
+    j = (y / cell).astype(np.int64)
+    counts = np.bincount(i * (int(j.max()) + 1) + j)
+    counts = counts[counts > 0]
+    return float(np.median(counts)) / (cell * cell), float(counts.size * cell * cell)
+
+
+def _min_raster(x: np.ndarray, y: np.ndarray, z: np.ndarray, cell: float) -> np.ndarray:
+    """Lowest z per XY cell (nan where empty); `x`, `y` start at 0."""
+    i = (x / cell).astype(np.int64)
+    j = (y / cell).astype(np.int64)
+    shape = (int(i.max()) + 1, int(j.max()) + 1)
+    flat = np.full(shape[0] * shape[1], np.inf)
+    np.minimum.at(flat, i * shape[1] + j, z)
+    flat[~np.isfinite(flat)] = np.nan
+    return flat.reshape(shape)
+
+
+def _open(z: np.ndarray, size: int) -> np.ndarray:
+    """Grey opening of a raster with nan gaps (gaps ignored); nan where nothing reaches."""
+    from scipy import ndimage
+
+    a = np.where(np.isnan(z), np.inf, z)
+    e = ndimage.minimum_filter(a, size=size, mode="nearest")
+    e[~np.isfinite(e)] = -np.inf
+    o = ndimage.maximum_filter(e, size=size, mode="nearest")
+    o[~np.isfinite(o)] = np.nan
+    return o
+
+
+def measure_cloud(points: Any, *, fields: dict | None = None) -> CloudMeasures:
+    """Measure the figures the automatic parameters depend on.
+
+    Parameters
+    ----------
+    points : ndarray of shape (N, 3)
+        The ground candidates (e.g. last returns, noise excluded), metres.
+    fields : dict, optional
+        Per-point fields of the same points (``return_number``,
+        ``number_of_returns``, ``scan_angle`` / ``scan_angle_rank``).
+
+    Returns
+    -------
+    CloudMeasures
+    """
+    from scipy import ndimage
+
+    xyz = np.asarray(points, dtype=np.float64)
+    fields = fields or {}
+    n = xyz.shape[0]
+    nan = math.nan
+    if n < 10:
+        return CloudMeasures(n, nan, nan, 0.0, False, nan, nan, "als", nan, nan, 0.0, 0.0)
+    x = np.ascontiguousarray(xyz[:, 0])
+    y = np.ascontiguousarray(xyz[:, 1])
+    z = np.ascontiguousarray(xyz[:, 2])
+    x = x - x.min()  # new arrays: the input is never modified
+    y = y - y.min()
+    density, area = _grid_density(x, y)
+    spacing = 1.0 / math.sqrt(density) if density > 0 else nan
+    nr = fields.get("number_of_returns")
+    rn = fields.get("return_number")
+    has_ret = nr is not None and rn is not None and bool(np.any(np.asarray(nr) > 0))
+    multi = float(np.mean(np.asarray(nr) > 1)) if has_ret else nan
+    ang = fields.get("scan_angle")
+    if ang is None:
+        ang = fields.get("scan_angle_rank")
+    angle_max = nan
+    if ang is not None and np.size(ang):
+        a = np.abs(np.asarray(ang, dtype=np.float64))
+        if "scan_angle" in fields and a.max() > 180:  # LAS 1.4: 0.006° units
+            a = a * 0.006
+        angle_max = float(a.max())
+    if math.isfinite(angle_max) and angle_max > 0:
+        sensor = "mls" if angle_max > 60.0 else "als"
+    else:
+        sensor = "mls" if density > MLS_DENSITY else "als"
+    # terrain slopes and object footprints from the lowest-point raster
+    cell = max(1.0, 2.0 * spacing) if math.isfinite(spacing) else 1.0
+    zmin = _min_raster(x, y, z, cell)
+    size = max(3, int(round(_OPEN_WINDOW / cell)) | 1)
+    opened = _open(zmin, size)
+    scell = max(5.0, 3.0 * cell)
+    k = max(1, int(round(scell / cell)))
+    coarse = opened[::k, ::k]
+    slope_med = slope_p90 = nan
+    if coarse.shape[0] >= 2 and coarse.shape[1] >= 2:
+        gx, gy = np.gradient(coarse, k * cell)
+        s = np.degrees(np.arctan(np.hypot(gx, gy)))
+        s = s[np.isfinite(s)]
+        if s.size:
+            slope_med = float(np.median(s))
+            slope_p90 = float(np.percentile(s, 90))
+    # raised regions: above the opened surface by more than _RAISED plus what the
+    # opening loses on a slope across half the window
+    tol = _RAISED + (
+        0.5 * _OPEN_WINDOW * math.tan(math.radians(slope_med)) if math.isfinite(slope_med) else 0.0
+    )
+    raised = np.nan_to_num(zmin - opened, nan=-1.0) > tol
+    # empty cells (no point) next to a raised cell belong to it: holes would shrink it
+    raised |= np.isnan(zmin) & ndimage.binary_dilation(raised, np.ones((3, 3), bool))
+    diam = area_obj = 0.0
+    if raised.any():
+        lab, nlab = ndimage.label(raised)
+        sizes = np.bincount(lab.ravel())[1:]
+        area_obj = float(sizes.max() * cell * cell)
+        dt = ndimage.distance_transform_edt(raised)
+        diam = float(2.0 * dt.max() * cell)
+    return CloudMeasures(
+        n_points=int(n),
+        density=float(density),
+        spacing=float(spacing),
+        occupied_area=area,
+        has_returns=bool(has_ret),
+        multi_return_share=multi,
+        scan_angle_max=angle_max,
+        sensor=sensor,
+        slope_median=slope_med,
+        slope_p90=slope_p90,
+        largest_object_diameter=diam,
+        largest_object_area=area_obj,
+    )
+
+
+def auto_parameters(
+    measures: CloudMeasures, method: str = "segment-ptd", *, sensor: str = "auto"
+) -> tuple[dict[str, Any], dict[str, str], str]:
+    """Filter parameters chosen from `measures`.
+
+    Parameters
+    ----------
+    measures : CloudMeasures
+    method : {"segment-ptd", "ptd"}
+    sensor : {"auto", "als", "mls"}
+        Hint that overrides the measured kind of acquisition.
+
+    Returns
+    -------
+    params : dict
+        Keyword arguments for :class:`~lidarqa.ground.SegmentPTD` / :class:`~lidarqa.ground.PTD`.
+    sources : dict
+        ``"measured"`` or ``"default"`` per parameter in `params`.
+    regime : str
+        ``"mls"``, ``"als-sparse"`` or ``"als-dense"``.
+    """
+    from . import PRESETS
+
+    check_choice(sensor, SENSORS, "sensor")
+    kind = measures.sensor if sensor == "auto" else sensor
+    params: dict[str, Any] = {}
+    sources: dict[str, str] = {}
+    if kind == "mls":
+        regime = "mls"
+    elif math.isfinite(measures.density) and measures.density >= DENSE_ALS:
+        regime = "als-dense"
+    else:
+        regime = "als-sparse"
+    if regime == "als-sparse":
+        for k, v in PRESETS["als"][method].items():
+            params[k] = v
+            sources[k] = "measured"  # chosen because of the measured density
+    return params, sources, regime

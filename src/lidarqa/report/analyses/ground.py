@@ -1,0 +1,201 @@
+"""The ``ground`` analysis: filter ground (segment-PTD or PTD) and score it (ISPRS errors)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ...errors import ConfigError
+from .._context import (
+    RunContext,
+    SectionResult,
+    dataclass_defaults,
+    import_module,
+    keyword_defaults,
+    library_attr,
+)
+from .._registry import CLOUD_KEY, register
+from .._schema import AnalysisItem, Key, Target, targets
+from ..html import Figure, Table
+
+_GROUND_CLASSES = {"segment-ptd": "SegmentPTD", "ptd": "PTD"}
+
+
+def _ground_params(options: dict) -> dict[str, Any]:
+    """classify_ground's keywords plus the chosen filter's parameters (its dataclass fields)."""
+    classify_ground = library_attr("lidarqa.ground", "classify_ground", "ground")
+    out = keyword_defaults(classify_ground, exclude=("method", "evaluate", "ignore_classes"))
+    filter_cls = library_attr(
+        "lidarqa.ground", _GROUND_CLASSES[options.get("method") or "segment-ptd"], "ground"
+    )
+    fields = dataclass_defaults(filter_cls)
+    for k, v in fields.items():
+        if k not in out:
+            out[k] = v
+            if k in fields.annotations:
+                out.annotations[k] = fields.annotations[k]
+    own = set(keyword_defaults(classify_ground))
+
+    def validate(params: dict[str, Any]) -> None:
+        # Building the filter checks every parameter's range (its __post_init__).
+        filter_cls(**{k: v for k, v in params.items() if k not in own})
+        mod = import_module("lidarqa.ground", "ground")
+        presets = getattr(mod, "PRESET_CHOICES", None) or getattr(mod, "PRESETS", None)
+        if (
+            params.get("preset") is not None
+            and presets is not None
+            and params["preset"] not in presets
+        ):
+            raise ConfigError(
+                f"key 'preset' must be one of {', '.join(map(repr, presets))}; "
+                f"got {params['preset']!r}"
+            )
+
+    out.validate = validate
+    return out
+
+
+KEYS = {
+    "cloud": CLOUD_KEY,
+    "method": Key("str", default="segment-ptd", choices=("segment-ptd", "ptd")),
+    "evaluate": Key("bool", default=True, help="score against the input's classes"),
+    "ignore_classes": Key("int_list", default=None, help="classes left out of the evaluation"),
+    "write_cloud": Key("bool", default=True, help="write the classified cloud"),
+    "cloud_format": Key("str", default="laz", choices=("laz", "las")),
+}
+TARGETS = targets(
+    Target("total", ("total",), "max", "total error", "%", 100.0),
+    Target("type_i", ("type_i",), "max", "type I error", "%", 100.0),
+    Target("type_ii", ("type_ii",), "max", "type II error", "%", 100.0),
+    Target("kappa", ("kappa",), "min", "Cohen's κ", ""),
+)
+
+
+@register(
+    "ground", _ground_params, keys=KEYS, targets=TARGETS, title="Ground filtering", order=20
+)
+def run_ground(ctx: RunContext, item: AnalysisItem) -> SectionResult:
+    """Ground filtering (segment-PTD or PTD) and its ISPRS errors against the input's classes."""
+    from .. import plots
+
+    ground_mod = import_module("lidarqa.ground", "ground")
+    opts = item.options
+    cloud = ctx.cloud(opts["cloud"])
+    n = len(cloud)
+    notes: list[str] = []
+    cls = cloud.classification
+    evaluate = bool(opts["evaluate"])
+    if evaluate and cls is None:
+        notes.append("the cloud has no classification: nothing to evaluate against")
+        evaluate = False
+    ignore = list(opts["ignore_classes"] or [])
+    import warnings
+
+    with (
+        ctx.step(f"Ground filtering ({opts['method']}, {n:,} points)") as progress,
+        warnings.catch_warnings(),
+    ):
+        warnings.simplefilter("ignore")  # reported through result.warnings instead
+        result = ground_mod.classify_ground(
+            cloud,
+            progress=progress,
+            method=opts["method"],
+            evaluate=evaluate,
+            ignore_classes=ignore or None,
+            **item.params,
+        )
+    ground = np.asarray(result.ground_mask, dtype=bool)
+    res = result.to_dict()
+    notes.extend(str(w) for w in res.get("warnings", []))
+    errors = result.evaluation
+    if errors is not None:
+        res.update(
+            type_i_pct=errors.type_i_pct,
+            type_ii_pct=errors.type_ii_pct,
+            total_pct=errors.total_pct,
+            ignore_classes=ignore,
+        )
+    if opts["write_cloud"] and cls is not None:
+        from ...io import write
+
+        out = cloud.copy()
+        out.fields["classification"] = ground_mod.relabel_classification(cls, ground)
+        path = ctx.output_path(item, f"{opts['cloud']}_ground.{opts['cloud_format']}")
+        with ctx.step("Writing the classified cloud"):
+            write(out, path, overwrite=True)
+    figures = []
+    evaluated = ~np.isin(cls, ignore) if errors is not None else None
+    with ctx.step("Plotting ground maps"):
+        cmap, emap = plots.plot_ground_maps(
+            cloud.xyz[:, :2], ground, (cls == 2) if errors is not None else None, evaluated
+        )
+        figures.append(Figure("Ground classification", cmap, "top view of the filter's result"))
+        if emap is not None:
+            figures.append(
+                Figure(
+                    "Error map",
+                    emap,
+                    "type I: reference ground rejected; type II: object accepted as ground",
+                )
+            )
+    tables = []
+    if errors is not None:
+        e = errors
+        tables.append(
+            Table(
+                "Cross table (points)",
+                ["reference \\ filter", "ground", "object", "total"],
+                [
+                    ["ground", e.a, e.b, e.a + e.b],
+                    ["object", e.c, e.d, e.c + e.d],
+                    ["total", e.a + e.c, e.b + e.d, e.n],
+                ],
+                note=("classes " + ", ".join(map(str, ignore)) + " not evaluated")
+                if ignore
+                else "",
+            )
+        )
+        tables.append(
+            Table(
+                "ISPRS errors",
+                ["measure", "value"],
+                [
+                    ["type I (%)", e.type_i_pct],
+                    ["type II (%)", e.type_ii_pct],
+                    ["total (%)", e.total_pct],
+                    ["Cohen's κ", e.kappa],
+                    ["points evaluated", e.n],
+                ],
+            )
+        )
+        headline = (
+            f"total error {e.total_pct:.2f} % (type I {e.type_i_pct:.2f} %, type II "
+            f"{e.type_ii_pct:.2f} %), κ {e.kappa:.3f}"
+        )
+    else:
+        headline = f"{int(ground.sum()):,} of {n:,} points classified as ground"
+    tables.append(
+        Table(
+            "Filter run",
+            ["quantity", "value"],
+            [
+                ["candidate points", res.get("n_candidates")],
+                ["ground points", res.get("n_ground")],
+                ["return handling", res.get("return_handling")],
+                ["noise points excluded", res.get("n_excluded_noise")],
+            ],
+        )
+    )
+    return SectionResult(
+        results=res,
+        headline=headline,
+        figures=figures,
+        tables=tables,
+        notes=notes,
+        parameters={"filter": dict(result.parameters)},
+        paragraphs=[
+            f"Method {opts['method']} on {opts['cloud']} ({n:,} points); the filter decides from "
+            "geometry (and return numbers) only; the file's classes are used only to score it."
+        ],
+    )

@@ -1,0 +1,111 @@
+"""The ``info`` analysis: describe a cloud and show it from above."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .._context import RunContext, SectionResult
+from .._registry import CLOUD_KEY, register
+from .._schema import AnalysisItem
+from ..html import Figure, Table
+
+
+@register("info", keys={"cloud": CLOUD_KEY}, title="Input cloud", order=10)
+def run_info(ctx: RunContext, item: AnalysisItem) -> SectionResult:
+    """Describe the cloud and show it from above, coloured by class and by flight strip."""
+    from ...io.info import describe_cloud
+    from .. import plots
+
+    name = item.options["cloud"]
+    cloud = ctx.cloud(name)
+    info = describe_cloud(cloud).to_dict()
+    figures = []
+    with ctx.step(f"Plotting {name}"):
+        if cloud.classification is not None:
+            figures.append(
+                Figure(
+                    "Classes",
+                    plots.plot_classes(
+                        cloud.xyz[:, :2],
+                        cloud.classification,
+                        f"{name}: classes",
+                        z=cloud.xyz[:, 2],
+                    ),
+                    "top view, coloured by the file's classification",
+                )
+            )
+        psid = cloud.point_source_id
+        if psid is not None and len(np.unique(psid)) > 1:
+            figures.append(
+                Figure(
+                    "Flight strips",
+                    plots.plot_categories(
+                        cloud.xyz[:, :2],
+                        psid,
+                        f"{name}: flight strips (point_source_id)",
+                        z=cloud.xyz[:, 2],
+                    ),
+                    "top view, coloured by point_source_id",
+                )
+            )
+        figures.append(
+            Figure(
+                "Heights",
+                plots.plot_values(
+                    cloud.xyz[:, :2],
+                    cloud.xyz[:, 2],
+                    f"{name}: heights",
+                    label="z (m)",
+                    z=cloud.xyz[:, 2],
+                ),
+                "top view, coloured by height (1st–99th percentile)",
+            )
+        )
+    b = info["bounds"]
+    rows = [
+        ["points", info["n_points"]],
+        ["x range", f"{b['min_x']:.2f} .. {b['max_x']:.2f}" if info["n_points"] else "–"],
+        ["y range", f"{b['min_y']:.2f} .. {b['max_y']:.2f}" if info["n_points"] else "–"],
+        ["z range", f"{b['min_z']:.2f} .. {b['max_z']:.2f}" if info["n_points"] else "–"],
+        [
+            "CRS",
+            (info["crs_name"] or "none")
+            + (f" (EPSG:{info['crs_epsg']})" if info["crs_epsg"] else ""),
+        ],
+        ["density (pts/m²)", info["density_per_m2"]],
+        [
+            "return numbers",
+            "valid"
+            if info["returns"].get("valid")
+            else (
+                "absent" if not info["returns"].get("present") else "present, partly invalid/zero"
+            ),
+        ],
+    ]
+    from ..plots import CLASS_NAMES
+
+    tables = [Table("Cloud", ["property", "value"], rows)]
+    if info["classes"]:
+        tables.append(
+            Table(
+                "Classes",
+                ["class", "name", "points"],
+                [[int(k), CLASS_NAMES.get(int(k), ""), v] for k, v in info["classes"].items()],
+            )
+        )
+    if info["point_source_ids"]:
+        tables.append(
+            Table(
+                "Flight strips",
+                ["flight strip (point source ID)", "points"],
+                [[str(int(k)), v] for k, v in info["point_source_ids"].items()],
+            )
+        )
+    dens = info["density_per_m2"]
+    headline = (
+        f"{info['n_points']:,} points"
+        + (f", {dens:.1f} pts/m²" if dens else "")
+        + (f", {len(info['point_source_ids'])} flight strips" if info["point_source_ids"] else "")
+    )
+    info.pop("header", None)
+    return SectionResult(results=info, headline=headline, figures=figures, tables=tables)

@@ -1,0 +1,312 @@
+"""Assessment analyses whose cloud input is a catalog (a folder, a glob or a ``.vpc``).
+
+``[inputs.clouds]`` may name a whole delivery instead of one file::
+
+    [inputs.clouds]
+    block = "tiles/"            # or "tiles/*.laz", or "delivery.vpc"
+
+An analysis whose cloud is such a catalog runs the catalog job (chunks with
+buffers, merged exactly, see :mod:`lidarqa.tiling.jobs_api`) instead of
+reading the cloud into memory, and its report section adds the catalog
+overview map (tiles, chunks coloured by status, strips) and the per-chunk
+status table (:mod:`lidarqa.report.catalog_overview`). Available on catalogs:
+``info`` (the catalog summary from the headers), ``edges``,
+``checkpoints`` with ``vertical = true`` and a check-point file, and
+``heights`` with map-point and reference-point inputs. The others
+report a clear error for that analysis while the rest of the report runs.
+Chunks use the default size and buffer and run in this process.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import AnalysisError
+from .html import Figure, Table
+
+__all__ = ["catalog_analysis", "catalog_crs", "catalog_record", "is_catalog_path"]
+
+
+def is_catalog_path(path: str | Path) -> bool:
+    """A folder, a ``.vpc`` file or a glob pattern (a catalog), not one cloud file."""
+    p = Path(path)
+    s = str(path)
+    if p.is_dir() or p.suffix.lower() == ".vpc":
+        return True
+    return any(ch in s for ch in "*?[") and not p.exists()
+
+
+def _open(path: str | Path) -> Any:
+    from ..tiling import open_catalog
+
+    return open_catalog(str(path))
+
+
+def catalog_crs(path: str | Path) -> Any:
+    """The catalog's CRS from its tile headers (refuses mixed CRSs, bad tiles, empty folders)."""
+    return _open(path).crs
+
+
+def catalog_record(name: str, spec: Any) -> dict[str, Any]:
+    """The report's input record of a catalog: tiles, points and a fingerprint.
+
+    Hashing every byte of a delivery would read it all; the fingerprint is the
+    SHA-256 of the sorted tile names, sizes and header bounds instead.
+    """
+    from ..io.crs import crs_epsg, crs_name
+
+    cat = _open(spec.path)
+    h = hashlib.sha256()
+    for t in cat.tiles:
+        size = Path(t.path).stat().st_size if Path(t.path).exists() else -1
+        h.update(f"{Path(t.path).name}|{size}|{t.n_points}|{t.bounds}\n".encode())
+    crs = spec.effective_crs or cat.crs
+    return {"name": name, "kind": spec.kind, "path": str(spec.path), "catalog": True,
+            "n_tiles": len(cat.tiles), "n_points": int(cat.n_points),
+            "size": int(sum(Path(t.path).stat().st_size for t in cat.tiles
+                            if Path(t.path).exists())),
+            "sha256": h.hexdigest(), "fingerprint": "tile names, sizes, point counts, bounds",
+            "crs_epsg": crs_epsg(crs), "crs_name": crs_name(crs)}
+
+
+def _cloud_input(item: Any) -> str | None:
+    opts = item.options
+    if item.kind == "checkpoints":
+        return opts.get("measured") if opts.get("vertical") else None
+    if item.kind == "lines":
+        for side in ("test", "model"):
+            v = opts.get(side)
+            if isinstance(v, dict) and "cloud" in v:
+                return v["cloud"]
+        return None
+    return opts.get("cloud") if isinstance(opts.get("cloud"), str) else None
+
+
+def catalog_analysis(ctx: Any, item: Any) -> Callable[[Any, Any], Any] | None:
+    """The catalog version of `item`'s analysis when its cloud input is a catalog, else None."""
+    name = _cloud_input(item)
+    spec = ctx.config.inputs.get(name) if name else None
+    if spec is None or spec.kind != "clouds" or not is_catalog_path(spec.path):
+        return None
+    func = _CATALOG_ANALYSES.get(item.kind)
+    if func is None:
+        def unavailable(ctx: Any, item: Any) -> Any:
+            raise AnalysisError(
+                f"analysis [{item.kind}] cannot run on the catalog input {name!r} yet "
+                f"(available on catalogs: {', '.join(sorted(_CATALOG_ANALYSES))}); "
+                + ("run `lidarqa ground` on the folder instead" if item.kind == "ground"
+                   else "give it one cloud file")
+            )
+
+        return unavailable
+    return func
+
+
+# ------------------------------------------------------------------ sections
+
+
+def _with_overview(res: Any, run: Any, title: str) -> Any:
+    from .catalog_overview import catalog_section
+
+    sec = catalog_section(run, title=title)
+    res.figures = [*res.figures, *sec["figures"]]
+    res.tables = [*res.tables, *sec["tables"]]
+    res.notes = [*res.notes, *sec["notes"]]
+    res.results["catalog"] = sec["results"]
+    return res
+
+
+def _info(ctx: Any, item: Any) -> Any:
+    from ..tiling import make_chunks
+    from ..tiling.jobs_api import CatalogRun
+    from ._context import SectionResult
+    from .catalog_overview import catalog_section
+
+    name = item.options["cloud"]
+    with ctx.step(f"Reading the headers of {name}"):
+        cat = _open(ctx.config.inputs[name].path)
+    chunks = make_chunks(cat)
+    run = CatalogRun(None, cat, tuple(chunks), ())  # no job: the chunks a job would use
+    sec = catalog_section(run, title=f"{name}: catalog")
+    d = cat.to_dict()
+    results = {**sec["results"], "crs_name": d.get("crs_name"), "crs_epsg": d.get("crs_epsg"),
+               "density_per_m2": d.get("density_per_m2"), "gaps": len(d.get("gaps", [])),
+               "overlaps": len(d.get("overlaps", [])),
+               "chunk_size": chunks[0].size if chunks else None}
+    rows = [["tiles", len(cat.tiles)], ["points", int(cat.n_points)],
+            ["CRS", d.get("crs_name") or "none"], ["density (pts/m²)", d.get("density_per_m2")],
+            ["gaps (missing tile cells)", results["gaps"]],
+            ["duplicate overlaps", results["overlaps"]],
+            ["default chunks", f"{len(chunks)} of {results['chunk_size']:g} m"
+             if chunks else "–"]]
+    headline = (f"catalog of {len(cat.tiles)} tiles, {int(cat.n_points):,} points"
+                + (f", {d['density_per_m2']:.1f} pts/m²" if d.get("density_per_m2") else ""))
+    return SectionResult(results=results, headline=headline,
+                         figures=sec["figures"],
+                         tables=[Table("Catalog", ["property", "value"], rows),
+                                 sec["tables"][1]],
+                         notes=sec["notes"])
+
+
+def _edges(ctx: Any, item: Any) -> Any:
+    from ..tiling.jobs_api import catalog_features
+    from . import plots
+    from ._context import SectionResult, selection_label
+    from ._context import write_vector as _write_vector_safe
+
+    opts = item.options
+    name = opts["cloud"]
+    seg_keys = ("grow_radius", "grow_dist", "seed_method", "min_segment_size", "max_rmse")
+    params = dict(item.params)
+    seg_opts = {k: params.pop(k) for k in seg_keys if k in params}
+    per: dict[str, Any] = {}
+    groups, rows, notes, runs = [], [], [], []
+    for sid in opts["source_ids"] or [None]:
+        with ctx.step(f"Edges of the catalog {name}" + (f", strip {sid}" if sid else "")):
+            run = catalog_features(ctx.config.inputs[name].path, kind="edges",
+                                   classes=opts["classes"], source_id=None if sid is None
+                                   else [sid], segment_options=seg_opts, options=params,
+                                   skip_failed=True)
+        runs.append(run)
+        seg = run.value
+        key = "all" if sid is None else str(sid)
+        lengths = seg.lengths if len(seg) else np.empty(0)
+        per[key] = {"n_edges": len(seg), "total_length": float(lengths.sum()),
+                    "median_length": float(np.median(lengths)) if len(lengths) else None}
+        if len(seg):
+            _write_vector_safe(ctx, item, seg, "edges" if sid is None else f"edges_{sid}",
+                               opts["format"], notes)
+        groups.append((seg.start, seg.end, "all" if sid is None else f"strip {sid}"))
+        rows.append([key, len(seg), float(lengths.sum()), per[key]["median_length"]])
+    with ctx.step("Plotting edges"):
+        fig = plots.plot_segments(groups, "Edges (" + selection_label(name, opts["classes"],
+                                                                       None) + ")")
+    res = SectionResult(
+        results={"n_edges": sum(v["n_edges"] for v in per.values()), "by_source_id": per,
+                 "classes": opts["classes"],
+                 "rule": "anchor-in-core: an edge is kept by the chunk holding its midpoint"},
+        headline=", ".join(f"{v['n_edges']} edges ({'strip ' + k if k != 'all' else 'all'})"
+                           for k, v in per.items()) + " over the catalog",
+        figures=[Figure("Edges", fig, "top view")],
+        tables=[Table("Edges", ["strip", "edges", "total length (m)", "median length (m)"],
+                      rows)],
+        notes=notes,
+        paragraphs=[f"{name} is a catalog: edges were found chunk by chunk with a buffer and "
+                    "each edge is kept once, by the chunk whose core holds its midpoint."],
+    )
+    return _with_overview(res, runs[0], f"{name}: chunks")
+
+
+def _checkpoints(ctx: Any, item: Any) -> Any:
+    from ..tiling.jobs_api import catalog_vertical_check
+    from . import plots
+    from ._context import SectionResult
+    from ._context import write_vector as _write_vector_safe
+
+    opts = item.options
+    if not isinstance(opts["check"], str):
+        raise AnalysisError("on a catalog, the vertical check needs a check-point file "
+                            "(check = \"<points input>\"), not points sampled from a cloud")
+    if opts.get("source_ids"):
+        raise AnalysisError("source_ids is not available for a vertical check on a catalog")
+    name = opts["measured"]
+    check = ctx.points(opts["check"])
+    params = dict(item.params)
+    classes = params.pop("classes", (2,))
+    with ctx.step(f"Vertical check of the catalog {name}"):
+        run = catalog_vertical_check(ctx.config.inputs[name].path, check,
+                                     classes=tuple(np.atleast_1d(classes).tolist()),
+                                     skip_failed=True, **params)
+    rep = run.value
+    res = rep.to_dict()
+    notes: list[str] = [str(w) for w in res.get("warnings", [])]
+    _write_vector_safe(ctx, item, rep.residual_points(), "residuals", opts["format"], notes)
+    residuals = np.column_stack([np.zeros(len(rep.dz)), np.zeros(len(rep.dz)), rep.dz])
+    residuals[rep.flag != "ok"] = np.nan
+    with ctx.step("Plotting residuals"):
+        figs = [Figure("Residual vectors", plots.plot_residual_vectors(
+            rep.check_xyz, residuals, "Check-point residuals"), "colour: vertical residual"),
+            Figure("Residual histograms", plots.plot_residual_histograms(residuals))]
+    table = Table("Residual statistics (m)", ["axis", "mean", "std", "RMSE", "max |residual|"],
+                  [["z", res.get("mean_z"), res.get("std_z"), res.get("rmse_z"),
+                    res.get("max_abs_z")]], note=f"{res['n_check']} check points")
+    out = SectionResult(
+        results=res,
+        headline=(f"RMSE z {res['rmse_z']:.3f} m, mean {res['mean_z']:+.3f} m over "
+                  f"{res['n_check']} check points (catalog)"),
+        figures=figs, tables=[table], notes=notes,
+        paragraphs=[f"Heights of a TIN of the ground of the catalog {name} at the check points "
+                    f"({opts['check']}), minus the check heights; each check point is compared "
+                    "in the chunk whose core holds it."],
+    )
+    return _with_overview(out, run, f"{name}: chunks read")
+
+
+def _heights(ctx: Any, item: Any) -> Any:
+    from ..io.vector import PointSet
+    from ..tiling.jobs_api import catalog_heights
+    from . import plots
+    from ._context import SectionResult
+    from ._context import import_module as _import
+    from ._context import write_vector as _write_vector_safe
+
+    opts = item.options
+    name, m, r = opts["cloud"], opts["map"], opts["reference"]
+    if not isinstance(m, str) or not isinstance(r, str):
+        raise AnalysisError("on a catalog, heights needs a map-point input (map = \"<input>\") "
+                            "and a reference-point input (reference = \"<points input>\"), not "
+                            "points derived from the cloud")
+    if opts.get("source_ids"):
+        raise AnalysisError("source_ids is not available for heights on a catalog")
+    mod = _import("lidarqa.accuracy.heights", "heights")
+    mp_in = mod.read_map_points(ctx.config.inputs[m].path, spacing=opts["map_spacing"])
+    ref_xyz = ctx.points(r).xyz
+    with ctx.step(f"Heights of {len(mp_in):,} map points on the catalog {name}"):
+        run = catalog_heights(ctx.config.inputs[name].path, mp_in.xyz[:, :2], ref_xyz,
+                              classes=opts["classes"], options=dict(item.params),
+                              skip_failed=True)
+    rep = run.value
+    res = rep.to_dict()
+    mpts = rep.map_points
+    res.update(n_reference=int(len(ref_xyz)), n_reference_outside=int(rep.n_outside),
+               flags=list(rep.flags))
+    notes: list[str] = []
+    mp_set = PointSet(ids=np.arange(len(mpts)), xyz=np.column_stack([mpts.xy, mpts.height]),
+                      crs=ctx.crs, attributes={"sigma": mpts.sigma, "failed": mpts.failed})
+    _write_vector_safe(ctx, item, mp_set.subset(~mpts.failed), "map_points", opts["format"],
+                       notes)
+    ref_set = PointSet(ids=np.arange(len(ref_xyz)), xyz=ref_xyz, crs=ctx.crs,
+                       attributes={"dh": rep.dh, "sigma_dh": rep.sigma_dh, "w": rep.w_values,
+                                   "outlier": rep.outlier, "inside": rep.inside})
+    _write_vector_safe(ctx, item, ref_set, "reference_points", opts["format"], notes)
+    with ctx.step("Plotting heights"):
+        figs = [Figure("w-tests", plots.plot_w_histogram(rep.w_values, critical=rep.w.critical),
+                       "w = Δh / σ_Δh; the red curve is the standard normal density")]
+    c, w = res["comparison"], res["w"]
+    out = SectionResult(
+        results=res,
+        headline=(f"RMS Δh {c['rms']:.3f} m over {c['n']} reference points, "
+                  f"{w['n_outliers']} w-test outlier(s) (catalog)"),
+        figures=figs,
+        tables=[Table("Comparison with the reference", ["quantity", "value"],
+                      [[k, v] for k, v in c.items() if not isinstance(v, list | dict)]),
+                Table("w-tests", ["quantity", "value"], [[k, v] for k, v in w.items()])],
+        notes=notes,
+        paragraphs=[f"{name} is a catalog: each map point is fitted, and each reference point "
+                    "compared, in the chunk whose core holds it; the figures are those of one "
+                    "run over the whole area."],
+    )
+    return _with_overview(out, run, f"{name}: chunks")
+
+
+_CATALOG_ANALYSES: dict[str, Callable[[Any, Any], Any]] = {
+    "info": _info,
+    "edges": _edges,
+    "checkpoints": _checkpoints,
+    "heights": _heights,
+}

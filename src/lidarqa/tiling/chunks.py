@@ -1,0 +1,237 @@
+"""A regular grid of chunks with buffers over a catalog.
+
+Every chunk has a *core* square of ``chunk_size`` metres and a *buffered* box, the
+core grown by ``buffer`` metres on every side. A job reads the buffered box (so that
+a filter sees the neighbourhood of every core point: no edge artifacts) and keeps
+the results of core points only. Core membership is decided by grid index,
+``col = floor((x - origin_x) / chunk_size)`` (half-open cells), so every point of the
+catalog is a core point of exactly one chunk, whatever floating point rounding does
+at cell borders. One exception keeps tiles whose data reach their east/north border
+exactly (e.g. 770500.00 .. 770650.00) from making an extra column/row of chunks that
+would hold only the points on that line: when the catalog's east (north) edge lies
+exactly on a grid line, the points on it belong to the last column (row), i.e. the
+column index is clamped to the last one (:attr:`Chunk.last`).
+
+Defaults (chosen from the catalog header data):
+
+- ``buffer``: :data:`DEFAULT_BUFFER` = 60 m, the ground filter's default seed cell
+  (the largest building footprint it is built for). A roof cut by a chunk border is
+  seen whole, with ground around it, as long as it is narrower than the buffer.
+- ``chunk_size``: the side whose *buffered* box holds about :data:`TARGET_POINTS`
+  points at the catalog's mean density (points / tile area), i.e.
+  ``sqrt(TARGET_POINTS / density) - 2 * buffer``, at least ``MIN_CHUNK`` m. It is then
+  snapped to the tiling: to ``tile_size / k`` (the largest such fraction not above
+  it) when smaller than the tile size, to a multiple of the tile size otherwise, so
+  chunks line up with tile borders when the tiles do with the origin.
+- ``origin``: (0, 0), so chunk borders fall on round coordinates; national tilings
+  (e.g. 1 km tiles at multiples of 1000 m) are then aligned with the chunks.
+- ``snap`` (used by the ground job): the buffered box's south-west corner is moved
+  further out to the filter's seed grid (cells of ``cell_size`` from the catalog's
+  south-west corner), so each chunk seeds its TIN in the same cells as one run over
+  the whole catalog. On the six adjacent IGN 50 m tiles this raises the agreement of
+  chunked and whole-area ground labels from 99.57 % to 99.94 % (50 m chunks).
+
+Chunks whose core touches no tile's header bounds are not created. Chunk ids
+(``"c0003_r0012"``, column and row counted from the catalog's south-west chunk) are
+stable for a given catalog, chunk size and origin.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..errors import OptionError
+
+__all__ = [
+    "Chunk",
+    "make_chunks",
+    "default_chunk_size",
+    "DEFAULT_BUFFER",
+    "TARGET_POINTS",
+    "MIN_CHUNK",
+]
+
+#: Default buffer around each chunk, m (the ground filter's default seed cell).
+DEFAULT_BUFFER = 60.0
+#: Points aimed at in one buffered chunk: about 1 GB of working memory for ground filtering.
+TARGET_POINTS = 4_000_000
+#: Smallest default chunk side, m.
+MIN_CHUNK = 20.0
+# Header bounds are the exact min/max of the scaled coordinates, so the grid cells a tile
+# reaches follow from them with the same formula as the points' (the final pass of a job
+# checks that every point was a core point once). Tiles are matched to buffered boxes with
+# this tolerance, m.
+_EPS = 1e-6
+
+
+@dataclass(frozen=True)
+class Chunk:
+    """One cell of the chunk grid.
+
+    Attributes
+    ----------
+    id : str
+        ``"cCCCC_rRRRR"``: stable name (column, row from the south-west chunk).
+    row, col : int
+        Position in the grid, counted from the catalog's south-west chunk.
+    core : tuple of 4 floats
+        ``(xmin, ymin, xmax, ymax)``, half-open ``[min, max)``.
+    buffered : tuple of 4 floats
+        The core grown by the buffer on each side (closed).
+    tiles : tuple of int
+        Indices into ``catalog.tiles`` of the tiles whose bounds meet ``buffered``.
+    index : tuple of 2 int
+        Absolute grid index ``(floor((x0 - ox) / size), floor((y0 - oy) / size))``.
+    size : float
+        Chunk side, m.
+    origin : tuple of 2 floats
+        Grid origin.
+    last : tuple of 2 int, optional
+        Absolute grid index of the catalog's last column and row: point indices are
+        clamped to them (points exactly on the catalog's east/north edge, when that
+        edge is a grid line, belong to the last column/row).
+    """
+
+    id: str
+    row: int
+    col: int
+    core: tuple[float, float, float, float]
+    buffered: tuple[float, float, float, float]
+    tiles: tuple[int, ...]
+    index: tuple[int, int] = (0, 0)
+    size: float = 0.0
+    origin: tuple[float, float] = (0.0, 0.0)
+    last: tuple[int, int] | None = None
+
+    def core_mask(self, xy: np.ndarray) -> np.ndarray:
+        """Boolean mask of the points of `xy` (N, 2+) whose grid cell is this chunk."""
+        ox, oy = self.origin
+        gi = np.floor((xy[:, 0] - ox) / self.size)
+        gj = np.floor((xy[:, 1] - oy) / self.size)
+        if self.last is not None:
+            gi = np.minimum(gi, self.last[0])
+            gj = np.minimum(gj, self.last[1])
+        return (gi == self.index[0]) & (gj == self.index[1])
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "id": self.id,
+            "row": self.row,
+            "col": self.col,
+            "core": list(self.core),
+            "buffered": list(self.buffered),
+            "tiles": list(self.tiles),
+        }
+
+
+def default_chunk_size(catalog: Any, *, buffer: float = DEFAULT_BUFFER) -> float:
+    """The default chunk side for `catalog` (see the module documentation), m."""
+    density = catalog.density
+    raw = math.sqrt(TARGET_POINTS / density) - 2.0 * buffer
+    raw = max(raw, MIN_CHUNK)
+    tile = catalog.tile_size()
+    if tile > 0:
+        if raw < tile:
+            k = math.ceil(tile / raw - 1e-9)
+            return float(tile / k)
+        return float(tile * math.floor(raw / tile + 1e-9))
+    return float(math.floor(raw))
+
+
+def make_chunks(
+    catalog: Any,
+    *,
+    chunk_size: float | None = None,
+    buffer: float | None = None,
+    origin: tuple[float, float] = (0.0, 0.0),
+    snap: tuple[float, float, float] | None = None,
+) -> tuple[Chunk, ...]:
+    """The chunks covering `catalog`, row by row from the south-west.
+
+    Parameters
+    ----------
+    catalog : Catalog
+    chunk_size : float, optional
+        Side of a chunk's core, m (default :func:`default_chunk_size`).
+    buffer : float, optional
+        Margin read around each core, m (default :data:`DEFAULT_BUFFER`); 0 allowed.
+    origin : (float, float), default (0, 0)
+        A point on the chunk grid lines (alignment).
+    snap : (gx, gy, step), optional
+        Extend each buffered box's south-west corner down to the grid of `step` metres
+        through ``(gx, gy)``. Jobs whose kernels lay a grid from the south-west corner
+        of their input (the ground filter's seed cells) use it so every chunk lays its
+        grid where one run over the whole catalog would.
+    """
+    buffer = DEFAULT_BUFFER if buffer is None else float(buffer)
+    if not math.isfinite(buffer) or buffer < 0:
+        raise OptionError(f"buffer must be >= 0 m, got {buffer}")
+    size = default_chunk_size(catalog, buffer=buffer) if chunk_size is None else float(chunk_size)
+    if not math.isfinite(size) or size <= 0:
+        raise OptionError(f"chunk size must be > 0 m, got {chunk_size}")
+    ox, oy = float(origin[0]), float(origin[1])
+    b = np.array([t.bounds2d for t in catalog.tiles], dtype=float).reshape(-1, 4)
+    nonempty = np.array([t.n_points > 0 for t in catalog.tiles], dtype=bool)
+    if not nonempty.any():
+        return ()
+    span = b[nonempty, 2:].max(axis=0) - b[nonempty, :2].min(axis=0)
+    if float(np.prod(span / size + 2.0)) > 10_000_000:
+        raise OptionError(f"chunk size {size:g} m makes too many chunks; choose a larger one")
+    c0 = np.floor((b[:, 0] - ox) / size).astype(np.int64)
+    c1 = np.floor((b[:, 2] - ox) / size).astype(np.int64)
+    r0 = np.floor((b[:, 1] - oy) / size).astype(np.int64)
+    r1 = np.floor((b[:, 3] - oy) / size).astype(np.int64)
+    # the catalog's last column/row: an east/north edge exactly on a grid line opens no
+    # column/row of its own (its points join the last one, see Chunk.core_mask)
+    last_c = max(int(np.ceil((b[nonempty, 2].max() - ox) / size)) - 1, int(c0[nonempty].min()))
+    last_r = max(int(np.ceil((b[nonempty, 3].max() - oy) / size)) - 1, int(r0[nonempty].min()))
+    c0, c1 = np.minimum(c0, last_c), np.minimum(c1, last_c)
+    r0, r1 = np.minimum(r0, last_r), np.minimum(r1, last_r)
+    cells: set[tuple[int, int]] = set()
+    for k in np.nonzero(nonempty)[0]:
+        if (c1[k] - c0[k] + 1) * (r1[k] - r0[k] + 1) > 10_000_000:
+            raise OptionError(f"chunk size {size} m makes too many chunks; choose a larger one")
+        for j in range(int(r0[k]), int(r1[k]) + 1):
+            for i in range(int(c0[k]), int(c1[k]) + 1):
+                cells.add((j, i))
+    gi0 = int(c0[nonempty].min())
+    gj0 = int(r0[nonempty].min())
+    out = []
+    for j, i in sorted(cells):
+        core = (ox + i * size, oy + j * size, ox + (i + 1) * size, oy + (j + 1) * size)
+        buf = (core[0] - buffer, core[1] - buffer, core[2] + buffer, core[3] + buffer)
+        if snap is not None:
+            gx, gy, step = snap
+            buf = (
+                gx + math.floor((buf[0] - gx) / step + 1e-9) * step,
+                gy + math.floor((buf[1] - gy) / step + 1e-9) * step,
+                buf[2],
+                buf[3],
+            )
+        hit = np.nonzero(
+            nonempty
+            & (b[:, 0] - _EPS <= buf[2])
+            & (b[:, 2] + _EPS >= buf[0])
+            & (b[:, 1] - _EPS <= buf[3])
+            & (b[:, 3] + _EPS >= buf[1])
+        )[0]
+        row, col = j - gj0, i - gi0
+        out.append(
+            Chunk(
+                id=f"c{col:04d}_r{row:04d}",
+                row=row,
+                col=col,
+                core=core,
+                buffered=buf,
+                tiles=tuple(int(t) for t in hit),
+                index=(i, j),
+                size=size,
+                origin=(ox, oy),
+                last=(last_c, last_r),
+            )
+        )
+    return tuple(out)

@@ -1,0 +1,400 @@
+"""Running a task on every chunk: serially, on a local Dask cluster or on any Dask cluster.
+
+:class:`Engine` owns the compute resources; :func:`run_chunks` reads each chunk on a
+worker, runs a pure task on it and gives back one :class:`ChunkOutcome` per chunk,
+**in chunk order** whatever the order in which chunks completed, so that everything
+assembled from the outcomes is the same for 1, 2 or N workers.
+
+Modes (``Engine(scheduler=...)``):
+
+- ``None`` (default): a ``dask.distributed.LocalCluster`` with ``workers`` processes
+  (default: one per CPU core), one thread each, each with a memory limit
+  (``memory_limit``, default: the machine's memory divided among the workers).
+- ``"serial"``: no Dask, every chunk in this process, one after the other (debugging,
+  small jobs, or when Dask is not installed).
+- ``"tcp://host:port"``: connect to a running scheduler (``dask scheduler`` +
+  ``dask worker``, or any Dask deployment). The workers must be able to read the
+  tiles at the same paths.
+
+A chunk that raises is retried ``retries`` times (a worker lost mid-chunk counts as
+one failure); when it still fails its outcome says so, with the error, and the other
+chunks are not affected. ``skip_failed=False`` (the default) then raises a
+:class:`ChunkFailedError` naming the failed chunks once every chunk has finished.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from ..errors import MissingDependencyError, OptionError, TilingError
+
+__all__ = ["Engine", "ChunkOutcome", "ChunkFailedError", "run_chunks", "run_task"]
+
+
+class ChunkFailedError(TilingError):
+    """Some chunks failed after their retries; ``.outcomes`` holds every outcome."""
+
+    def __init__(self, message: str, outcomes: list[ChunkOutcome] | None = None) -> None:
+        super().__init__(message)
+        self.outcomes = outcomes or []
+
+
+@dataclass(frozen=True)
+class ChunkOutcome:
+    """What became of one chunk."""
+
+    chunk: Any
+    ok: bool
+    result: Any = None
+    error: str | None = None
+    attempts: int = 1
+    skipped: bool = False
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "chunk": self.chunk.id,
+            "ok": self.ok,
+            "error": self.error,
+            "attempts": self.attempts,
+            "skipped": self.skipped,
+        }
+
+
+_THREAD_VARS = ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def _dask():
+    try:
+        import dask  # noqa: F401
+        import distributed
+    except ImportError as exc:  # pragma: no cover - depends on the environment
+        raise MissingDependencyError(
+            "parallel runs need Dask: pip install 'lidarqa[dask]' (or use --workers 1 / serial)"
+        ) from exc
+    return distributed
+
+
+class Engine:
+    """Where chunks run. Use as a context manager (``with Engine() as eng: ...``).
+
+    Parameters
+    ----------
+    scheduler : None, "serial" or str
+        None: a LocalCluster; "serial": in this process; else a scheduler address.
+    workers : int, optional
+        LocalCluster workers (default: the number of CPU cores). ``workers=1``
+        still uses one worker process unless `scheduler` is "serial".
+    memory_limit : str or int, optional
+        Per-worker memory limit of the LocalCluster (bytes or e.g. "2GB"); default
+        the machine's memory divided by the workers.
+    """
+
+    def __init__(
+        self,
+        scheduler: str | None = None,
+        workers: int | None = None,
+        memory_limit: str | int | None = None,
+    ) -> None:
+        if workers is not None and int(workers) < 1:
+            raise OptionError(f"workers must be >= 1, got {workers}")
+        self.scheduler = scheduler
+        self.workers = None if workers is None else int(workers)
+        self.memory_limit = memory_limit
+        self.client: Any = None
+        self.cluster: Any = None
+
+    @property
+    def serial(self) -> bool:
+        return self.scheduler == "serial"
+
+    @property
+    def dashboard_link(self) -> str | None:
+        if self.client is None:
+            return None
+        try:
+            link = self.client.dashboard_link
+        except Exception:
+            return None
+        return link or None
+
+    @property
+    def n_workers(self) -> int:
+        if self.serial:
+            return 1
+        if self.client is not None:
+            try:
+                return max(len(self.client.scheduler_info().get("workers", {})), 1)
+            except Exception:
+                return 1
+        return self.workers or (os.cpu_count() or 1)
+
+    def start(self) -> Engine:
+        if self.serial or self.client is not None:
+            return self
+        distributed = _dask()
+        if self.scheduler:
+            try:
+                self.client = distributed.Client(self.scheduler, timeout="20s")
+            except Exception as exc:
+                raise TilingError(
+                    f"cannot connect to the Dask scheduler {self.scheduler}: {exc}"
+                ) from exc
+            return self
+        import dask
+
+        n = self.workers or (os.cpu_count() or 1)
+        with dask.config.set({"distributed.worker.daemon": False}):
+            self.cluster = distributed.LocalCluster(
+                n_workers=n,
+                threads_per_worker=1,
+                processes=True,
+                memory_limit=self.memory_limit if self.memory_limit is not None else "auto",
+                dashboard_address=":0",
+                host="127.0.0.1",
+                silence_logs=40,
+                # one single-threaded worker per core: compiled kernels must not start
+                # one thread per core in every worker
+                env={k: "1" for k in _THREAD_VARS},
+            )
+        self.client = distributed.Client(self.cluster)
+        return self
+
+    def close(self) -> None:
+        if self.client is not None:
+            try:
+                self.client.close()
+            except Exception:
+                pass
+        if self.cluster is not None:
+            try:
+                self.cluster.close()
+            except Exception:
+                pass
+        self.client = None
+        self.cluster = None
+
+    def __enter__(self) -> Engine:
+        return self.start()
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+
+def run_task(catalog: Any, chunk: Any, task: Callable[[Any], Any]) -> Any:
+    """Read `chunk` and run `task` on it (what a worker does for one chunk)."""
+    from .reader import read_chunk
+
+    return task(read_chunk(catalog, chunk))
+
+
+def _error_text(exc: BaseException) -> str:
+    text = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+    return f"{type(exc).__name__}: {text}"[:300] if text else type(exc).__name__
+
+
+class _Progress:
+    def __init__(self, total: int, enabled: bool, description: str, link: str | None) -> None:
+        self.enabled = enabled and total > 0
+        self._p = None
+        if not self.enabled:
+            return
+        from rich.console import Console
+        from rich.progress import (
+            BarColumn,
+            MofNCompleteColumn,
+            Progress,
+            TaskProgressColumn,
+            TextColumn,
+            TimeElapsedColumn,
+            TimeRemainingColumn,
+        )
+
+        console = Console(stderr=True)
+        if link:
+            console.print(f"Dask dashboard: {link}")
+        self._p = Progress(
+            TextColumn("{task.description}"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TaskProgressColumn(),
+            TextColumn("ETA"),
+            TimeRemainingColumn(),
+            TimeElapsedColumn(),
+            console=console,
+            transient=True,
+        )
+        self._p.start()
+        self._task = self._p.add_task(description, total=total)
+
+    def advance(self) -> None:
+        if self._p is not None:
+            self._p.advance(self._task)
+
+    def close(self) -> None:
+        if self._p is not None:
+            self._p.stop()
+            self._p = None
+
+
+def run_chunks(
+    catalog: Any,
+    chunks: Sequence[Any],
+    task: Callable[[Any], Any],
+    *,
+    engine: Engine | None = None,
+    progress: bool = True,
+    retries: int = 2,
+    skip_failed: bool = False,
+    on_outcome: Callable[[ChunkOutcome], Any] | None = None,
+    keep_results: bool = True,
+    description: str = "Chunks",
+    order_seed: int | None = None,
+) -> list[ChunkOutcome]:
+    """Run ``task(read_chunk(catalog, chunk))`` on every chunk.
+
+    Parameters
+    ----------
+    catalog : Catalog
+    chunks : sequence of Chunk
+    task : callable
+        Pure and picklable: ``task(chunk_data) -> result`` (picklable); it must not
+        write files (the caller persists results, e.g. in `on_outcome`).
+    engine : Engine, optional
+        Default: a serial engine (in this process).
+    progress : bool, default True
+        A progress bar over chunks (%, ETA) on stderr, with the Dask dashboard link.
+    retries : int, default 2
+        Extra attempts for a chunk that raised.
+    skip_failed : bool, default False
+        Return failed outcomes instead of raising :class:`ChunkFailedError`.
+    on_outcome : callable, optional
+        Called in this process with each outcome as soon as its chunk is done (in
+        completion order), e.g. to save per-chunk results for ``--resume``.
+    keep_results : bool, default True
+        Keep results in the returned outcomes (False: ``result=None``, saves memory
+        when `on_outcome` persisted them).
+    order_seed : int, optional
+        Submit the chunks in a shuffled order (seeded); tests use it to check that
+        results do not depend on the completion order.
+
+    Returns
+    -------
+    list of ChunkOutcome
+        In the order of `chunks`.
+    """
+    if retries < 0:
+        raise OptionError(f"retries must be >= 0, got {retries}")
+    chunks = list(chunks)
+    ids = [c.id for c in chunks]
+    if len(set(ids)) != len(ids):
+        raise TilingError("chunk ids must be unique")
+    order = list(range(len(chunks)))
+    if order_seed is not None:
+        import random
+
+        random.Random(order_seed).shuffle(order)
+    own = engine is None
+    engine = engine or Engine("serial")
+    outcomes: dict[int, ChunkOutcome] = {}
+
+    def record(i: int, oc: ChunkOutcome) -> None:
+        if on_outcome is not None:
+            on_outcome(oc)
+        if not keep_results and oc.result is not None:
+            oc = ChunkOutcome(oc.chunk, oc.ok, None, oc.error, oc.attempts, oc.skipped)
+        outcomes[i] = oc
+
+    try:
+        engine.start()
+        bar = _Progress(len(chunks), progress, description, engine.dashboard_link)
+        try:
+            if engine.serial:
+                for i in order:
+                    attempts = 0
+                    while True:
+                        attempts += 1
+                        try:
+                            res = run_task(catalog, chunks[i], task)
+                        except (KeyboardInterrupt, SystemExit):
+                            raise
+                        except Exception as exc:
+                            if attempts <= retries:
+                                continue
+                            record(
+                                i, ChunkOutcome(chunks[i], False, None, _error_text(exc), attempts)
+                            )
+                            break
+                        record(i, ChunkOutcome(chunks[i], True, res, None, attempts))
+                        break
+                    bar.advance()
+            else:
+                _run_dask(engine, catalog, chunks, order, task, retries, record, bar)
+        finally:
+            bar.close()
+    finally:
+        if own:
+            engine.close()
+    result = [outcomes[i] for i in range(len(chunks))]
+    failed = [o for o in result if not o.ok]
+    if failed and not skip_failed:
+        raise ChunkFailedError(
+            f"{len(failed)} of {len(result)} chunk(s) failed: "
+            + "; ".join(f"{o.chunk.id}: {o.error}" for o in failed[:5])
+            + (" ..." if len(failed) > 5 else ""),
+            result,
+        )
+    return result
+
+
+def _run_dask(engine, catalog, chunks, order, task, retries, record, bar) -> None:
+    distributed = _dask()
+    client = engine.client
+    cat_future = client.scatter(catalog, broadcast=True, hash=False)
+    token = f"{os.getpid()}-{time.monotonic_ns()}"
+    attempts: dict[int, int] = {}
+    fut_index: dict[Any, int] = {}
+
+    def submit(i: int) -> Any:
+        attempts[i] = attempts.get(i, 0) + 1
+        fut = client.submit(
+            run_task,
+            cat_future,
+            chunks[i],
+            task,
+            key=f"lidarqa-chunk-{chunks[i].id}-{token}-{attempts[i]}",
+            pure=False,
+        )
+        fut_index[fut] = i
+        return fut
+
+    ac = distributed.as_completed([submit(i) for i in order])
+    try:
+        for fut in ac:
+            i = fut_index.pop(fut)
+            if fut.status == "finished":
+                try:
+                    res = fut.result()
+                except Exception as exc:  # lost while fetching
+                    err = _error_text(exc)
+                else:
+                    record(i, ChunkOutcome(chunks[i], True, res, None, attempts[i]))
+                    fut.release()
+                    bar.advance()
+                    continue
+            else:
+                exc = fut.exception()
+                err = _error_text(exc) if exc is not None else fut.status
+            fut.release()
+            if attempts[i] <= retries:
+                ac.add(submit(i))
+                continue
+            record(i, ChunkOutcome(chunks[i], False, None, err, attempts[i]))
+            bar.advance()
+    except BaseException:
+        for fut in list(fut_index):
+            fut.cancel()
+        raise

@@ -1,0 +1,674 @@
+"""Ground classification of a whole catalog, chunk by chunk, with the same result as one run.
+
+How it works:
+
+1. Each chunk is read with its buffer (default :data:`~lidarqa.tiling.chunks.DEFAULT_BUFFER`,
+   at least the filter's seed cell) and filtered with
+   :func:`lidarqa.ground.classify_ground`, exactly as ``lidarqa ground`` filters one
+   file. Only the labels of the chunk's *core* points are kept: for each tile, the
+   record numbers of its core points that are ground, and the number of core points.
+2. Each chunk's labels are saved in the work folder ``OUTDIR/.lidarqa-work/`` as soon
+   as the chunk is done (``<chunk id>.npz``, written atomically), next to ``run.json``
+   which records the catalog, the chunk grid and the filter parameters. ``resume=True``
+   re-uses the saved chunks of a run with the same ``run.json`` and computes only the
+   missing ones.
+3. A final pass writes one output file per input tile (same name, in ``output_dir``):
+   every point exactly once, in input order, with all its dimensions, the ground
+   points as class 2 and former class-2 points that are not ground as class 1 (the
+   rules of single-file ``lidarqa ground``). It checks that the chunks' core points
+   add up to each tile's point count. The outputs depend only on the saved labels, so
+   they are byte-identical for any number of workers and any completion order.
+   Then ``<output_dir>/<name>.vpc`` lists the outputs and the work folder is removed.
+
+Each output file is written atomically: an interrupted run (Ctrl-C, SIGTERM, a
+failure) leaves complete files or none, plus the work folder for ``resume``.
+
+With ``evaluate=True`` the ISPRS cross-table counts (reference = the input class 2)
+are counted on core points in every chunk and summed, which gives exactly the counts
+of one whole-area evaluation.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import OptionError, OutputExistsError, TilingError
+
+__all__ = [
+    "GroundTask",
+    "ChunkGround",
+    "CatalogGroundResult",
+    "ground_catalog",
+    "catalog_grow_radius",
+    "WORK_DIR",
+]
+
+WORK_DIR = ".lidarqa-work"
+
+
+@dataclass(frozen=True)
+class ChunkGround:
+    """Per-chunk result of :class:`GroundTask` (small: ground record numbers only)."""
+
+    chunk_id: str
+    tiles: tuple[int, ...]
+    n_core: tuple[int, ...]
+    ground: tuple[np.ndarray, ...]  # sorted record numbers (uint32/int64) per tile
+    n_points_read: int = 0
+    counts: tuple[int, int, int, int] | None = None  # a, b, c, d on core points
+    warnings: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class GroundTask:
+    """The per-chunk ground job: filter the buffered chunk, keep the core labels."""
+
+    method: str = "segment-ptd"
+    last_returns_only: bool = True
+    exclude_classes: tuple[int, ...] = (7, 18)
+    preset: str | None = None
+    params: tuple[tuple[str, Any], ...] = ()
+    evaluate: bool = False
+    ignore_classes: tuple[int, ...] = ()
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "method": self.method,
+            "last_returns_only": self.last_returns_only,
+            "exclude_classes": list(self.exclude_classes),
+            "preset": self.preset,
+            "params": dict(self.params),
+            "evaluate": self.evaluate,
+            "ignore_classes": list(self.ignore_classes),
+        }
+
+    def __call__(self, data: Any) -> ChunkGround:
+        from ..errors import DataQualityWarning
+        from ..ground import classify_ground
+
+        chunk = data.chunk
+        core = data.core
+        if not core.any():
+            return ChunkGround(chunk.id, (), (), (), len(core))
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", DataQualityWarning)
+            res = classify_ground(
+                data.cloud,
+                method=self.method,
+                last_returns_only=self.last_returns_only,
+                exclude_classes=self.exclude_classes,
+                preset=self.preset,
+                **dict(self.params),
+            )
+        ground = np.asarray(res.ground_mask, dtype=bool)
+        tiles, n_core, per_tile = [], [], []
+        for t in np.unique(data.tile_index[core]).tolist():
+            sel = core & (data.tile_index == t)
+            idx = data.point_index[sel & ground]
+            idx = np.sort(idx)
+            if len(idx) and idx[-1] < 2**32:
+                idx = idx.astype(np.uint32)
+            tiles.append(int(t))
+            n_core.append(int(sel.sum()))
+            per_tile.append(idx)
+        counts = None
+        if self.evaluate:
+            cls = data.cloud.classification
+            if cls is None:
+                raise OptionError("evaluate needs a classification in the input tiles")
+            ref = np.asarray(cls) == 2
+            m = core.copy()
+            if self.ignore_classes:
+                m &= ~np.isin(np.asarray(cls), np.asarray(self.ignore_classes))
+            r, g = ref[m], ground[m]
+            counts = (
+                int(np.count_nonzero(r & g)),
+                int(np.count_nonzero(r & ~g)),
+                int(np.count_nonzero(~r & g)),
+                int(np.count_nonzero(~r & ~g)),
+            )
+        return ChunkGround(
+            chunk_id=chunk.id,
+            tiles=tuple(tiles),
+            n_core=tuple(n_core),
+            ground=tuple(per_tile),
+            n_points_read=len(core),
+            counts=counts,
+            warnings=tuple(sorted({str(w.message) for w in caught})),
+        )
+
+
+@dataclass(frozen=True)
+class CatalogGroundResult:
+    """Result of :func:`ground_catalog`."""
+
+    outputs: tuple[str, ...]
+    vpc: str | None
+    n_points: int
+    n_ground: int
+    n_chunks: int
+    n_chunks_run: int
+    n_chunks_resumed: int
+    chunk_size: float
+    buffer: float
+    failed: tuple[tuple[str, str], ...] = ()
+    bad: tuple[tuple[str, str], ...] = ()
+    evaluation: Any = None
+    parameters: dict = field(default_factory=dict)
+    chunks: tuple[dict, ...] = ()
+    warnings: tuple[str, ...] = ()
+
+    def to_dict(self) -> dict[str, Any]:
+        d = {
+            "outputs": list(self.outputs),
+            "vpc": self.vpc,
+            "n_points": self.n_points,
+            "n_ground": self.n_ground,
+            "ground_fraction": self.n_ground / self.n_points if self.n_points else None,
+            "n_chunks": self.n_chunks,
+            "n_chunks_run": self.n_chunks_run,
+            "n_chunks_resumed": self.n_chunks_resumed,
+            "chunk_size": self.chunk_size,
+            "buffer": self.buffer,
+            "failed_chunks": [{"chunk": c, "error": e} for c, e in self.failed],
+            "bad_tiles": [{"path": p, "reason": r} for p, r in self.bad],
+            "chunks": list(self.chunks),
+            "warnings": list(self.warnings),
+        }
+        if self.evaluation is not None:
+            full = self.evaluation.to_dict()
+            d.update(
+                {
+                    k: full[k]
+                    for k in ("type_i", "type_ii", "total", "kappa", "n_evaluated", "confusion")
+                    if k in full
+                }
+            )
+        return d
+
+
+# --- work folder ------------------------------------------------------------------------------
+
+
+def _fingerprint(catalog: Any, chunks: Any, task: GroundTask) -> dict[str, Any]:
+    return {
+        "version": 1,
+        "tiles": [[t.path, t.n_points, list(t.bounds)] for t in catalog.tiles],
+        "chunks": [[c.id, list(c.core), list(c.buffered)] for c in chunks],
+        "task": task.to_dict(),
+    }
+
+
+def _save_chunk(work: Path, res: ChunkGround) -> None:
+    from ..io import atomic_path
+
+    arrays: dict[str, np.ndarray] = {
+        "tiles": np.asarray(res.tiles, dtype=np.int64),
+        "n_core": np.asarray(res.n_core, dtype=np.int64),
+        "counts": np.asarray(res.counts if res.counts is not None else (-1, -1, -1, -1)),
+    }
+    for k, g in enumerate(res.ground):
+        arrays[f"g{k}"] = g
+    with atomic_path(work / f"{res.chunk_id}.npz", overwrite=True) as tmp:
+        with tmp.open("wb") as fh:
+            np.savez(fh, **arrays)
+
+
+def _load_chunk(work: Path, chunk_id: str) -> ChunkGround | None:
+    p = work / f"{chunk_id}.npz"
+    if not p.is_file():
+        return None
+    try:
+        with np.load(p) as z:
+            tiles = tuple(int(v) for v in z["tiles"])
+            n_core = tuple(int(v) for v in z["n_core"])
+            ground = tuple(np.asarray(z[f"g{k}"]) for k in range(len(tiles)))
+            counts_arr = z["counts"]
+    except Exception:
+        return None  # damaged: recompute
+    counts = None if counts_arr[0] < 0 else tuple(int(v) for v in counts_arr)
+    return ChunkGround(chunk_id, tiles, n_core, ground, counts=counts)
+
+
+_AUTO_FIELDS = ("return_number", "number_of_returns", "scan_angle", "scan_angle_rank")
+
+
+def _catalog_sample(
+    catalog: Any,
+    *,
+    last_returns_only: bool = True,
+    exclude_classes: Any = (7, 18),
+    max_points: int = 4_000_000,
+) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Ground candidates (xyz and the fields the auto preset measures) of whole tiles.
+
+    All tiles when they hold at most `max_points` points together, else tiles spread
+    evenly over the catalog (by index in path order) up to that many points: a
+    deterministic sample that does not depend on the chunking or the workers.
+    """
+    from ..errors import DataQualityWarning
+    from ..ground import ground_candidates
+    from ..io.las import LasReader
+
+    n = len(catalog.tiles)
+    total = catalog.n_points
+    if total <= max_points:
+        picks = list(range(n))
+    else:
+        k = max(1, int(n * max_points / total))
+        picks = sorted({int(round(v)) for v in np.linspace(0, n - 1, k)})
+    parts: list[np.ndarray] = []
+    fields: dict[str, list[np.ndarray]] = {}
+    budget = max_points
+    for t in picks:
+        tile = catalog.tiles[t]
+        if tile.n_points > budget and parts:
+            break
+        with LasReader(tile.path) as r:
+            for piece in r.chunks(1_000_000):
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", DataQualityWarning)
+                    cand, *_ = ground_candidates(
+                        piece,
+                        last_returns_only=last_returns_only,
+                        exclude_classes=exclude_classes,
+                    )
+                parts.append(piece.xyz[cand])
+                for k, v in piece.fields.items():
+                    if k in _AUTO_FIELDS:
+                        fields.setdefault(k, []).append(np.asarray(v)[cand])
+        budget -= tile.n_points
+    xyz = np.concatenate(parts) if parts else np.empty((0, 3))
+    joined = {k: np.concatenate(v) for k, v in fields.items() if len(v) == len(parts)}
+    return xyz, joined
+
+
+def catalog_grow_radius(
+    catalog: Any,
+    *,
+    last_returns_only: bool = True,
+    exclude_classes: Any = (7, 18),
+    factor: float = 2.5,
+    max_points: int = 4_000_000,
+    sample: np.ndarray | None = None,
+) -> float:
+    """The segment-PTD surface-growing radius of a catalog, estimated once for all chunks.
+
+    :func:`~lidarqa.ground.default_grow_radius` (``factor`` x the mean point spacing,
+    from the median point count of grid cells) on the ground candidates of whole
+    tiles (:func:`_catalog_sample`, or the candidates given as `sample`).
+    Per-chunk estimates differ by a few per cent from chunk to chunk and from a whole
+    run, and the radius changes segments far from chunk borders; one value for the
+    catalog keeps chunks consistent (on a catalog small enough to be sampled entirely
+    it is exactly the whole-area value).
+    """
+    from ..ground import default_grow_radius
+
+    xyz = sample
+    if xyz is None:
+        xyz, _ = _catalog_sample(
+            catalog,
+            last_returns_only=last_returns_only,
+            exclude_classes=exclude_classes,
+            max_points=max_points,
+        )
+    if len(xyz) < 3:
+        return 0.3
+    r0 = default_grow_radius(xyz - xyz.min(axis=0), factor=factor, floor=0.0)
+    return float(max(0.3, r0))
+
+
+def catalog_auto_parameters(
+    catalog: Any,
+    method: str = "segment-ptd",
+    *,
+    sensor: str = "auto",
+    last_returns_only: bool = True,
+    exclude_classes: Any = (7, 18),
+    sample: tuple[np.ndarray, dict[str, np.ndarray]] | None = None,
+) -> tuple[dict[str, Any], Any, str]:
+    """``preset="auto"`` for a catalog: measure once, choose once, for every chunk.
+
+    :func:`~lidarqa.ground.measure_cloud` on the catalog sample (:func:`_catalog_sample`)
+    and :func:`~lidarqa.ground.auto_parameters` on its figures. Measuring chunk by
+    chunk would let neighbouring chunks pick different parameter sets (a sparse
+    chunk of trees beside a dense one of roofs) and break the seams; one choice
+    keeps the catalog run equal to one in-memory run of the same cloud.
+
+    Returns the chosen parameters, the measures and the regime.
+    """
+    from ..ground.auto import auto_parameters, measure_cloud
+
+    xyz, fields = sample if sample is not None else _catalog_sample(
+        catalog, last_returns_only=last_returns_only, exclude_classes=exclude_classes
+    )
+    measures = measure_cloud(xyz, fields=fields)
+    chosen, _, regime = auto_parameters(measures, method, sensor=sensor)
+    return chosen, measures, regime
+
+
+def _output_names(catalog: Any, output_dir: Path) -> list[Path]:
+    names = [Path(t.path).name for t in catalog.tiles]
+    if len(set(names)) != len(names):
+        # same file name in two folders: prefix with the parent folder name
+        names = [f"{Path(t.path).parent.name}_{Path(t.path).name}" for t in catalog.tiles]
+        if len(set(names)) != len(names):
+            names = [f"{k:05d}_{Path(t.path).name}" for k, t in enumerate(catalog.tiles)]
+    return [output_dir / n for n in names]
+
+
+def ground_catalog(
+    sources: Any,
+    output_dir: str | os.PathLike,
+    *,
+    method: str = "segment-ptd",
+    preset: str | None = "auto",
+    sensor: str = "auto",
+    last_returns_only: bool = True,
+    exclude_classes: Any = (7, 18),
+    evaluate: bool = False,
+    ignore_classes: Any = None,
+    chunk_size: float | None = None,
+    buffer: float | None = None,
+    origin: tuple[float, float] = (0.0, 0.0),
+    engine: Any = None,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    resume: bool = False,
+    skip_bad: bool = False,
+    overwrite: bool = False,
+    retries: int = 2,
+    progress: bool = False,
+    vpc_name: str | None = None,
+    order_seed: int | None = None,
+    **params: Any,
+) -> CatalogGroundResult:
+    """Classify ground over a catalog; write one output file per input tile and a ``.vpc``.
+
+    Parameters
+    ----------
+    sources : Catalog or anything :func:`open_catalog` accepts
+    output_dir : path
+        Created if missing. Outputs keep the input file names.
+    method, preset, last_returns_only, exclude_classes, evaluate, ignore_classes, **params
+        As :func:`lidarqa.ground.classify_ground`.
+    chunk_size, buffer, origin
+        The chunk grid (:func:`make_chunks`); the default buffer is the larger of
+        :data:`DEFAULT_BUFFER` and the filter's seed cell.
+    engine : Engine, optional
+        Otherwise one is made from `scheduler` and `workers` (``workers=1`` without a
+        scheduler runs serially in this process).
+    resume : bool
+        Re-use the chunks saved by an interrupted run with the same settings.
+    skip_bad : bool
+        Leave bad tiles out (listed in the result) instead of failing.
+    overwrite : bool
+        Replace existing output files.
+    order_seed : int, optional
+        Shuffle the chunk submission order (tests of determinism).
+
+    Returns
+    -------
+    CatalogGroundResult
+    """
+    from .._validate import check_choice
+    from ..ground import METHODS, PRESETS, filter_errors_from_counts, relabel_classification
+    from ..ground.auto import SENSORS
+    from ..io.las import rewrite_las_classification
+    from .catalog import Catalog, open_catalog
+    from .chunks import DEFAULT_BUFFER, make_chunks
+    from .engine import Engine, run_chunks
+
+    if method not in METHODS:
+        raise OptionError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    check_choice(sensor, SENSORS, "sensor")
+    if preset is not None and preset != "auto" and preset not in PRESETS:
+        raise OptionError(
+            f"preset must be one of auto, {', '.join(PRESETS)}, got {preset!r}"
+        )
+    catalog = sources if isinstance(sources, Catalog) else open_catalog(sources, skip_bad=skip_bad)
+    full_params = dict(params)
+    sample = None
+    auto = None
+    if preset == "auto":
+        # measured once on a sample of whole tiles, then fixed for every chunk
+        sample = _catalog_sample(
+            catalog,
+            last_returns_only=bool(last_returns_only),
+            exclude_classes=tuple(exclude_classes or ()),
+        )
+        chosen, measures, regime = catalog_auto_parameters(
+            catalog, method, sensor=sensor, sample=sample
+        )
+        auto = {"regime": regime, "measured": measures.to_dict(), "chosen": dict(chosen)}
+        full_params = {**chosen, **full_params}
+        preset = None
+    # validate the parameters once, here, before any work
+    from ..ground import PTD, SegmentPTD
+
+    cls_type = SegmentPTD if method == "segment-ptd" else PTD
+    try:
+        filt = cls_type(**{**(PRESETS[preset][method] if preset else {}), **full_params})
+    except TypeError as exc:
+        raise OptionError(f"invalid parameter for method {method!r}: {exc}") from None
+    if buffer is None:
+        buffer = max(DEFAULT_BUFFER, float(filt.cell_size))
+    if method == "segment-ptd" and filt.grow_radius is None:
+        # one surface-growing radius for the whole catalog, as one in-memory run would
+        # estimate it, instead of one per chunk (see catalog_grow_radius)
+        full_params["grow_radius"] = catalog_grow_radius(
+            catalog,
+            last_returns_only=bool(last_returns_only),
+            exclude_classes=tuple(exclude_classes or ()),
+            factor=float(filt.grow_radius_factor),
+            sample=None if sample is None else sample[0],
+        )
+    # Seed cells are laid from the south-west corner of the filter's input: snap every
+    # buffered box to the seed grid of the whole catalog (see make_chunks).
+    bx, by = catalog.bounds[:2]
+    chunks = make_chunks(
+        catalog,
+        chunk_size=chunk_size,
+        buffer=buffer,
+        origin=origin,
+        snap=(bx, by, float(filt.cell_size)),
+    )
+    if not chunks:
+        raise TilingError("the catalog holds no point")
+    task = GroundTask(
+        method=method,
+        last_returns_only=bool(last_returns_only),
+        exclude_classes=tuple(int(c) for c in (exclude_classes or ())),
+        preset=preset,
+        params=tuple(sorted(full_params.items())),
+        evaluate=bool(evaluate),
+        ignore_classes=tuple(int(c) for c in (ignore_classes or ())),
+    )
+    out_dir = Path(output_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise OptionError(f"output {out_dir} exists and is not a folder")
+    outputs = _output_names(catalog, out_dir)
+    inputs = {str(Path(t.path).resolve()) for t in catalog.tiles}
+    for o in outputs:
+        if str(o.resolve()) in inputs:
+            raise OptionError(f"output {o} is also an input; lidarqa never modifies its inputs")
+    vpc_path = out_dir / (vpc_name or f"{out_dir.resolve().name or 'ground'}.vpc")
+    existing = [o for o in [*outputs, vpc_path] if o.exists()]
+    if existing and not (overwrite or resume):
+        raise OutputExistsError(
+            f"output {existing[0]} exists"
+            + (f" (and {len(existing) - 1} more)" if len(existing) > 1 else "")
+            + "; pass --overwrite (overwrite=True) to replace, or --resume to finish a run"
+        )
+    out_dir.mkdir(parents=True, exist_ok=True)
+    work = out_dir / WORK_DIR
+    fp = _fingerprint(catalog, chunks, task)
+    fp_text = json.dumps(fp, sort_keys=True)
+    done: dict[str, ChunkGround] = {}
+    if work.exists():
+        same = False
+        try:
+            same = (work / "run.json").read_text(encoding="utf-8") == fp_text
+        except OSError:
+            same = False
+        if resume and same:
+            for c in chunks:
+                r = _load_chunk(work, c.id)
+                if r is not None:
+                    done[c.id] = r
+        else:
+            if resume and not same:
+                warnings.warn(
+                    "the work folder is from a run with other settings; starting over",
+                    stacklevel=2,
+                )
+            shutil.rmtree(work)
+    work.mkdir(exist_ok=True)
+    (work / "run.json").write_text(fp_text, encoding="utf-8")
+    todo = [c for c in chunks if c.id not in done]
+    messages: set[str] = set()
+
+    def save(oc: Any) -> None:
+        if oc.ok:
+            _save_chunk(work, oc.result)
+            messages.update(oc.result.warnings)
+
+    own = engine is None
+    if own:
+        if scheduler is None and workers == 1:
+            engine = Engine("serial")
+        else:
+            engine = Engine(scheduler, workers=workers)
+    try:
+        outcomes = run_chunks(
+            catalog,
+            todo,
+            task,
+            engine=engine,
+            progress=progress,
+            retries=retries,
+            skip_failed=True,
+            on_outcome=save,
+            keep_results=False,
+            description="Ground",
+            order_seed=order_seed,
+        )
+    finally:
+        if own:
+            engine.close()
+    failed = tuple((o.chunk.id, o.error or "failed") for o in outcomes if not o.ok)
+    if failed:
+        from .engine import ChunkFailedError
+
+        raise ChunkFailedError(
+            f"{len(failed)} of {len(chunks)} chunk(s) failed (run again with --resume to retry "
+            "only those): " + "; ".join(f"{c}: {e}" for c, e in failed[:5]),
+            list(outcomes),
+        )
+    # --- final pass: assemble the output tiles in catalog order ---------------------------
+    per_tile: dict[int, list[str]] = {}
+    for c in chunks:
+        for t in c.tiles:
+            per_tile.setdefault(t, []).append(c.id)
+    cache: dict[str, ChunkGround] = {}
+
+    def load(cid: str) -> ChunkGround:
+        r = cache.get(cid)
+        if r is None:
+            r = _load_chunk(work, cid)
+            if r is None:
+                raise TilingError(f"chunk {cid}: its saved labels are missing or damaged")
+            if len(cache) > 64:
+                cache.pop(next(iter(cache)))
+            cache[cid] = r
+        return r
+
+    n_ground = 0
+    counts = np.zeros(4, dtype=np.int64)
+    have_counts = False
+    for c in chunks:
+        r = load(c.id)
+        if r.counts is not None:
+            counts += np.asarray(r.counts, dtype=np.int64)
+            have_counts = True
+    for k, tile in enumerate(catalog.tiles):
+        mask = np.zeros(tile.n_points, dtype=bool)
+        covered = 0
+        for cid in per_tile.get(k, []):
+            r = load(cid)
+            if k in r.tiles:
+                pos = r.tiles.index(k)
+                covered += r.n_core[pos]
+                mask[np.asarray(r.ground[pos], dtype=np.int64)] = True
+        if covered != tile.n_points:
+            raise TilingError(
+                f"{tile.path}: the chunks hold {covered:,} of its {tile.n_points:,} points "
+                "(points outside the header bounds?)"
+            )
+        n_ground += int(mask.sum())
+
+        def new_classes(start: int, cls: np.ndarray, mask: np.ndarray = mask) -> np.ndarray:
+            return relabel_classification(cls, mask[start : start + len(cls)])
+
+        rewrite_las_classification(tile.path, outputs[k], new_classes, overwrite=True)
+    out_catalog = Catalog(
+        tiles=tuple(
+            type(t)(
+                path=str(outputs[k].resolve()),
+                n_points=t.n_points,
+                bounds=t.bounds,
+                crs_wkt=t.crs_wkt,
+                point_format=t.point_format,
+                version=t.version,
+                is_copc=False,
+                file_source_id=t.file_source_id,
+            )
+            for k, t in enumerate(catalog.tiles)
+        ),
+        crs=catalog.crs,
+    )
+    out_catalog.write_vpc(vpc_path, overwrite=True)
+    shutil.rmtree(work, ignore_errors=True)
+    evaluation = (
+        filter_errors_from_counts(*counts.tolist()) if have_counts and counts.sum() else None
+    )
+    return CatalogGroundResult(
+        outputs=tuple(str(o) for o in outputs),
+        vpc=str(vpc_path),
+        n_points=catalog.n_points,
+        n_ground=n_ground,
+        n_chunks=len(chunks),
+        n_chunks_run=len(todo),
+        n_chunks_resumed=len(done),
+        chunk_size=chunks[0].size,
+        buffer=float(buffer),
+        bad=catalog.bad,
+        evaluation=evaluation,
+        parameters={
+            **task.to_dict(),
+            "filter": filt.to_dict(),
+            **({"auto": auto} if auto is not None else {}),
+        },
+        chunks=tuple(
+            {"id": c.id, "core": list(c.core), "status": "resumed" if c.id in done else "done"}
+            for c in chunks
+        ),
+        warnings=tuple(sorted(messages)),
+    )
+
+
+def _digest(path: str | os.PathLike) -> str:  # used by tests and the benchmark
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()

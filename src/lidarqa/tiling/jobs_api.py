@@ -1,0 +1,346 @@
+"""The area jobs on a catalog, as Python functions (what the CLI commands call).
+
+Each function takes a catalog (or anything :func:`lidarqa.tiling.open_catalog`
+accepts: paths, a folder, a glob, a ``.vpc``), cuts it into chunks with
+buffers, runs a pure chunk task on the engine (serial by default, a Dask
+LocalCluster or any Dask cluster with ``engine=Engine(...)``) and merges the
+chunk results into the result of one in-memory run over the whole area:
+
+* :func:`catalog_features` -- planes, edges or corners, each feature once
+  (anchor-in-core rule, :mod:`lidarqa.tiling.jobs_vector`);
+* :func:`catalog_vertical_check` -- ``checkpoints --vertical``;
+* :func:`catalog_heights` -- map point heights and w-tests against reference
+  points (:mod:`lidarqa.tiling.jobs_accuracy`);
+* :func:`catalog_repeatability` -- line repeatability of every flight-strip
+  pair over the whole block (:mod:`lidarqa.tiling.jobs_lines`).
+
+Every function returns a :class:`CatalogRun`: the merged ``value`` plus the
+catalog, the chunks and the per-chunk outcomes (ok, failed, retried), which the
+report shows on its catalog overview map.
+
+Example
+-------
+>>> from lidarqa.tiling import Engine                          # doctest: +SKIP
+>>> from lidarqa.tiling.jobs_api import catalog_features       # doctest: +SKIP
+>>> with Engine(workers=2) as eng:                             # doctest: +SKIP
+...     run = catalog_features("tiles/", kind="edges", classes=(6,), engine=eng)
+>>> run.value.write("edges.gpkg")                              # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..errors import OptionError
+
+__all__ = [
+    "CatalogRun",
+    "catalog_features",
+    "catalog_heights",
+    "catalog_repeatability",
+    "catalog_vertical_check",
+    "open_sources",
+]
+
+
+@dataclass(frozen=True, eq=False)
+class CatalogRun:
+    """A merged catalog job: its ``value`` and how every chunk went.
+
+    Attributes
+    ----------
+    value : object
+        The merged result (Segments/PointSet, VerticalCheckReport, HeightReport,
+        list of repeatability rows).
+    catalog : Catalog
+    chunks : tuple of Chunk
+        The chunks that were run.
+    outcomes : tuple of ChunkOutcome
+        In chunk order.
+    extra : dict
+        Job-specific details (e.g. the strips' edge sets, the fixed parameters).
+    """
+
+    value: Any
+    catalog: Any
+    chunks: tuple[Any, ...]
+    outcomes: tuple[Any, ...]
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def failed(self) -> list[str]:
+        """Ids of the chunks that failed after their retries."""
+        return [o.chunk.id for o in self.outcomes if not o.ok and not getattr(o, "skipped", False)]
+
+    def chunk_status(self) -> list[dict[str, Any]]:
+        """``[{"chunk", "status", "attempts", "error"}]``; status ok, retried, failed or skipped."""
+        return [chunk_status(o) for o in self.outcomes]
+
+    def to_dict(self) -> dict[str, Any]:
+        st = self.chunk_status()
+        counts = {k: sum(1 for s in st if s["status"] == k)
+                  for k in ("ok", "retried", "failed", "skipped")}
+        return {"n_tiles": len(self.catalog.tiles), "n_chunks": len(self.chunks),
+                "chunk_status": counts, "failed_chunks": self.failed}
+
+
+def chunk_status(outcome: Any) -> dict[str, Any]:
+    """One outcome's status: ``ok``, ``retried`` (ok after > 1 attempt), ``failed``, ``skipped``."""
+    attempts = int(getattr(outcome, "attempts", 1) or 1)
+    if getattr(outcome, "skipped", False):
+        status = "skipped"
+    elif outcome.ok:
+        status = "retried" if attempts > 1 else "ok"
+    else:
+        status = "failed"
+    return {"chunk": outcome.chunk.id, "status": status, "attempts": attempts,
+            "error": outcome.error}
+
+
+def open_sources(sources: Any, *, skip_bad: bool = False, crs: Any = None) -> Any:
+    """A :class:`~lidarqa.tiling.Catalog` as is, or one opened from paths/folder/glob/.vpc."""
+    from . import Catalog, open_catalog
+
+    if isinstance(sources, Catalog):
+        return sources
+    return open_catalog(sources, skip_bad=skip_bad, crs=crs)
+
+
+def _run(catalog: Any, chunks: Sequence[Any], task: Any, run_opts: dict[str, Any],
+         description: str) -> tuple[list[Any], list[Any | None]]:
+    from . import run_chunks
+
+    if not chunks:
+        return [], []
+    outcomes = run_chunks(catalog, list(chunks), task, description=description, **run_opts)
+    return outcomes, [o.result if o.ok else None for o in outcomes]
+
+
+def _split(kw: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any], dict[str, Any]]:
+    """(open options, chunk options, run options) from the common keyword arguments."""
+    open_opts = {"skip_bad": kw.pop("skip_bad", False), "crs": kw.pop("crs", None)}
+    chunk_opts = {"chunk_size": kw.pop("chunk_size", None), "buffer": kw.pop("buffer", None),
+                  "origin": kw.pop("origin", (0.0, 0.0))}
+    run_opts = {k: kw.pop(k) for k in ("engine", "progress", "retries", "skip_failed",
+                                       "order_seed") if k in kw}
+    run_opts.setdefault("progress", False)
+    if kw:
+        raise OptionError(f"unknown option(s): {', '.join(sorted(kw))}")
+    return open_opts, chunk_opts, run_opts
+
+
+def _sample_points(catalog: Any, chunks: Sequence[Any], classes: Any, source_id: Any) -> np.ndarray:
+    """Selected points of one chunk near the middle of the block (to fix data-driven defaults)."""
+    from . import read_chunk
+
+    order = sorted(range(len(chunks)), key=lambda i: -len(chunks[i].tiles))
+    for i in order[:3]:
+        cd = read_chunk(catalog, chunks[i])
+        cloud = cd.cloud
+        if classes or source_id:
+            cloud = cloud.select(classes=classes, source_id=source_id)
+        if len(cloud) > 100:
+            return cloud.xyz
+    return np.empty((0, 3))
+
+
+# ------------------------------------------------------------------ vector features
+
+
+def catalog_features(
+    sources: Any,
+    *,
+    kind: str,
+    classes: Sequence[int] | None = None,
+    source_id: Sequence[int] | None = None,
+    segment_options: dict[str, Any] | None = None,
+    options: dict[str, Any] | None = None,
+    tolerance: float = 0.05,
+    **common: Any,
+) -> CatalogRun:
+    """Planes, edges or corners of a whole catalog, each feature once.
+
+    Parameters
+    ----------
+    sources : Catalog, path, folder, glob, .vpc or a list of those
+    kind : {"planes", "edges", "corners"}
+    classes, source_id : sequence of int, optional
+        Point selection (e.g. ``(6,)`` for buildings).
+    segment_options, options : dict, optional
+        Plane segmentation and edge/corner options. Data-driven defaults
+        (growing radius, support distance) are measured once on one chunk and
+        used for every chunk.
+    tolerance : float, default 0.05
+        Near-duplicate distance (m) of the merge.
+    **common
+        ``chunk_size``, ``buffer``, ``origin``, ``engine``, ``progress``,
+        ``retries``, ``skip_failed``, ``order_seed`` (shuffled submission, for
+        tests), ``skip_bad``, ``crs``.
+    """
+    from . import make_chunks
+    from .jobs_vector import VectorTask, fixed_auto_options, merge_vector_parts
+
+    open_opts, chunk_opts, run_opts = _split(dict(common))
+    catalog = open_sources(sources, **open_opts)
+    chunks = make_chunks(catalog, **chunk_opts)
+    cls = tuple(int(c) for c in classes) if classes else None
+    sid = tuple(int(s) for s in source_id) if source_id else None
+    seg_opts, opts = fixed_auto_options(_sample_points(catalog, chunks, cls, sid), kind=kind,
+                                        segment_options=segment_options, options=options)
+    task = VectorTask(kind=kind, classes=cls, source_id=sid, segment_options=seg_opts,
+                      options=opts, bounds=tuple(float(v) for v in catalog.bounds[:4]))
+    outcomes, parts = _run(catalog, chunks, task, run_opts, f"{kind.capitalize()}")
+    value = merge_vector_parts(parts, tolerance=tolerance, crs=catalog.crs)
+    return CatalogRun(value, catalog, tuple(chunks), tuple(outcomes),
+                      {"segment_options": seg_opts, "options": opts})
+
+
+# ------------------------------------------------------------------ check points, heights
+
+
+def catalog_vertical_check(
+    sources: Any,
+    check: Any,
+    *,
+    classes: Sequence[int] | None = (2,),
+    max_edge: float | None = None,
+    search_radius: float | None = None,
+    checkpoint_rmse_v: float = 0.0,
+    **common: Any,
+) -> CatalogRun:
+    """``checkpoints --vertical`` over a catalog: only chunks holding check points are read.
+
+    The buffer must be at least ``2 x max_edge`` (the ground TIN's reach); the
+    default buffer (tens of metres) is far above that for dense ground.
+    """
+    from ..accuracy.checkpoints import _as_pointset
+    from . import make_chunks
+    from .jobs_accuracy import (
+        CheckSpacingTask,
+        VerticalCheckTask,
+        chunks_with_points,
+        max_edge_from_spacing,
+        merge_vertical,
+    )
+
+    open_opts, chunk_opts, run_opts = _split(dict(common))
+    catalog = open_sources(sources, **open_opts)
+    cp = _as_pointset(check, "check")
+    chunks = chunks_with_points(make_chunks(catalog, **chunk_opts), cp.xyz)
+    cls = tuple(int(c) for c in classes) if classes is not None else None
+    if max_edge is None:
+        _, spacing = _run(catalog, chunks, CheckSpacingTask(cp.xyz, classes=cls), run_opts,
+                          "Ground spacing")
+        max_edge = max_edge_from_spacing(spacing)
+    task = VerticalCheckTask(cp, max_edge=float(max_edge), search_radius=search_radius,
+                             classes=cls)
+    outcomes, parts = _run(catalog, chunks, task, run_opts, "Check points")
+    value = merge_vertical(parts, cp, max_edge=float(max_edge), search_radius=search_radius,
+                           checkpoint_rmse_v=checkpoint_rmse_v)
+    return CatalogRun(value, catalog, tuple(chunks), tuple(outcomes), {"max_edge": max_edge})
+
+
+def catalog_heights(
+    sources: Any,
+    map_xy: Any,
+    reference_xyz: Any,
+    *,
+    classes: Sequence[int] | None = None,
+    options: dict[str, Any] | None = None,
+    **common: Any,
+) -> CatalogRun:
+    """Height quality (map point heights, TIN, w-tests) over a catalog.
+
+    Map points are fitted from the chunk that owns them; a chunk whose buffer
+    is too narrow for the fits or the TIN around its reference points fails
+    with a message naming it (see :mod:`lidarqa.tiling.jobs_accuracy`). The
+    default buffer is :func:`heights_buffer`. The w-tests and data snooping run
+    once over all reference points.
+    """
+    from . import make_chunks
+    from .jobs_accuracy import HeightsTask, merge_heights
+
+    open_opts, chunk_opts, run_opts = _split(dict(common))
+    catalog = open_sources(sources, **open_opts)
+    mxy = np.asarray(map_xy, dtype=np.float64).reshape(len(map_xy), -1)[:, :2]
+    ref = np.asarray(reference_xyz, dtype=np.float64).reshape(-1, 3)
+    from .jobs_vector import owned
+
+    if chunk_opts["buffer"] is None:
+        chunk_opts["buffer"] = heights_buffer(mxy, options)
+    chunks = tuple(c for c in make_chunks(catalog, **chunk_opts)
+                   if owned(mxy, c).any() or owned(ref, c).any())
+    cls = tuple(int(c) for c in classes) if classes else None
+    task = HeightsTask(mxy, ref, options=dict(options or {}), classes=cls,
+                       bounds=tuple(float(v) for v in catalog.bounds[:4]))
+    outcomes, parts = _run(catalog, chunks, task, run_opts, "Heights")
+    value = merge_heights(parts, mxy, ref, options=options)
+    return CatalogRun(value, catalog, tuple(chunks), tuple(outcomes))
+
+
+def heights_buffer(map_xy: Any, options: dict[str, Any] | None = None) -> float:
+    """Default buffer of a heights job (m): room for the map point TIN around a chunk.
+
+    ``max(60, 3 x the largest nearest-neighbour distance between map points + 10)``:
+    a reference point's triangle and the map points that decide it lie within a
+    few map spacings, and their fits reach a few metres in dense data.
+    """
+    from scipy.spatial import cKDTree
+
+    from .chunks import DEFAULT_BUFFER
+
+    xy = np.asarray(map_xy, dtype=np.float64)[:, :2]
+    if len(xy) < 2:
+        return float(DEFAULT_BUFFER)
+    d, _ = cKDTree(xy).query(xy, k=2)
+    return float(max(DEFAULT_BUFFER, 3.0 * float(np.max(d[:, 1])) + 10.0))
+
+
+# ------------------------------------------------------------------ strips
+
+
+def catalog_repeatability(
+    sources: Any,
+    *,
+    classes: Sequence[int] | None = None,
+    source_id: Sequence[int] | None = None,
+    segment_options: dict[str, Any] | None = None,
+    edge_options: dict[str, Any] | None = None,
+    match_options: dict[str, Any] | None = None,
+    tolerance: float = 0.05,
+    **common: Any,
+) -> CatalogRun:
+    """Line repeatability of every pair of flight strips (point_source_id) over the block.
+
+    ``value`` is the list of pair rows (as ``lidarqa repeatability``);
+    ``extra["strips"]`` the whole-block edges of each strip and
+    ``extra["strip_chunks"]`` the chunks where each strip gave edges.
+    """
+    from . import make_chunks
+    from .jobs_lines import StripEdgesTask, merge_strip_edges, strip_pairs
+    from .jobs_vector import fixed_auto_options
+
+    open_opts, chunk_opts, run_opts = _split(dict(common))
+    catalog = open_sources(sources, **open_opts)
+    chunks = make_chunks(catalog, **chunk_opts)
+    cls = tuple(int(c) for c in classes) if classes else None
+    sid = tuple(int(s) for s in source_id) if source_id else None
+    seg_opts, e_opts = fixed_auto_options(_sample_points(catalog, chunks, cls, sid),
+                                          segment_options=segment_options, options=edge_options)
+    task = StripEdgesTask(classes=cls, source_ids=sid, segment_options=seg_opts,
+                          edge_options=e_opts)
+    outcomes, parts = _run(catalog, chunks, task, run_opts, "Strip edges")
+    strips = merge_strip_edges(parts, tolerance=tolerance)
+    rows = strip_pairs(strips, **(match_options or {}))
+    where: dict[int, list[str]] = {}
+    for p in parts:
+        if p is not None:
+            for s in p[1]:
+                where.setdefault(int(s), []).append(p[0])
+    return CatalogRun(rows, catalog, tuple(chunks), tuple(outcomes),
+                      {"strips": strips, "strip_chunks": where,
+                       "segment_options": seg_opts, "edge_options": e_opts})

@@ -1,0 +1,150 @@
+"""Reading the points of one chunk (its core and buffer) from the tiles it touches.
+
+Tiles are streamed in pieces of :data:`READ_STEP` points (laspy chunk iterators) and
+only the points inside the chunk's buffered box are kept, so memory holds one chunk
+plus one piece at a time. Points come tile by tile (catalog order), in record order
+within a tile, which makes every job's input, hence its result, deterministic.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+__all__ = ["ChunkData", "read_chunk", "READ_STEP"]
+
+#: Points read from a file at a time while streaming.
+READ_STEP = 1_000_000
+_TOL = 1e-6  # m
+
+
+@dataclass(eq=False)
+class ChunkData:
+    """The points of one chunk with its buffer.
+
+    Attributes
+    ----------
+    cloud : lidarqa.io.PointCloud
+        All points of the buffered box, with the dimensions common to its tiles.
+    core : ndarray of bool
+        True for points of the chunk's core (each catalog point is core in exactly
+        one chunk).
+    tile_index : ndarray of int32
+        Index into ``catalog.tiles`` of each point's file.
+    point_index : ndarray of int64
+        Record number of each point in its file.
+    chunk : Chunk
+    """
+
+    cloud: Any
+    core: np.ndarray
+    tile_index: np.ndarray
+    point_index: np.ndarray
+    chunk: Any
+
+    def __len__(self) -> int:
+        return len(self.core)
+
+    @property
+    def n_core(self) -> int:
+        return int(self.core.sum())
+
+
+def _in_box(xyz: np.ndarray, box: tuple[float, float, float, float]) -> np.ndarray:
+    # widened by _TOL: a core cell's box (origin + index * size) may round a hair inside
+    # the points that the grid-index rule puts in it
+    return (
+        (xyz[:, 0] >= box[0] - _TOL)
+        & (xyz[:, 0] <= box[2] + _TOL)
+        & (xyz[:, 1] >= box[1] - _TOL)
+        & (xyz[:, 1] <= box[3] + _TOL)
+    )
+
+
+def _read_tile_box(path: str, box: tuple[float, float, float, float], whole: bool) -> tuple:
+    """(xyz, fields, point_index) of the points of `path` inside `box`."""
+    from ..io.las import LasReader
+
+    parts_xyz, parts_idx = [], []
+    parts_fields: dict[str, list[np.ndarray]] = {}
+    offset = 0
+    with LasReader(path) as r:
+        for piece in r.chunks(READ_STEP):
+            n = len(piece)
+            keep = np.ones(n, dtype=bool) if whole else _in_box(piece.xyz, box)
+            if keep.all():
+                parts_xyz.append(piece.xyz)
+                parts_idx.append(np.arange(offset, offset + n, dtype=np.int64))
+                for k, v in piece.fields.items():
+                    parts_fields.setdefault(k, []).append(v)
+            elif keep.any():
+                sel = np.nonzero(keep)[0]
+                parts_xyz.append(piece.xyz[sel])
+                parts_idx.append(sel.astype(np.int64) + offset)
+                for k, v in piece.fields.items():
+                    parts_fields.setdefault(k, []).append(v[sel])
+            offset += n
+    if parts_xyz:
+        xyz = np.concatenate(parts_xyz)
+        idx = np.concatenate(parts_idx)
+        fields = {k: np.concatenate(v) for k, v in parts_fields.items()}
+    else:
+        xyz = np.empty((0, 3))
+        idx = np.empty(0, dtype=np.int64)
+        fields = None
+    return xyz, fields, idx
+
+
+def read_chunk(catalog: Any, chunk: Any) -> ChunkData:
+    """Read the points of `chunk` (core + buffer) from every tile it touches.
+
+    Parameters
+    ----------
+    catalog : Catalog
+    chunk : Chunk
+
+    Returns
+    -------
+    ChunkData
+    """
+    from ..io import PointCloud
+
+    box = chunk.buffered
+    xyzs, idxs, tids, fieldsets = [], [], [], []
+    for t in chunk.tiles:
+        tile = catalog.tiles[t]
+        xmin, ymin, xmax, ymax = tile.bounds2d
+        whole = xmin >= box[0] and xmax <= box[2] and ymin >= box[1] and ymax <= box[3]
+        xyz, fields, idx = _read_tile_box(tile.path, box, whole)
+        if len(xyz) == 0:
+            continue
+        xyzs.append(xyz)
+        idxs.append(idx)
+        tids.append(np.full(len(xyz), t, dtype=np.int32))
+        fieldsets.append(fields)
+    if xyzs:
+        xyz = np.concatenate(xyzs) if len(xyzs) > 1 else xyzs[0]
+        common = set(fieldsets[0])
+        for f in fieldsets[1:]:
+            common &= set(f)
+        names = [k for k in fieldsets[0] if k in common]
+        fields = {
+            k: (
+                np.concatenate([f[k] for f in fieldsets]) if len(fieldsets) > 1 else fieldsets[0][k]
+            )
+            for k in names
+        }
+        point_index = np.concatenate(idxs)
+        tile_index = np.concatenate(tids)
+    else:
+        xyz = np.empty((0, 3))
+        fields = {}
+        point_index = np.empty(0, dtype=np.int64)
+        tile_index = np.empty(0, dtype=np.int32)
+    cloud = PointCloud(xyz=xyz, fields=fields, crs=catalog.crs)
+    core = chunk.core_mask(xyz)
+    return ChunkData(
+        cloud=cloud, core=core, tile_index=tile_index, point_index=point_index, chunk=chunk
+    )
