@@ -138,6 +138,15 @@ KEY_UNITS: dict[str, str] = {
     ),
     # per volume/area densities and curvature
     "max_segment_density": "1/m²",
+    # the cloud figures of the automatic ground-filter preset (parameters.measured)
+    "density": "1/m²",
+    "occupied_area": "m²",
+    "largest_object_area": "m²",
+    "largest_object_diameter": "m",
+    "scan_angle_max": "degree",
+    "slope_median": "degree",
+    "slope_p90": "degree",
+    "multi_return_share": "fraction",
     "curvature": "1/m",
     "size": "byte",
     # a verdict's value and target have the unit of the metric named beside them

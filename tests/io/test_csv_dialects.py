@@ -8,7 +8,7 @@ from click.testing import CliRunner
 
 import lidarqa
 from lidarqa.cli.main import cli
-from lidarqa.errors import ReadError
+from lidarqa.errors import DataQualityWarning, ReadError
 from lidarqa.io.text import dialect_hint
 from lidarqa.io.vector import read_points
 
@@ -40,11 +40,11 @@ def test_not_utf8_and_utf16_hints(tmp_path):
     u16 = tmp_path / "u16.csv"
     u16.write_bytes("x,y,z\n1,2,3\n".encode("utf-16"))
     assert "UTF-16" in dialect_hint(u16)
-    for path in (latin, u16):  # point lists too: one line with the hint, no traceback
-        with pytest.raises(ReadError, match="UTF"):
-            read_points(path)
-    r = CliRunner().invoke(cli, ["checkpoints", str(latin), str(latin)])
-    assert r.exit_code == 1 and "save it as 'CSV UTF-8'" in r.output, r.output
+    # point lists: Latin-1 is read with a warning, never an internal error
+    named = tmp_path / "named.csv"
+    named.write_bytes("id,x,y,z\n\xe9t\xe91,1,2,3\n".encode("latin-1"))
+    with pytest.warns(DataQualityWarning, match="Latin-1"):
+        assert read_points(named).ids.tolist() == ["\xe9t\xe91"]
 
 
 def test_plain_csv_gets_no_hint(tmp_path):
