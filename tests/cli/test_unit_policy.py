@@ -30,7 +30,8 @@ NOT_YET_WALKED = {"swaths", "roads"}
 SELECTING = {"planes", "edges", "corners", "heights", "checkpoints", "repeatability", "lines"}
 COMMON = {"--json", "--overwrite", "--quiet", "--verbose"}
 UNIT_WORDS = re.compile(
-    r"\((m|degrees|1/m|dimensionless|0\.\.1|in --angle-unit)[),;]|, (m|degrees|m²)\b"
+    r"\((m|m²|degrees|1/m|dimensionless|0\.\.1|in --angle-unit)[),;]"
+    r"|, (m|degrees|m²)\b|\b(metres|degrees)\b"
 )
 
 
