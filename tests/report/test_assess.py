@@ -202,6 +202,7 @@ def test_cli_assess_and_refusal(synthetic_config, tmp_path):
     r2 = CliRunner().invoke(cli, ["assess", str(synthetic_config), "--out", str(out), "-q"])
     assert r2.exit_code == 1
     assert "exists" in r2.stderr and "--overwrite" in r2.stderr
+    assert "overwrite=True" not in r2.stderr  # CLI terms, not Python
     assert len(r2.stderr.strip().splitlines()) == 1
 
 
@@ -278,3 +279,8 @@ transform = "helmert"
     # A 3D Helmert absorbs a pure shift: residuals vanish.
     assert run.results["helmert"]["rmse_3d"] < 1e-6
     assert run.document["parameters"]["helmert"]["params"]["transform"] == "helmert"
+    # about the control-point centroid, the translation is the shift itself (issue #16)
+    t = run.results["helmert"]["transform"]
+    assert [t["params"][k] for k in ("tx", "ty", "tz")] == pytest.approx(-MEASURED_SHIFT, abs=1e-6)
+    html = (tmp_path / "out" / "report.html").read_text(encoding="utf-8")
+    assert "tx (m)" in html and "control-point centroid" in html

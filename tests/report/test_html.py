@@ -96,7 +96,27 @@ def test_self_contained_and_scrollable_tables():
         (np.float64(2.0), "2"),
         ([1, 2], "1, 2"),
         (3e-7, "3.000e-07"),
+        (770500.05000000005, "770500.050"),  # coordinates to the millimetre (issue #16)
+        (1234.5678, "1234.568"),
     ],
 )
 def test_fmt(value, text):
     assert fmt(value) == text
+
+
+def test_id_columns_have_no_thousands_separators():
+    t = Table(title="Residuals", columns=["id", "dz (m)", "points"], rows=[[12345, 0.01, 12345]])
+    sec = Section(id="s", title="s", kind="checkpoints", tables=[t])
+    html_text = render_html(
+        Report(title="t", subtitle="s", summary=[], sections=[sec], parameters={}, provenance=[],
+               inputs=[], versions={})
+    )  # fmt: skip
+    assert "<td>12345</td>" in html_text.replace(' class="num"', "")
+    assert "12,345" in html_text  # a count keeps its separators
+    t2 = Table(title="r", columns=["cloud z (m)", "dz (m)"], rows=[[20.9, 0.031694]], decimals=3)
+    sec2 = Section(id="s2", title="s2", kind="checkpoints", tables=[t2])
+    html2 = render_html(
+        Report(title="t", subtitle="s", summary=[], sections=[sec2], parameters={}, provenance=[],
+               inputs=[], versions={})
+    )  # fmt: skip
+    assert "20.900" in html2 and "0.032" in html2 and "0.03169" not in html2

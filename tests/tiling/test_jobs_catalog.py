@@ -201,12 +201,13 @@ def test_cli_edges_on_a_folder_writes_each_edge_once(tiles, edges_run, tmp_path)
 def test_cli_vertical_check_and_repeatability_on_a_catalog(tiles, tmp_path):
     import json
 
-    from lidarqa.io.vector import write_points
+    from lidarqa.io.vector import read_points, write_points
 
     scene, folder, whole = tiles
     check = sample_checkpoints(scene, 25, seed=9)
     cpath = tmp_path / "check.csv"
     write_points(check, cpath)
+    check = read_points(cpath)  # as the command reads it: CSV coordinates to 0.1 mm
     js = tmp_path / "cp.json"
     r = _cli(["-q", "checkpoints", *sorted(folder.glob("*.las")), cpath, "--vertical",
               "--scheduler", "serial", "--chunk-size", "30", "--buffer", "15", "--json", js])
@@ -228,7 +229,7 @@ def test_cli_heights_on_a_catalog_equals_the_in_memory_run(tiles, tmp_path):
     import json
 
     from lidarqa.accuracy.heights import assess_heights
-    from lidarqa.io.vector import PointSet, write_points
+    from lidarqa.io.vector import PointSet, read_points, write_points
 
     scene, folder, whole = tiles
     rng = np.random.default_rng(4)
@@ -237,6 +238,8 @@ def test_cli_heights_on_a_catalog_equals_the_in_memory_run(tiles, tmp_path):
     ref = sample_checkpoints(scene, 30, seed=11)
     write_points(PointSet(np.arange(60), np.c_[mxy, np.zeros(60)]), tmp_path / "map.csv")
     write_points(ref, tmp_path / "ref.csv")
+    # as the command reads them: CSV coordinates to 0.1 mm
+    mxy, ref = read_points(tmp_path / "map.csv").xyz[:, :2], read_points(tmp_path / "ref.csv")
     js = tmp_path / "h.json"
     r = _cli(["-q", "heights", folder, tmp_path / "map.csv", tmp_path / "ref.csv", "--classes",
               "2", "--scheduler", "serial", "--chunk-size", "30", "--buffer", "30", "--json", js])
@@ -282,6 +285,8 @@ def test_assess_with_a_catalog_input_shows_the_overview_and_chunk_status(tiles, 
     from lidarqa.report import run_assessment
 
     scene, folder, whole = tiles
+    from lidarqa.io.vector import read_points
+
     check = sample_checkpoints(scene, 20, seed=12)
     write_points(check, tmp_path / "check.csv")
     rng = np.random.default_rng(4)
@@ -290,6 +295,9 @@ def test_assess_with_a_catalog_input_shows_the_overview_and_chunk_status(tiles, 
     write_points(PointSet(np.arange(40), np.c_[mxy, np.zeros(40)]), tmp_path / "map.csv")
     href = sample_checkpoints(scene, 25, seed=13)
     write_points(href, tmp_path / "href.csv")
+    # as the run reads them: CSV coordinates to 0.1 mm
+    check, href = read_points(tmp_path / "check.csv"), read_points(tmp_path / "href.csv")
+    mxy = read_points(tmp_path / "map.csv").xyz[:, :2]
     cfg = tmp_path / "a.toml"
     cfg.write_text(f"""
 title = "catalog"

@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from .._progress import ProgressCallback, report, stage
 from ..errors import InvalidPointsError, LidarQAError, MissingDependencyError, ReadError
 from ..io.vector import Segments, read_segments
 
@@ -64,10 +65,10 @@ def extract_segments(points: np.ndarray, *, crs: Any = None, **options: Any) -> 
     return seg
 
 
-def _read_cloud(path: str | os.PathLike, classes: Any) -> Any:
+def _read_cloud(path: str | os.PathLike, classes: Any, crs: Any = None) -> Any:
     from ..io import read
 
-    cloud = read(path)
+    cloud = read(path, crs=crs)
     if classes is not None:
         cloud = cloud.select(classes=classes)
     return cloud
@@ -79,24 +80,30 @@ def load_segments(
     classes: Any = None,
     source_id: Any = None,
     edge_options: dict | None = None,
+    crs: Any = None,
+    progress: ProgressCallback | None = None,
 ) -> Segments:
     """Segments from a segment file, or the edges of the selected points of a cloud.
 
     `classes` and `source_id` (int or list of ints) select points of a cloud; for a
     segment file, which has no points, they raise :class:`InvalidPointsError`.
+    `crs` (a pyproj CRS) is the CRS of an input that declares none. `progress`
+    receives the fraction done of the edge extraction (plane segmentation).
     """
     if is_segment_file(path):
         if classes is not None or source_id is not None:
             raise InvalidPointsError(
                 f"{path} is a segment file: --classes / --source-id select points of a cloud only"
             )
-        return read_segments(path)
-    cloud = _read_cloud(path, classes)
+        return read_segments(path, crs=crs)
+    cloud = _read_cloud(path, classes, crs)
     if source_id is not None:
         cloud = cloud.select(source_id=source_id)
     if len(cloud) == 0:
-        raise InvalidPointsError(f"{path}: no points with classes={classes} source_id={source_id}")
-    return extract_segments(cloud.xyz, crs=cloud.crs, **(edge_options or {}))
+        raise InvalidPointsError(
+            f"{path}: no points in the selection (classes {classes}, source ids {source_id})"
+        )
+    return extract_segments(cloud.xyz, crs=cloud.crs, progress=progress, **(edge_options or {}))
 
 
 def load_passes(
@@ -106,6 +113,8 @@ def load_passes(
     classes: Any = None,
     source_id: Any = None,
     edge_options: dict | None = None,
+    crs: Any = None,
+    progress: ProgressCallback | None = None,
 ) -> list[tuple[str, str, Any]]:
     """``[(group, name, Segments or LidarQAError)]``: one pass per file, or per strip.
 
@@ -113,32 +122,43 @@ def load_passes(
     With it, every point_source_id (restricted to `source_id` if given) of each
     cloud is a pass and each file is its own group, so strips are compared
     within a file (merge tiles first to pool them). A strip whose edges cannot be
-    extracted is kept as the error, to be reported.
+    extracted is kept as the error, to be reported. `progress` receives the
+    fraction done (files, then strips within a file).
     """
     out: list[tuple[str, str, Any]] = []
-    for path in paths:
+    n = len(paths)
+    for i, path in enumerate(paths):
+        file_progress = stage(progress, i / n, (i + 1) / n)
         stem = Path(path).name
         if not by_source_id:
-            out.append(("", stem, load_segments(path, classes=classes, edge_options=edge_options)))
+            seg_or_edges = load_segments(
+                path, classes=classes, edge_options=edge_options, crs=crs, progress=file_progress
+            )
+            out.append(("", stem, seg_or_edges))
             continue
         if is_segment_file(path):
             raise InvalidPointsError(f"--by-source-id needs point clouds; {path} is a segment file")
-        cloud = _read_cloud(path, classes)
+        cloud = _read_cloud(path, classes, crs)
         sid = cloud.point_source_id
         if sid is None:
             raise InvalidPointsError(f"{path} has no point_source_id field for --by-source-id")
         wanted = np.unique(sid)
         if source_id is not None:
             wanted = wanted[np.isin(wanted, np.atleast_1d(source_id))]
-        for s in wanted.tolist():
+        k = max(len(wanted), 1)
+        for j, s in enumerate(wanted.tolist()):
             sub = cloud.subset(sid == s)
+            strip_progress = stage(file_progress, j / k, (j + 1) / k)
             try:
-                seg: Any = extract_segments(sub.xyz, crs=cloud.crs, **(edge_options or {}))
+                seg: Any = extract_segments(
+                    sub.xyz, crs=cloud.crs, progress=strip_progress, **(edge_options or {})
+                )
             except MissingDependencyError:
                 raise
             except LidarQAError as exc:  # a strip without usable edges is reported, not fatal
                 seg = exc
             out.append((stem, str(s), seg))
+    report(progress, 1.0)
     return out
 
 

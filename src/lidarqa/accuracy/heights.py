@@ -1136,7 +1136,7 @@ def densify_polygons(polygons: Any, *, spacing: float = 10.0) -> tuple[np.ndarra
     return np.ascontiguousarray(xy[first]), poly[first].astype(np.int64)
 
 
-def read_map_points(path: str | os.PathLike, *, spacing: float = 10.0) -> Any:
+def read_map_points(path: str | os.PathLike, *, spacing: float = 10.0, crs: Any = None) -> Any:
     """Read map points from a point list or derive them from polygons.
 
     CSV (``id,x,y[,z]``) and Point GeoPackage/GeoJSON files are read with
@@ -1144,11 +1144,14 @@ def read_map_points(path: str | os.PathLike, *, spacing: float = 10.0) -> Any:
     into boundary points every `spacing` metres by :func:`densify_polygons`
     (attribute ``polygon``: the source feature's id).
 
+    `crs` (a pyproj CRS) is the CRS of a file that declares none.
+
     Returns
     -------
     lidarqa.io.vector.PointSet
         z is NaN (map heights come from the laser points).
     """
+    from ..io.crs import resolve_crs
     from ..io.vector import PointSet, _crs_from_meta, read_points
 
     p = Path(path)
@@ -1179,6 +1182,6 @@ def read_map_points(path: str | os.PathLike, *, spacing: float = 10.0) -> Any:
                 ids=np.arange(len(xy)),
                 xyz=xyz,
                 attributes={"polygon": ids[poly]},
-                crs=_crs_from_meta(meta),
+                crs=resolve_crs(_crs_from_meta(meta), crs, p),
             )
-    return read_points(p, require_z=False)
+    return read_points(p, require_z=False, crs=crs)

@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from .._progress import report
 from .._validate import check_choice, check_positive
 from ..errors import DegenerateGeometryError, InvalidPointsError, OptionError
 from ..io.crs import ensure_same_crs
@@ -563,6 +564,7 @@ def match_segments(
     denominator: str = "matched",
     ground_truth: Any = None,
     cutoff: float | None = None,
+    progress: Any = None,
 ) -> LineMatch:
     """Match a test set of 3D segments to a model set, both ways ([S-PG]; :ref:`alg-lines`).
 
@@ -588,6 +590,8 @@ def match_segments(
     cutoff : float, optional
         Initial pruning cutoff (metres, default 1.0, or the fixed threshold). Only a
         speed knob: results equal the dense computation for any cutoff.
+    progress : callable, optional
+        Called with the fraction of the work done (0..1).
 
     Returns
     -------
@@ -644,6 +648,7 @@ def match_segments(
         return ii, jj, comp, dmt
 
     ii, jj, comp, dmt = evaluate(c0)
+    report(progress, 0.4)
 
     # exact nearest distances, both directions
     # (no pair within the cutoff leaves ii/jj empty: every index is then -1)
@@ -688,6 +693,7 @@ def match_segments(
         )
         near_mt[todo_m], arg_mt[todo_m] = b[todo_m], a[todo_m]
 
+    report(progress, 0.7)
     # thresholds
     if threshold is None:
         auto_tm = auto_threshold(near_tm, sensitivity=sensitivity)
@@ -728,6 +734,7 @@ def match_segments(
             **_confusion(key[match_mt], gkey, p, q, "mt"),
         }
 
+    report(progress, 1.0)
     return LineMatch(
         p=p,
         q=q,

@@ -17,14 +17,32 @@ onto *target* coordinates (e.g. total-station check points):
 ``"helmert-fixed-scale"``
     The same with s = 1 (6-parameter rigid-body transformation).
 
+Parameters surveyors can read
+-----------------------------
+Rotations and scale about the coordinate origin make the translation of a
+national grid (x ≈ 10⁵–10⁶ m) absorb ``(s·R - I)·X̄``: a rotation of a few
+thousandths of a degree moves it by metres and its σ is metres too. So the
+reported translations ``tx, ty, tz`` are taken **about the centroid of the
+source control points** ``X0`` (the Molodensky–Badekas form)::
+
+    X2 = X0 + T + s·R·(X1 - X0)
+
+``T`` is then the shift of the control-point centroid, close to the mean
+coordinate difference, and its σ is about σ0/√n (centimetres for a cm-level
+survey). ``X0`` is reported as ``origin_x, origin_y, origin_z``. Rotation
+angles and scale are the same in both forms. The 2D similarity likewise
+reports ``tx, ty`` about the centroid (``tz = e``) next to the paper's
+``a, b, c, d, e``, whose ``c, d`` are taken at the coordinate origin.
+``TransformFit.translation`` and :meth:`TransformFit.apply` use the
+translation at the coordinate origin.
+
 Estimation is by ordinary least squares in the Gauss-Markov model: the target
 coordinates are the observations, all with the same (unknown) variance σ0², the
 source coordinates are taken as error-free. The Helmert estimate starts from the
 closed-form Horn/Umeyama solution and is refined by Gauss-Newton, whose final
 design matrix gives the parameter covariance ``σ0²·(AᵀA)⁻¹`` (linearised at the
-solution). Every computation is done in centred coordinates (:ref:`alg-conventions`)
-and the parameters and their covariance are transformed back to the original
-origin, so UTM-sized coordinates lose no precision.
+solution). Every computation is done in centred coordinates (:ref:`alg-conventions`),
+so UTM-sized coordinates lose no precision.
 """
 
 from __future__ import annotations
@@ -65,10 +83,12 @@ class TransformFit:
     name : str
         One of :data:`TRANSFORMS`.
     params : dict of str to float
-        Estimated parameters. ``similarity2d``: ``a, b, c, d, e`` (c, d, e in m)
-        plus the derived ``scale`` and ``rotation_deg``. ``helmert``:
-        ``tx, ty, tz`` (m), ``omega_deg, phi_deg, kappa_deg`` (R = R_z(κ)·R_y(φ)·R_x(ω))
-        and ``scale``. ``none``: empty.
+        Estimated parameters. ``similarity2d``: ``a, b, c, d, e`` (c, d, e in m;
+        c, d at the coordinate origin), the derived ``scale`` and
+        ``rotation_deg``, and ``tx, ty, tz`` (m), the shift about the centroid
+        `origin`. ``helmert``: ``tx, ty, tz`` (m, about the centroid `origin`),
+        ``omega_deg, phi_deg, kappa_deg`` (R = R_z(κ)·R_y(φ)·R_x(ω)) and
+        ``scale``. ``none``: empty.
     sigmas : dict of str to float
         Standard deviation of each parameter (same keys and units), from the
         full covariance matrix scaled by the a-posteriori σ0². NaN without
@@ -95,6 +115,9 @@ class TransformFit:
     linear : ndarray of shape (3, 3)
         Linear part: target = linear @ source + translation (for
         ``similarity2d`` z is shifted, not scaled).
+    origin : ndarray of shape (3,)
+        Centroid of the source control points (m): the point about which
+        ``tx, ty, tz`` are given (zeros for ``none``).
     sigma0_h, sigma0_v : float
         ``similarity2d`` only: separate σ0 of the horizontal (dof 2n-4) and
         vertical (dof n-1) adjustments, which are independent; the parameter
@@ -116,6 +139,7 @@ class TransformFit:
     translation: np.ndarray
     scale: float
     linear: np.ndarray
+    origin: np.ndarray = field(default_factory=lambda: np.zeros(3))
     sigma0_h: float = math.nan
     sigma0_v: float = math.nan
     notes: tuple[str, ...] = field(default_factory=tuple)
@@ -144,6 +168,9 @@ class TransformFit:
             "dof": self.dof,
             "n_points": self.n_points,
         }
+        if self.name != "none":
+            out["origin"] = dict(zip(("x", "y", "z"), map(float, self.origin), strict=True))
+            out["translation_at_coordinate_origin"] = [float(v) for v in self.translation]
         if self.name == "similarity2d":
             out["sigma0_h"] = self.sigma0_h
             out["sigma0_v"] = self.sigma0_v
@@ -342,6 +369,11 @@ def fit_similarity2d(source: Any, target: Any) -> TransformFit:
     params = dict(zip(names, (a, b, c, d, e), strict=True)) | {"scale": scale, "rotation_deg": rot}
     sigmas = {k: float(v) for k, v in zip(names, sig, strict=True)}
     sigmas |= {"scale": float(sig_d[0]), "rotation_deg": float(sig_d[1])}
+    # about the centroid X0 of the source points: x2 = x0 + tx + a(x1-x0) - b(y1-y0), ...
+    # tx = x̄2 - x̄1 (the centred model's shift is zero at the LS solution), σ = σ0_h/√n
+    params |= {"tx": float(m2[0] - m1[0]), "ty": float(m2[1] - m1[1]), "tz": e}
+    s_t = math.sqrt(s0_h**2 / n) if dof_h > 0 else math.nan
+    sigmas |= {"tx": s_t, "ty": s_t, "tz": float(sig[4])}
     rotation = np.array(
         [[a / scale, -b / scale, 0.0], [b / scale, a / scale, 0.0], [0.0, 0.0, 1.0]]
     )
@@ -359,6 +391,7 @@ def fit_similarity2d(source: Any, target: Any) -> TransformFit:
         translation=np.array([c, d, e]),
         scale=scale,
         linear=np.array([[a, -b, 0.0], [b, a, 0.0], [0.0, 0.0, 1.0]]),
+        origin=m1.copy(),
         sigma0_h=s0_h,
         sigma0_v=s0_v,
         notes=tuple(notes),
@@ -397,8 +430,10 @@ def fit_helmert(
     Returns
     -------
     TransformFit
-        ``tx, ty, tz`` (m), ``omega_deg, phi_deg, kappa_deg`` with
+        ``tx, ty, tz`` (m, the shift of the source centroid ``origin``:
+        ``X2 = X0 + T + s·R·(X1 - X0)``), ``omega_deg, phi_deg, kappa_deg`` with
         R = R_z(κ)·R_y(φ)·R_x(ω), ``scale``; their sigmas, σ0 and residuals.
+        ``translation`` is the equivalent shift at the coordinate origin.
 
     Raises
     ------
@@ -415,9 +450,9 @@ def fit_helmert(
     centred model ``X2' = s·R·X1' + t'`` with R updated multiplicatively,
     R ← exp([δ]×)·R, so the design matrix rows are ``[I, -s[R·x1']×, R·x1']``.
     The covariance of (t', δ, s) is σ0²(AᵀA)⁻¹ with σ0² = vᵀv/(3n-u); it is
-    propagated to (t, ω, φ, κ, s) with t = X̄2 + t' - s·R·X̄1 and a numerical
-    Jacobian of the Euler angles. Near φ = ±90° (gimbal lock) ω and κ sigmas
-    are unreliable; a note says so.
+    propagated to (T, ω, φ, κ, s) with T = X̄2 + t' - X̄1 (the shift about the
+    centroid) and a numerical Jacobian of the Euler angles. Near φ = ±90°
+    (gimbal lock) ω and κ sigmas are unreliable; a note says so.
     """
     src, tgt = _validate_pair(source, target)
     n = len(src)
@@ -482,12 +517,13 @@ def fit_helmert(
         diff = np.array(euler_angles(_expm_so3(dv) @ r)) - angles
         diff = (diff + 180.0) % 360.0 - 180.0
         j_e[:, k] = diff / h
+    # about the centroid X0 = X̄1 (Molodensky-Badekas): X2 = X0 + T + s·R·(X1 - X0),
+    # T = X̄2 + t' - X̄1 depends on t' only, so its sigma is that of the centred shift
+    shift = m2 + t - m1
     j = np.zeros((7, u))
     j[:3, :3] = np.eye(3)
-    j[:3, 3:6] = s * _skew(rm1)
     j[3:6, 3:6] = j_e
     if not fix_scale:
-        j[:3, 6] = -rm1
         j[6, 6] = 1.0
     cov7 = j @ cov_int @ j.T
     names = ("tx", "ty", "tz", "omega_deg", "phi_deg", "kappa_deg", "scale")
@@ -501,7 +537,7 @@ def fit_helmert(
         notes.append("phi is ±90° (gimbal lock): omega and kappa are not separable")
     if fix_scale:
         notes.append("scale fixed at 1")
-    params = dict(zip(names, (*translation.tolist(), *angles.tolist(), float(s)), strict=True))
+    params = dict(zip(names, (*shift.tolist(), *angles.tolist(), float(s)), strict=True))
     sigmas = {k: float(v) for k, v in zip(names, sig7, strict=True)}
     pnames = names[:6] if fix_scale else names
     cov_out = cov7[:u, :u] if fix_scale else cov7
@@ -519,6 +555,7 @@ def fit_helmert(
         translation=translation,
         scale=float(s),
         linear=s * r,
+        origin=m1.copy(),
         notes=tuple(notes),
     )
 

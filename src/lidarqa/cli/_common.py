@@ -36,9 +36,16 @@ __all__ = [
     "fmt_number",
     "parse_int_list",
     "INT_LIST",
+    "crs_option",
+    "classes_option",
+    "source_id_option",
+    "input_crs",
     "target_options",
     "check_targets",
 ]
+
+#: Suffixes of text outputs that get a ``.prj`` CRS sidecar.
+_SIDECAR_SUFFIXES = {".csv", ".txt", ".xyz"}
 
 
 @dataclass
@@ -116,6 +123,46 @@ def common_options(func: Callable[..., Any]) -> Callable[..., Any]:
     for opt in reversed(opts):
         func = opt(func)
     return func
+
+
+CRS_HELP = (
+    "CRS of inputs that declare none: an EPSG code (2154 or EPSG:2154), WKT, or a .prj "
+    "file. CSV inputs also take it from a .prj file next to them; an input whose own "
+    "CRS differs is an error."
+)
+
+
+def crs_option(func: Callable[..., Any]) -> Callable[..., Any]:
+    """``--crs CRS``: the CRS of inputs that declare none (see :func:`input_crs`)."""
+    return click.option("--crs", "crs", default=None, metavar="CRS", help=CRS_HELP)(func)
+
+
+def classes_option(func: Callable[..., Any]) -> Callable[..., Any]:
+    """``--classes INT[,INT...]``: use only points of these LAS classes."""
+    return click.option(
+        "--classes",
+        type=INT_LIST,
+        default=None,
+        help="Use only points of these LAS classes (e.g. 6 for buildings, 2,6).",
+    )(func)
+
+
+def source_id_option(func: Callable[..., Any]) -> Callable[..., Any]:
+    """``--source-id INT[,INT...]``: use only points of these flight strips."""
+    return click.option(
+        "--source-id",
+        "source_id",
+        type=INT_LIST,
+        default=None,
+        help="Use only points of these flight strips / passes (LAS point_source_id).",
+    )(func)
+
+
+def input_crs(value: str | None) -> Any:
+    """The pyproj CRS of ``--crs`` (None when not given); a bad value is an OptionError."""
+    from ..io.crs import parse_crs
+
+    return parse_crs(value)
 
 
 def target_options(**metrics: tuple[str, str]) -> Callable[[Callable[..., Any]], Any]:
@@ -223,11 +270,23 @@ def prepare_outputs(*outputs: str | Path | None, inputs: tuple = ()) -> None:
 
     Refuses an existing output without ``--overwrite`` and an output that is an input.
     """
+    from ..errors import OutputExistsError
+
     s = settings()
     for out in (*outputs, s.json_path):
         if out is None:
             continue
-        check_output(out, overwrite=s.overwrite)
+        paths = [Path(out)]
+        if Path(out).suffix.lower() in _SIDECAR_SUFFIXES and not Path(out).exists():
+            paths.append(Path(out).with_suffix(".prj"))  # its CRS sidecar
+        for p in paths:
+            try:
+                check_output(p, overwrite=s.overwrite)
+            except OutputExistsError:
+                what = "" if p == Path(out) else f" (the CRS file of {Path(out).name})"
+                raise OutputExistsError(
+                    f"output {p}{what} exists; add --overwrite to replace it"
+                ) from None
         check_distinct(out, *[i for i in inputs if i is not None])
 
 
@@ -271,15 +330,23 @@ def echo(text: str = "") -> None:
     click.echo(text)
 
 
+def _no_progress(fraction: float) -> None:
+    """The progress callback of a step that shows nothing."""
+
+
 class Steps:
     """Progress display for the steps of a long command (rich, on stderr).
 
-    ``with steps("Reading input"):`` shows a spinner while the step runs and a
-    tick with its duration afterwards; nothing is shown with ``-q``. For loops
-    with a known length use :meth:`track`.
+    ``with steps("Reading input") as progress:`` shows the step while it runs
+    and a tick with its duration afterwards; nothing is shown with ``-q``.
+    `progress` is a callback for the kernels' ``progress=`` keyword: once the
+    kernel reports a fraction, the spinner becomes a bar with percentage,
+    elapsed time and ETA. When stderr is not a terminal (piped, redirected,
+    CI logs) there is no live display and no control code: one plain line per
+    finished step, never wrapped. For loops with a known length use :meth:`track`.
     """
 
-    def __init__(self, quiet: bool | None = None) -> None:
+    def __init__(self, quiet: bool | None = None, console: Any = None) -> None:
         if quiet is None:
             try:
                 quiet = settings().quiet
@@ -290,26 +357,80 @@ class Steps:
         if not quiet:
             from rich.console import Console
 
-            self._console = Console(stderr=True)
+            self._console = console or Console(stderr=True, soft_wrap=True, highlight=False)
+
+    @property
+    def live(self) -> bool:
+        """True when progress is drawn live (stderr is an interactive terminal)."""
+        c = self._console
+        return c is not None and c.is_terminal and not c.is_dumb_terminal
+
+    def _done(self, description: str, seconds: float) -> None:
+        from rich.markup import escape
+        from rich.text import Text
+
+        assert self._console is not None
+        if self.live:
+            self._console.print(
+                f"[green]✓[/green] {escape(description)} [dim]({seconds:.1f} s)[/dim]"
+            )
+        else:
+            self._console.print(Text(f"✓ {description} ({seconds:.1f} s)"), soft_wrap=True)
 
     @contextlib.contextmanager
-    def __call__(self, description: str) -> Iterator[None]:
+    def __call__(self, description: str) -> Iterator[Callable[[float], None]]:
         if self._console is None:
-            yield
+            yield _no_progress
             return
         t0 = time.perf_counter()
-        with self._console.status(description + " ..."):
-            yield
-        self._console.print(
-            f"[green]✓[/green] {description} [dim]({time.perf_counter() - t0:.1f} s)[/dim]"
+        if not self.live:
+            yield _no_progress
+            self._done(description, time.perf_counter() - t0)
+            return
+        from rich.progress import (
+            BarColumn,
+            Progress,
+            SpinnerColumn,
+            TaskProgressColumn,
+            TextColumn,
+            TimeElapsedColumn,
+            TimeRemainingColumn,
         )
 
+        bar = Progress(
+            SpinnerColumn(),
+            TextColumn("{task.description}", markup=False),
+            BarColumn(bar_width=24),
+            TaskProgressColumn(),
+            TimeElapsedColumn(),
+            TextColumn("ETA"),
+            TimeRemainingColumn(),
+            console=self._console,
+            transient=True,
+        )
+        with bar:
+            task = bar.add_task(description, total=None)
+
+            def update(fraction: float) -> None:
+                f = min(1.0, max(0.0, float(fraction)))
+                bar.update(task, total=1.0, completed=f, refresh=True)
+
+            yield update
+        self._done(description, time.perf_counter() - t0)
+
     def track(self, iterable: Any, description: str, total: int | None = None) -> Iterator[Any]:
+        """Iterate with a progress bar (count, %, ETA) when live; plain lines otherwise."""
         if self._console is None:
             yield from iterable
+            return
+        t0 = time.perf_counter()
+        if not self.live:
+            yield from iterable
+            self._done(description, time.perf_counter() - t0)
             return
         from rich.progress import track
 
         yield from track(
             iterable, description=description, total=total, console=self._console, transient=True
         )
+        self._done(description, time.perf_counter() - t0)

@@ -12,6 +12,7 @@ from ._common import Steps, common_options, echo, finish, prepare_outputs, setti
 def _run(
     config_path: str | Path, out: str, command: str, *, skip_unavailable: bool = False
 ) -> None:
+    from ..errors import OutputExistsError
     from ..report.config import load_config
     from ..report.run import check_out_dir, run_assessment
 
@@ -21,7 +22,10 @@ def _run(
     with steps("Checking the configuration"):
         cfg = load_config(config_path, skip_unavailable=skip_unavailable)
     prepare_outputs(inputs=tuple(str(p) for p in cfg.input_paths()))
-    check_out_dir(out, overwrite=s.overwrite)
+    try:
+        check_out_dir(out, overwrite=s.overwrite)
+    except OutputExistsError as exc:  # the library's message also names the Python keyword
+        raise OutputExistsError(str(exc).replace(" (overwrite=True)", "")) from None
     run = run_assessment(cfg, out, overwrite=s.overwrite, steps=steps, command=command)
     echo(f"{cfg.title}")
     width = max((len(r.analysis) for r in run.summary), default=10)

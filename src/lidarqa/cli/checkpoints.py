@@ -8,16 +8,20 @@ from typing import Any
 import click
 
 from ..accuracy.transforms import TRANSFORMS
+from ..units import param_unit
 from ._catalog_jobs import catalog_options, wants_catalog
 from ._common import (
     INT_LIST,
     Steps,
     common_options,
+    crs_option,
     echo,
     finish,
     fmt_number,
+    input_crs,
     prepare_outputs,
     settings,
+    source_id_option,
     target_options,
 )
 
@@ -135,6 +139,7 @@ def _scaled(xyz: Any, fh: float, fv: float) -> Any:
     default=None,
     help="With --vertical: classes forming the ground TIN [default: 2].",
 )
+@source_id_option
 @click.option(
     "--max-edge",
     type=float,
@@ -161,8 +166,10 @@ def _scaled(xyz: Any, fh: float, fv: float) -> Any:
     "--output",
     type=click.Path(dir_okay=False),
     default=None,
-    help="Write per-point residuals (.csv, .gpkg or .geojson).",
+    help="Write per-point residuals (.csv, .gpkg or .geojson); they carry the CRS of the "
+    "inputs (a CSV in a .prj file next to it).",
 )
+@crs_option
 @catalog_options
 @target_options(
     rmse_z=("rmse_z", "the vertical RMSE (m)"),
@@ -181,10 +188,12 @@ def checkpoints(
     max_distance: float | None,
     vertical: bool,
     classes: list[int] | None,
+    source_id: list[int] | None,
     max_edge: float | None,
     checkpoint_rmse_h: float,
     checkpoint_rmse_v: float,
     output: str | None,
+    crs: str | None,
     **cat_opts: Any,
 ) -> None:
     """Accuracy of MEASURED points against surveyed CHECK points.
@@ -210,10 +219,11 @@ def checkpoints(
             "--vertical compares heights only: --transform, --control-ids, --control-file "
             "and --match do not apply"
         )
-    if not vertical and (classes is not None or max_edge is not None):
-        raise OptionError("--classes and --max-edge apply only with --vertical")
+    if not vertical and (classes is not None or max_edge is not None or source_id is not None):
+        raise OptionError("--classes, --source-id and --max-edge apply only with --vertical")
     if control_ids and control_file:
         raise OptionError("give --control-ids or --control-file, not both")
+    given = input_crs(crs)
     if wants_catalog(measured, cat_opts):
         if not vertical:
             raise OptionError("a catalog of clouds (several files, a folder, a glob, a .vpc) "
@@ -233,17 +243,23 @@ def checkpoints(
         ctrl = _read_control_file(control_file)
 
     with steps("Reading check points"):
-        chk = read_points(check)
+        chk = read_points(check, crs=given)
 
     if vertical:
         from .. import read
         from ..accuracy.checkpoints import vertical_check
 
         with steps("Reading " + measured):
-            cloud = read(measured)
+            cloud = read(measured, crs=given)
+        if source_id is not None:
+            cloud = cloud.select(source_id=source_id)
+            if len(cloud) == 0:
+                raise OptionError(f"{measured} has no points with --source-id {source_id}")
         ensure_same_crs(cloud.crs, chk.crs, what=("MEASURED", "CHECK"))
-        crs = cloud.crs if cloud.crs is not None else chk.crs
-        fh, fv, hname, vname = _unit_factors(crs, "MEASURED" if cloud.crs is not None else "CHECK")
+        crs_used = cloud.crs if cloud.crs is not None else chk.crs
+        fh, fv, hname, vname = _unit_factors(
+            crs_used, "MEASURED" if cloud.crs is not None else "CHECK"
+        )
         if fv != 1.0 or fh != 1.0:
             notes.append(
                 f"coordinates converted to metres (horizontal unit: {hname or 'metre'}, "
@@ -278,10 +294,12 @@ def checkpoints(
                 "give a point list (id,x,y,z) such as the output of `lidarqa corners`"
             )
         with steps("Reading measured points"):
-            mea = read_points(measured)
+            mea = read_points(measured, crs=given)
         ensure_same_crs(mea.crs, chk.crs, what=("MEASURED", "CHECK"))
-        crs = mea.crs if mea.crs is not None else chk.crs
-        fh, fv, hname, vname = _unit_factors(crs, "MEASURED" if mea.crs is not None else "CHECK")
+        crs_used = mea.crs if mea.crs is not None else chk.crs
+        fh, fv, hname, vname = _unit_factors(
+            crs_used, "MEASURED" if mea.crs is not None else "CHECK"
+        )
         if fv != 1.0 or fh != 1.0:
             notes.append(
                 f"coordinates converted to metres (horizontal unit: {hname or 'metre'}, "
@@ -305,7 +323,7 @@ def checkpoints(
         res = report.residual_points()
         # write the check points in their own (unconverted) coordinates
         out = PointSet(
-            res.ids, _scaled(res.xyz, 1.0 / fh, 1.0 / fv), res.attributes, crs=chk.crs or crs
+            res.ids, _scaled(res.xyz, 1.0 / fh, 1.0 / fv), res.attributes, crs=chk.crs or crs_used
         )
         with steps("Writing " + output):
             write_points(out, output, overwrite=settings().overwrite)
@@ -324,11 +342,12 @@ def checkpoints(
             "max_distance": max_distance,
             "vertical": vertical,
             "classes": (classes or [2]) if vertical else None,
+            "source_id": source_id,
             "max_edge": results.get("vertical", {}).get("max_edge") if vertical else None,
             "checkpoint_rmse_h": checkpoint_rmse_h,
             "checkpoint_rmse_v": checkpoint_rmse_v,
             "output": output,
-            "crs": crs_name(crs),
+            "crs": crs_name(crs_used),
         },
         results=results,
     )
@@ -342,8 +361,27 @@ def _summary(r: dict, vertical: bool) -> None:
     t = r["transform"]
     if t["name"] != "none":
         echo(f"transform       {t['name']}   sigma0 {fmt_number(t['sigma0'], 4)} m")
-        for k, v in t["params"].items():
-            echo(f"  {k:<14}{v:.8g} ± {fmt_number(t['sigmas'].get(k), 6)}")
+        o = t.get("origin")
+        if o:
+            echo(
+                f"  about the control-point centroid x {o['x']:.3f}  y {o['y']:.3f}  "
+                f"z {o['z']:.3f} m"
+            )
+        order = ["tx", "ty", "tz"] + [k for k in t["params"] if k not in ("tx", "ty", "tz")]
+        for k in order:
+            if k not in t["params"] or k in ("c", "d", "e"):  # c, d at the origin; e = tz
+                continue
+            v, unit = t["params"][k], param_unit(k)
+            digits = 7 if k in ("scale", "a", "b") else 4
+            sig = t["sigmas"].get(k)
+            if k == "scale" and not sig:
+                echo(f"  {'scale':<14}{'1 (fixed)':>14}")
+                continue
+            line = f"  {k.removesuffix('_deg'):<14}{fmt_number(v, digits):>14} ± "
+            line += f"{fmt_number(sig, digits)} {unit}".rstrip()
+            if k == "scale" and v is not None and sig is not None:  # surveyors read ppm
+                line += f"   ({(v - 1.0) * 1e6:+.1f} ± {sig * 1e6:.1f} ppm)"
+            echo(line)
     if not vertical:
         echo("                x          y          z")
         for name in ("mean", "std", "rmse", "max_abs"):

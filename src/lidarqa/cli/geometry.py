@@ -11,7 +11,17 @@ import click
 import numpy as np
 
 from ._catalog_jobs import catalog_options, pop_catalog_options, wants_catalog
-from ._common import INT_LIST, Steps, common_options, echo, finish, prepare_outputs, settings
+from ._common import (
+    CRS_HELP,
+    INT_LIST,
+    Steps,
+    common_options,
+    echo,
+    finish,
+    input_crs,
+    prepare_outputs,
+    settings,
+)
 
 _OUT_SUFFIXES = (".csv", ".gpkg", ".geojson", ".json")
 
@@ -36,6 +46,7 @@ def _selection_options(func: Callable[..., Any]) -> Callable[..., Any]:
                      help="Smallest planar segment kept (points)."),
         click.option("--max-rmse", type=float, default=0.15, show_default=True,
                      help="Drop segments whose plane RMS residual exceeds this (m)."),
+        click.option("--crs", "crs", default=None, metavar="CRS", help=CRS_HELP),
     ]
     for opt in reversed(opts):
         func = opt(func)
@@ -72,14 +83,16 @@ def _check_suffix(output: str) -> None:
         raise OptionError(f"output {output}: use a .csv, .gpkg or .geojson file name")
 
 
-def _load(path: str, classes: list[int] | None, source_id: list[int] | None, steps: Steps):
+def _load(path: str, classes: list[int] | None, source_id: list[int] | None, steps: Steps,
+          crs: str | None = None):
     """Read and select; return (cloud selection, xyz in metres, z factor)."""
     from ..errors import InvalidPointsError
     from ..io import read
-    from ..io.crs import z_to_metres_factor
+    from ..io.crs import require_metric_xy, z_to_metres_factor
 
+    given = input_crs(crs)
     with steps(f"Reading {path}"):
-        cloud = read(path)
+        cloud = read(path, crs=given)
     sub = cloud.select(classes=classes, source_id=source_id) if (classes or source_id) else cloud
     if len(sub) < 3:
         what = []
@@ -89,6 +102,8 @@ def _load(path: str, classes: list[int] | None, source_id: list[int] | None, ste
             what.append(f"source ids {','.join(map(str, source_id))}")
         sel = (" with " + " and ".join(what)) if what else ""
         raise InvalidPointsError(f"{path}: {len(sub)} point(s){sel}; at least 3 are needed")
+    # fitted in metres: x, y in feet or degrees mixed with z in metres would distort them
+    require_metric_xy(sub.crs, path, "planes, edges and corners need")
     f = z_to_metres_factor(sub.crs) if sub.crs is not None else 1.0
     xyz = sub.xyz.copy()
     if f != 1.0:
@@ -99,10 +114,11 @@ def _load(path: str, classes: list[int] | None, source_id: list[int] | None, ste
 def _segment(xyz: np.ndarray, opts: dict, steps: Steps):
     from ..geometry.segmentation import segment_planes
 
-    with steps(f"Segmenting {len(xyz):,} points into planes"):
+    with steps(f"Segmenting {len(xyz):,} points into planes") as progress:
         return segment_planes(xyz, grow_radius=opts["grow_radius"], grow_dist=opts["grow_dist"],
                               seed_method=opts["seed_method"],
-                              min_segment_size=opts["min_segment_size"], max_rmse=opts["max_rmse"])
+                              min_segment_size=opts["min_segment_size"], max_rmse=opts["max_rmse"],
+                              progress=progress)
 
 
 def _stats(values: np.ndarray) -> dict[str, Any]:
@@ -142,7 +158,7 @@ def planes(paths: tuple[str, ...], output: str, classes: list[int] | None,
     _check_suffix(output)
     prepare_outputs(output, inputs=(path,))
     steps = Steps()
-    sub, xyz, f = _load(path, classes, source_id, steps)
+    sub, xyz, f = _load(path, classes, source_id, steps, opts.pop("crs", None))
     seg = _segment(xyz, opts, steps)
     cen = seg.centroid.copy()
     cen[:, 2] /= f
@@ -205,7 +221,7 @@ def edges(paths: tuple[str, ...], output: str, classes: list[int] | None,
     path = _one(paths)
     prepare_outputs(output, inputs=(path,))
     steps = Steps()
-    sub, xyz, f = _load(path, classes, source_id, steps)
+    sub, xyz, f = _load(path, classes, source_id, steps, opts.pop("crs", None))
     seg = _segment(xyz, opts, steps)
     with steps("Intersecting adjacent planes"):
         e, skipped = edges_from_segmentation(xyz, seg, near_dist=near_dist, min_angle=min_angle,
@@ -237,7 +253,7 @@ def edges(paths: tuple[str, ...], output: str, classes: list[int] | None,
 @click.command()
 @_selection_options
 @click.option("--min-det", type=float, default=0.1, show_default=True,
-              help="Smallest |det| of the three unit normals (conditioning).")
+              help="Smallest |det| of the three unit normals (dimensionless, 0..1; conditioning).")
 @click.option("--min-angle", type=float, default=10.0, show_default=True,
               help="Smallest angle (degrees) between any two of the three planes.")
 @click.option("--max-dist", type=float, default=1.0, show_default=True,
@@ -268,7 +284,7 @@ def corners(paths: tuple[str, ...], output: str, classes: list[int] | None,
     path = _one(paths)
     prepare_outputs(output, inputs=(path,))
     steps = Steps()
-    sub, xyz, f = _load(path, classes, source_id, steps)
+    sub, xyz, f = _load(path, classes, source_id, steps, opts.pop("crs", None))
     seg = _segment(xyz, opts, steps)
     with steps("Intersecting plane triples"):
         c, refused = corners_from_segmentation(seg, xyz, min_det=min_det, min_angle=min_angle,

@@ -5,7 +5,16 @@ from __future__ import annotations
 import click
 
 from ._catalog import is_catalog
-from ._common import INT_LIST, Steps, common_options, echo, finish, prepare_outputs
+from ._common import (
+    INT_LIST,
+    Steps,
+    common_options,
+    crs_option,
+    echo,
+    finish,
+    input_crs,
+    prepare_outputs,
+)
 
 
 @click.command()
@@ -15,7 +24,8 @@ from ._common import INT_LIST, Steps, common_options, echo, finish, prepare_outp
     "--output",
     required=True,
     type=click.Path(),
-    help="Output cloud (.las/.laz/.csv): every point, input order, all dimensions. "
+    help="Output cloud (.las/.laz, or .csv/.txt text with a .prj CRS file): every point, input "
+    "order, all dimensions; coordinates to the input's precision (its LAS scale). "
     "For a catalog (folder, glob, .vpc or several files): the output folder.",
 )
 @click.option(
@@ -40,43 +50,45 @@ from ._common import INT_LIST, Steps, common_options, echo, finish, prepare_outp
     show_default=True,
     help="With --preset auto: airborne (als) or mobile (mls) scan, if known; auto measures it.",
 )
-@click.option("--cell-size", type=float, default=None, help="Seed grid cell, m (default 60).")
 @click.option(
-    "--max-terrain-angle", type=float, default=None, help="Steepest facet, degrees (default 88)."
+    "--cell-size", type=float, default=None, help="Seed grid cell size (m) [default: 60]."
 )
 @click.option(
-    "--iter-angle", type=float, default=None, help="Iteration angle, degrees (default 6)."
+    "--max-terrain-angle", type=float, default=None, help="Steepest facet (degrees) [default: 88]."
 )
 @click.option(
-    "--iter-distance", type=float, default=None, help="Iteration distance, m (default 0.5)."
+    "--iter-angle", type=float, default=None, help="Iteration angle (degrees) [default: 6]."
 )
 @click.option(
-    "--min-edge-length", type=float, default=None, help="Minimum edge length, m (default 1)."
+    "--iter-distance", type=float, default=None, help="Iteration distance (m) [default: 0.5]."
+)
+@click.option(
+    "--min-edge-length", type=float, default=None, help="Minimum TIN edge length (m) [default: 1]."
 )
 @click.option("--no-mirror", is_flag=True, help="Do not test points mirrored at steep edges.")
 @click.option(
     "--accept-ratio",
     type=float,
     default=None,
-    help="segment-ptd: fraction of tested points that must pass (default 0.5).",
+    help="segment-ptd: fraction of tested points that must pass (0..1) [default: 0.5].",
 )
 @click.option(
     "--orientation-thr",
     type=float,
     default=None,
-    help="segment-ptd: façade orientation threshold, degrees (default 45).",
+    help="segment-ptd: façade orientation threshold (degrees) [default: 45].",
 )
 @click.option(
     "--scatter-thr",
     type=float,
     default=None,
-    help="segment-ptd: vegetation scatterness threshold (default 0.2).",
+    help="segment-ptd: vegetation scatterness threshold (dimensionless) [default: 0.2].",
 )
 @click.option(
     "--grow-radius",
     type=float,
     default=None,
-    help="segment-ptd: surface-growing radius, m (default 2.5 x point spacing).",
+    help="segment-ptd: surface-growing radius (m) [default: 2.5 x point spacing].",
 )
 @click.option(
     "--all-returns",
@@ -101,6 +113,7 @@ from ._common import INT_LIST, Steps, common_options, echo, finish, prepare_outp
     default=None,
     help="With --evaluate: reference classes left out, e.g. 1,7,9.",
 )
+@crs_option
 @click.option(
     "--chunk-size",
     type=float,
@@ -151,6 +164,7 @@ def ground(
     exclude_classes,
     evaluate,
     ignore_classes,
+    crs,
     chunk_size,
     buffer,
     workers,
@@ -175,6 +189,7 @@ def ground(
     from ..ground import classify_ground, relabel_classification
     from ..io import read, write
 
+    given_crs = input_crs(crs)
     catalog_opts = {
         "--chunk-size": chunk_size,
         "--buffer": buffer,
@@ -251,7 +266,7 @@ def ground(
     params.update(given)
     steps = Steps()
     with steps("Reading " + path):
-        cloud = read(path)
+        cloud = read(path, crs=given_crs)
     from ..ground import kernels_cached
 
     if not kernels_cached():
@@ -261,7 +276,7 @@ def ground(
             err=True,
         )
     with (
-        steps(f"Filtering ({method}, {len(cloud):,} points)"),
+        steps(f"Filtering ({method}, {len(cloud):,} points)") as progress,
         warnings.catch_warnings(record=True) as caught,
     ):
         warnings.simplefilter("always", DataQualityWarning)
@@ -273,6 +288,7 @@ def ground(
             evaluate=evaluate,
             ignore_classes=ignore_classes,
             preset=preset,
+            progress=progress,
             sensor=sensor,
             **params,
         )
@@ -332,6 +348,7 @@ def ground(
             "last_returns_only": not all_returns,
             "exclude_classes": list(exclude_classes or []),
             "ignore_classes": list(ignore_classes or []),
+            "crs": crs,
             **result.parameters,
         },
         results=res,

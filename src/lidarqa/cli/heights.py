@@ -21,9 +21,20 @@ from ..accuracy.heights import (
     SIGMA_STRIP,
 )
 from ._catalog_jobs import catalog_options, wants_catalog
-from ._common import INT_LIST, Steps, common_options, echo, finish, prepare_outputs, settings
+from ._common import (
+    INT_LIST,
+    Steps,
+    common_options,
+    crs_option,
+    echo,
+    finish,
+    input_crs,
+    prepare_outputs,
+    settings,
+    source_id_option,
+)
 
-OUT_SUFFIXES = (".csv", ".gpkg")  # GeoJSON cannot hold the NaN z of unfitted map points
+OUT_SUFFIXES = (".csv", ".gpkg", ".geojson")  # GeoJSON: unfitted map points are written 2D
 
 
 def _horizontal_vertical(crs: Any) -> tuple[Any, Any]:
@@ -43,13 +54,13 @@ def _check_crs(a: Any, b: Any, names: tuple[str, str]) -> None:
     ensure_same_crs(va, vb, what=(names[0] + " vertical", names[1] + " vertical"))
 
 
-def _read_reference(path: str) -> Any:
+def _read_reference(path: str, crs: Any = None) -> Any:
     from ..io.vector import PointSet, read_points
 
     p = Path(path)
     if p.is_file() and p.stat().st_size == 0:  # an empty file: no reference points
-        return PointSet(ids=np.empty(0, dtype=np.int64), xyz=np.empty((0, 3)))
-    return read_points(p, require_z=True)
+        return PointSet(ids=np.empty(0, dtype=np.int64), xyz=np.empty((0, 3)), crs=crs)
+    return read_points(p, require_z=True, crs=crs)
 
 
 def _ids(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -129,8 +140,11 @@ def _measured_e4(pc: Any) -> float:
     return float(rep.e4)
 
 
-def _fmt(v: float, scale: float = 100.0, unit: str = "cm") -> str:
-    return "n/a" if v is None or not np.isfinite(v) else f"{v * scale:.1f} {unit}"
+def _fmt(v: float, scale: float = 1.0, unit: str = "m") -> str:
+    """Metres to the millimetre (the unit policy: metres everywhere); % with one decimal."""
+    if v is None or not np.isfinite(v):
+        return "n/a"
+    return f"{v * scale:.1f} {unit}" if unit == "%" else f"{v * scale:.3f} {unit}"
 
 
 @click.command()
@@ -198,14 +212,14 @@ def _fmt(v: float, scale: float = 100.0, unit: str = "cm") -> str:
     type=float,
     default=0.0,
     show_default=True,
-    help="Correlation 0..1 between the heights of the three TIN vertices.",
+    help="Correlation between the heights of the three TIN vertices (0..1).",
 )
 @click.option(
     "--alpha",
     type=float,
     default=0.001,
     show_default=True,
-    help="Significance level of the w-tests (0.001 -> critical value 3.29).",
+    help="Significance level of the w-tests (0..1; 0.001 -> critical value 3.29).",
 )
 @click.option(
     "--classes",
@@ -213,12 +227,13 @@ def _fmt(v: float, scale: float = 100.0, unit: str = "cm") -> str:
     default=None,
     help="Use only laser points of these classes, e.g. 2 or 2,11.",
 )
+@source_id_option
 @click.option(
     "--spacing",
     type=float,
     default=10.0,
     show_default=True,
-    help="Map points every this many metres along polygon boundaries (polygon MAP).",
+    help="Distance between map points along polygon boundaries (m; polygon MAP).",
 )
 @click.option(
     "--eq8",
@@ -246,9 +261,10 @@ def _fmt(v: float, scale: float = 100.0, unit: str = "cm") -> str:
     "--output",
     type=click.Path(dir_okay=False),
     default=None,
-    help="Per-point output (.csv or .gpkg, layer 'heights'): a row per map point and per "
-    "reference point, told apart by the 'kind' column.",
+    help="Per-point output (.csv, .gpkg or .geojson, layer 'heights'): a row per map point "
+    "and per reference point, told apart by the 'kind' column.",
 )
+@crs_option
 @catalog_options
 @common_options
 def heights(
@@ -267,12 +283,14 @@ def heights(
     correlation: float,
     alpha: float,
     classes: list[int] | None,
+    source_id: list[int] | None,
     spacing: float,
     eq8_diagonal: bool,
     posterior: bool,
     estimate_offset: bool,
     largest_segment: bool,
     output: str | None,
+    crs: str | None,
     **cat_opts: Any,
 ) -> None:
     """Height quality of map points by error propagation, tested with w-tests.
@@ -296,10 +314,11 @@ def heights(
     from ..accuracy.heights import assess_heights, read_map_points
     from ..errors import OptionError
     from ..io import read
-    from ..io.crs import z_to_metres_factor
+    from ..io.crs import require_metric_xy, z_to_metres_factor
 
     if output is not None and Path(output).suffix.lower() not in OUT_SUFFIXES:
         raise OptionError(f"--output must end in {', '.join(OUT_SUFFIXES)}; got {output!r}")
+    given = input_crs(crs)
     prepare_outputs(output, inputs=(cloud, map_path, reference))
     steps = Steps()
     on_catalog = wants_catalog((cloud,), cat_opts)
@@ -319,15 +338,20 @@ def heights(
         pc: Any = type("Header", (), {"crs": cat.crs})()
     else:
         with steps("Reading " + cloud):
-            pc = read(cloud)
+            pc = read(cloud, crs=given)
         if sigma_strip == "auto":
             with steps("Measuring E4 from the strip overlaps"):
                 sigma_strip = _measured_e4(pc)
             sigma_strip_source = "measured (strip offsets)"
-            echo(f"E4 (σ_strip) measured from the strip overlaps: {sigma_strip * 100:.1f} cm")
+            echo(f"E4 (σ_strip) measured from the strip overlaps: {sigma_strip:.3f} m")
         with steps("Selecting points"):
-            if classes:
-                pc = pc.select(classes=classes)
+            if classes or source_id:
+                pc = pc.select(classes=classes, source_id=source_id)
+                if len(pc) == 0:
+                    raise OptionError(
+                        f"{cloud} has no points with --classes {classes} --source-id {source_id}"
+                    )
+            require_metric_xy(pc.crs, cloud, "the search radius and the plane fits need")
             xyz = pc.xyz.copy()
             xyz[:, 2] *= z_to_metres_factor(pc.crs)
     if _is_polygon_map(map_path) and on_catalog:
@@ -357,8 +381,8 @@ def heights(
             estimate_offset=estimate_offset,
         )
     with steps("Reading map and reference points"):
-        mp = read_map_points(map_path, spacing=spacing)
-        ref = _read_reference(reference)
+        mp = read_map_points(map_path, spacing=spacing, crs=given)
+        ref = _read_reference(reference, given)
         _check_crs(pc.crs, mp.crs, ("cloud", "map"))
         _check_crs(pc.crs, ref.crs, ("cloud", "reference"))
         _check_crs(mp.crs, ref.crs, ("map", "reference"))
@@ -431,7 +455,13 @@ def heights(
     if report.flags:
         echo("flags             " + ", ".join(report.flags))
     params = dict(report.parameters)
-    params.update(classes=classes, spacing=spacing, sigma_strip_source=sigma_strip_source)
+    params.update(
+        classes=classes,
+        source_id=source_id,
+        spacing=spacing,
+        crs=crs,
+        sigma_strip_source=sigma_strip_source,
+    )
     if catalog_run is not None:
         from ._catalog_jobs import _echo_run, _run_summary
 

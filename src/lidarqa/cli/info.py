@@ -4,7 +4,16 @@ from __future__ import annotations
 
 import click
 
-from ._common import Steps, common_options, echo, finish, prepare_outputs, settings
+from ._common import (
+    Steps,
+    common_options,
+    crs_option,
+    echo,
+    finish,
+    input_crs,
+    prepare_outputs,
+    settings,
+)
 
 
 @click.command()
@@ -17,8 +26,9 @@ from ._common import Steps, common_options, echo, finish, prepare_outputs, setti
     is_flag=True,
     help="Catalog: also count the points of each strip (point source id); reads every point.",
 )
+@crs_option
 @common_options
-def info(paths: tuple[str, ...], skip_bad: bool, strips: bool) -> None:
+def info(paths: tuple[str, ...], skip_bad: bool, strips: bool, crs: str | None) -> None:
     """Describe a point cloud: points, bounds, CRS, classes, strips, density, returns.
 
     With a catalog (a folder, glob pattern, .vpc or several files): a summary from the
@@ -31,9 +41,10 @@ def info(paths: tuple[str, ...], skip_bad: bool, strips: bool) -> None:
         info_on_catalog(paths, skip_bad=skip_bad, strips=strips)
         return
     path = paths[0]
+    given = input_crs(crs)
     prepare_outputs(inputs=(path,))
     with Steps()("Reading " + path):
-        result = describe(path)
+        result = describe(path, crs=given)
     d = result.to_dict()
     b = d["bounds"]
     echo(f"{path}")
@@ -45,11 +56,17 @@ def info(paths: tuple[str, ...], skip_bad: bool, strips: bool) -> None:
     echo(
         f"  CRS             {d['crs_name'] or 'none'}"
         + (f" (EPSG:{d['crs_epsg']})" if d["crs_epsg"] else "")
+        + (" (from --crs)" if given is not None and d["crs_name"] else "")
     )
+    if not d["crs_name"]:
+        echo(
+            "                  (the file declares no CRS: pass --crs, e.g. --crs EPSG:2154, "
+            "to every command that reads it, so that its outputs carry one)"
+        )
     if d["vertical_unit"]:
         echo(f"  vertical unit   {d['vertical_unit']}")
     if d["density_per_m2"]:
-        echo(f"  density         {d['density_per_m2']:.1f} pts/m²")
+        echo(f"  density         {d['density_per_m2']:.3g} pts/m²")
     if d["classes"]:
         echo("  classes         " + ", ".join(f"{k}: {v:,}" for k, v in d["classes"].items()))
     if d["point_source_ids"]:
@@ -70,7 +87,7 @@ def info(paths: tuple[str, ...], skip_bad: bool, strips: bool) -> None:
             )
         )
     )
-    finish("info", inputs={"path": path}, parameters={}, results=d)
+    finish("info", inputs={"path": path}, parameters={"crs": crs}, results=d)
 
 
 def _station(value: str | None) -> tuple[float, float, float]:
@@ -100,13 +117,25 @@ def _station(value: str | None) -> tuple[float, float, float]:
     type=float,
     default=0.0,
     show_default=True,
-    help="Azimuth of the instrument's zero direction, in the angle unit.",
+    help="Azimuth of the instrument's zero direction (in --angle-unit).",
 )
-@click.option("--instrument-height", type=float, default=0.0, show_default=True, help="Metres.")
+@click.option(
+    "--instrument-height",
+    type=float,
+    default=0.0,
+    show_default=True,
+    help="Instrument height above the station mark (m).",
+)
 @click.option(
     "--angle-unit", type=click.Choice(["deg", "gon", "rad"]), default="deg", show_default=True
 )
-@click.option("--crs", default=None, help="CRS of the output (EPSG code or WKT).")
+@click.option(
+    "--crs",
+    default=None,
+    metavar="CRS",
+    help="CRS of the station and so of the output: an EPSG code (2154 or EPSG:2154), WKT, "
+    "or a .prj file.",
+)
 @common_options
 def polar(
     observations: str,

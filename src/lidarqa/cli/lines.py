@@ -9,14 +9,17 @@ from typing import Any
 
 import click
 
+from ..units import format_decimal
 from ._catalog_jobs import catalog_options, wants_catalog
 from ._common import (
+    CRS_HELP,
     INT_LIST,
     Steps,
     common_options,
     echo,
     finish,
     fmt_number,
+    input_crs,
     prepare_outputs,
     settings,
 )
@@ -65,6 +68,7 @@ def _matching_options(func: Callable[..., Any]) -> Callable[..., Any]:
             default=None,
             help="Point-cloud input: classes whose edges are extracted, e.g. 6.",
         ),
+        click.option("--crs", "crs", default=None, metavar="CRS", help=CRS_HELP),
     ]
     for opt in reversed(opts):
         func = opt(func)
@@ -124,6 +128,7 @@ def lines(
     pairs_out: str | None,
     test_source_id: list[int] | None,
     model_source_id: list[int] | None,
+    crs: str | None,
 ) -> None:
     """Match TEST line segments to MODEL segments; OLHD both ways and LHD (Poreba & Goulette 2013).
 
@@ -134,18 +139,25 @@ def lines(
     from ..accuracy._lines_io import load_segments, read_pairs
     from ..accuracy.lines import match_segments
 
+    given = input_crs(crs)
     inputs = tuple(x for x in (test, model, ground_truth) if x)
     prepare_outputs(matrix, pairs_out, inputs=inputs)
     steps = Steps()
-    with steps("Reading test " + test):
-        t = load_segments(test, classes=classes, source_id=test_source_id)
-    with steps("Reading model " + model):
-        m = load_segments(model, classes=classes, source_id=model_source_id)
+    test_label = test + _selection(classes, test_source_id)
+    model_label = model + _selection(classes, model_source_id)
+    with steps("Reading test " + test_label) as progress:
+        t = load_segments(
+            test, classes=classes, source_id=test_source_id, crs=given, progress=progress
+        )
+    with steps("Reading model " + model_label) as progress:
+        m = load_segments(
+            model, classes=classes, source_id=model_source_id, crs=given, progress=progress
+        )
     gt = None
     if ground_truth:
         with steps("Reading ground truth"):
             gt = read_pairs(ground_truth)
-    with steps(f"Matching {len(t)} × {len(m)} segments"):
+    with steps(f"Matching {len(t)} × {len(m)} segments") as progress:
         r = match_segments(
             t,
             m,
@@ -155,6 +167,7 @@ def lines(
             rotate=rotate,
             denominator=denominator,
             ground_truth=gt,
+            progress=progress,
         )
     from ..io._atomic import atomic_path
 
@@ -174,8 +187,8 @@ def lines(
     def how(auto: Any) -> str:
         return {"peak": "auto", "fixed": "fixed"}.get(auto.reason, f"fallback: {auto.reason}")
 
-    echo(f"test   {test}: p = {r.p} segments")
-    echo(f"model  {model}: q = {r.q} segments")
+    echo(f"test   {test_label}: p = {r.p} segments")
+    echo(f"model  {model_label}: q = {r.q} segments")
     echo(f"{'':22}{'test→model':>12}{'model→test':>14}")
     echo(
         f"{'threshold (m)':22}{fmt_number(r.threshold_tm, 3):>12}"
@@ -208,9 +221,20 @@ def lines(
             "classes": classes,
             "test_source_id": test_source_id,
             "model_source_id": model_source_id,
+            "crs": crs,
         },
         results=d,
     )
+
+
+def _selection(classes: list[int] | None, source_id: list[int] | None) -> str:
+    """`` [classes 6, source id 706]`` for the summary, or empty for the whole input."""
+    parts = []
+    if classes:
+        parts.append("classes " + ",".join(map(str, classes)))
+    if source_id:
+        parts.append("source id " + ",".join(map(str, source_id)))
+    return f" [{'; '.join(parts)}]" if parts else ""
 
 
 def _write_matrix(r: Any, path: Any) -> None:
@@ -229,7 +253,7 @@ def _write_matrix(r: Any, path: Any) -> None:
                 dd[bounds[i] : bounds[i + 1]].tolist(),
                 strict=True,
             ):
-                row[j] = repr(v)
+                row[j] = format_decimal(v)
             w.writerow([str(tid), *row])
 
 
@@ -259,11 +283,11 @@ def _write_pairs(r: Any, path: Any) -> None:
                 [
                     tids[r.pair_test[k]],
                     mids[r.pair_model[k]],
-                    repr(float(c[0])),
-                    repr(float(c[1])),
-                    repr(float(c[2])),
-                    repr(float(c[3])),
-                    repr(float(r.pair_d_mt[k])),
+                    format_decimal(float(c[0])),
+                    format_decimal(float(c[1])),
+                    format_decimal(float(c[2])),
+                    format_decimal(float(c[3])),
+                    format_decimal(float(r.pair_d_mt[k])),
                     "true" if r.match_tm[k] else "false",
                     "true" if r.match_mt[k] else "false",
                 ]
@@ -318,6 +342,7 @@ def repeatability(
     rotate: str,
     denominator: str,
     classes: list[int] | None,
+    crs: str | None,
     **cat_opts: Any,
 ) -> None:
     """Compare every pair of passes both ways: a table like Poreba & Goulette's Table 1.
@@ -335,6 +360,7 @@ def repeatability(
     from ..accuracy.lines import match_segments
     from ..errors import CRSMismatchError, LidarQAError, OptionError
 
+    given = input_crs(crs)
     if source_id is not None and not by_source_id:
         raise OptionError("--source-id selects strips and needs --by-source-id")
     if pool and not by_source_id:
@@ -360,12 +386,14 @@ def repeatability(
         raise OptionError("catalog options apply to repeatability --by-source-id only")
     prepare_outputs(inputs=files)
     steps = Steps()
-    with steps("Reading passes and extracting edges"):
+    with steps("Reading passes and extracting edges") as progress:
         passes = load_passes(
             list(files),
             by_source_id=by_source_id,
             classes=classes,
             source_id=source_id,
+            crs=given,
+            progress=progress,
             edge_options={"outlines": True} if outlines else None,
         )
     if pool:
@@ -456,6 +484,7 @@ def repeatability(
             "rotate": rotate,
             "denominator": denominator,
             "classes": classes,
+            "crs": crs,
         },
         results=rows,
     )

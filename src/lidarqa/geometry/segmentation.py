@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
+from .._progress import ProgressCallback, report, stage
 from .._validate import as_points, check_choice, check_positive, check_range
 from ..errors import OptionError
 from . import _kernels as K
@@ -71,6 +72,7 @@ def surface_growing(
     seed_method: str = "pca",
     seed: int = 0,
     refine_boundaries: bool = True,
+    progress: ProgressCallback | None = None,
 ) -> np.ndarray:
     """Segment points into planar surfaces by seed detection and surface growing.
 
@@ -159,22 +161,30 @@ def surface_growing(
     _check_neighbourhood(pts, grow_radius, "grow_radius")
     labels_out[perm] = _grow_sorted(pts, k_seed, seed_dist, min_seed_points, hough_angle_step,
                                     grow_radius, grow_dist, refit_growth, min_segment_size,
-                                    seed_method, seed, refine_boundaries)
+                                    seed_method, seed, refine_boundaries, progress=progress)
+    report(progress, 1.0)
     return labels_out
 
 
 def _grow_sorted(pts: np.ndarray, k_seed: int, seed_dist: float, min_seed_points: int,
                  hough_angle_step: float, grow_radius: float, grow_dist: float,
                  refit_growth: float, min_segment_size: int, seed_method: str, seed: int,
-                 refine_boundaries: bool, knn: np.ndarray | None = None) -> np.ndarray:
-    """Surface growing on canonically sorted, centred points (validated options)."""
+                 refine_boundaries: bool, knn: np.ndarray | None = None,
+                 progress: ProgressCallback | None = None) -> np.ndarray:
+    """Surface growing on canonically sorted, centred points (validated options).
+
+    `progress` gets coarse stage fractions (the growing itself is one compiled call):
+    neighbours 0-0.35, planarity 0.4, growing 0.9, boundary refinement 1.
+    """
     n = len(pts)
     if n < 3 or _fewer_than_3_distinct(pts):
         return np.full(n, -1, dtype=np.int64)
     k = min(k_seed, n)
     if knn is None or knn.shape[1] != k:
         knn = K.knn(pts, k)
+    report(progress, 0.35)
     planarity = K.planarity_knn(pts, knn)
+    report(progress, 0.4)
     trial_order = np.lexsort((np.arange(n), planarity)).astype(np.int64)
 
     grid = K.build_grid(pts, grow_radius)
@@ -182,6 +192,7 @@ def _grow_sorted(pts: np.ndarray, k_seed: int, seed_dist: float, min_seed_points
     labels = K.surface_growing_kernel(
         pts, trial_order, knn, k, _METHOD_CODE[seed_method], seed_dist, min_seed_points, dirs,
         seed, grow_radius * grow_radius, grow_dist, refit_growth, min_segment_size, *grid)
+    report(progress, 0.9)
     if refine_boundaries and labels.max() >= 1:
         labels = _refine_boundaries(pts, labels, grow_radius, grow_dist, grid)
     return labels
@@ -391,6 +402,7 @@ def segment_planes(
     trim: float = 3.0,
     adjacency_dist: float | None = None,
     min_contacts: int = 3,
+    progress: ProgressCallback | None = None,
 ) -> PlaneSegmentation:
     """Segment a cloud into planes: surface growing, a plane per segment, adjacency.
 
@@ -419,6 +431,8 @@ def segment_planes(
         distance (m) of each other.
     min_contacts : int, default 3
         Point pairs needed to call two segments adjacent.
+    progress : callable, optional
+        Called with the estimated fraction of the work done (0..1).
 
     Returns
     -------
@@ -467,8 +481,10 @@ def segment_planes(
     opts = _check_growing_options(k_seed, seed_dist, min_seed_points, hough_angle_step,
                                   grow_radius, grow_dist, refit_growth, min_segment_size,
                                   seed_method, seed)
-    labels = _grow_sorted(pts, *opts, True, knn)
+    report(progress, 0.3)
+    labels = _grow_sorted(pts, *opts, True, knn, progress=stage(progress, 0.3, 0.9))
     if labels.max(initial=-1) < 0:
+        report(progress, 1.0)
         return _empty_segmentation(n, params)
     offset = (pts_in.min(axis=0) + pts_in.max(axis=0)) / 2.0
     n_labels = int(labels.max()) + 1
@@ -520,6 +536,7 @@ def segment_planes(
     inl_out[perm] = inl
     centroid = mean + offset
     rho = np.einsum("ij,ij->i", normal, centroid)
+    report(progress, 1.0)
     return PlaneSegmentation(
         labels=labels_out, inliers=inl_out, normal=normal, rho=rho, centroid=centroid,
         n_points=cnt.astype(np.int64), n_inliers=cnt_i.astype(np.int64), rmse=rmse, covariance=c4,

@@ -271,6 +271,7 @@ def classify_ground(
     ignore_classes: Any = None,
     preset: str | None = "auto",
     sensor: str = "auto",
+    progress: Any = None,
     **params: Any,
 ) -> GroundResult:
     """Detect ground points in a point cloud from geometry and return numbers alone.
@@ -301,6 +302,9 @@ def classify_ground(
     sensor : {"auto", "als", "mls"}, default "auto"
         With ``preset="auto"``: the kind of acquisition if known (overrides the
         measured one).
+    progress : callable, optional
+        Called with the estimated fraction of the work done (0..1), e.g. to show
+        a progress bar; the filter itself never prints.
     **params
         Filter parameters of :class:`SegmentPTD` or :class:`PTD` (m, degrees).
 
@@ -346,7 +350,7 @@ def classify_ground(
     sources = {
         k: ("given" if k in given else sources.get(k, "default")) for k in filt.to_dict()
     }
-    details = filt.run(cloud.xyz, candidates=cand)
+    details = filt.run(cloud.xyz, candidates=cand, progress=progress)
     ground = details.ground_mask
     evaluation = None
     if evaluate:

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from .._progress import ProgressCallback, geometric_fraction, report, stage
 from .._validate import as_points, check_choice, check_positive, check_range
 from ..errors import InvalidPointsError
 from ._prefilter import low_outliers
@@ -189,7 +190,9 @@ class PTD(TINParameters):
 
             raise OptionError(f"max_iter must be an integer >= 1, got {self.max_iter!r}")
 
-    def run(self, points: Any, *, candidates: Any = None) -> PTDResult:
+    def run(
+        self, points: Any, *, candidates: Any = None, progress: ProgressCallback | None = None
+    ) -> PTDResult:
         """Run the filter and return the full :class:`PTDResult`.
 
         Parameters
@@ -199,11 +202,15 @@ class PTD(TINParameters):
         candidates : ndarray of bool, shape (N,), optional
             Points allowed to be ground (e.g. last returns, not noise). Others are
             ignored by the filter and never ground. Default: all.
+        progress : callable, optional
+            Called with the estimated fraction of the work done (0..1).
         """
         pts = as_points(points)
         n = pts.shape[0]
         cand = np.ones(n, dtype=bool) if candidates is None else _as_mask(candidates, n)
-        return _ptd(pts, cand, self)
+        result = _ptd(pts, cand, self, progress)
+        report(progress, 1.0)
+        return result
 
     def ground_mask(self, points: Any, *, candidates: Any = None) -> np.ndarray:
         """Boolean ground mask ``(N,)`` of `points` (see :meth:`run`)."""
@@ -297,11 +304,14 @@ def densify(
     *,
     max_iter: int,
     min_gain_frac: float = 0.0,
+    progress: ProgressCallback | None = None,
 ) -> TIN:
     """Point-wise progressive densification (:ref:`alg-ptd`) of `st`; returns the final TIN.
 
     The TIN grows by insertion (startinpy) instead of being rebuilt each iteration;
     if startinpy merges two vertices (closer than 1e-7 m) it falls back to rebuilding.
+    `progress` receives an estimate of the fraction done after each sweep (the
+    gains shrink about geometrically, see :func:`lidarqa._progress.geometric_fraction`).
     """
     inc: IncrementalTIN | None
     try:
@@ -350,6 +360,10 @@ def densify(
                 inc.add(new)
             except _MergedVertices:
                 inc = None
+        if progress is not None:
+            prev = st.added[-2] if len(st.added) > 1 else 2 * st.added[-1]
+            est = geometric_fraction(float(sum(st.added)), float(st.added[-1]), float(prev))
+            progress(max(est, k / max_iter))
         if min_gain_frac > 0 and new.size / max(1, int(st.in_tin.sum())) < min_gain_frac:
             st.stop = "min_gain_frac"
             break
@@ -371,7 +385,9 @@ def final_pass(xyz: np.ndarray, st: DensifyState, tin: TIN, distance: float) -> 
     return int(hit.size)
 
 
-def _ptd(points: np.ndarray, cand: np.ndarray, par: PTD) -> PTDResult:
+def _ptd(
+    points: np.ndarray, cand: np.ndarray, par: PTD, progress: ProgressCallback | None = None
+) -> PTDResult:
     n = points.shape[0]
     if n == 0 or not cand.any():
         return _empty_result(n)
@@ -386,7 +402,16 @@ def _ptd(points: np.ndarray, cand: np.ndarray, par: PTD) -> PTDResult:
     st.ground[seeds] = True
     st.in_tin[seeds] = True
     st.open_[seeds] = False
-    tin = densify(xyz, st, virtual, crit, max_iter=par.max_iter, min_gain_frac=par.min_gain_frac)
+    report(progress, 0.1)
+    tin = densify(
+        xyz,
+        st,
+        virtual,
+        crit,
+        max_iter=par.max_iter,
+        min_gain_frac=par.min_gain_frac,
+        progress=stage(progress, 0.1, 0.95),
+    )
     final_pass(xyz, st, tin, par.final_distance)
     tris = tin.real_triangles()
     return PTDResult(

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 from numba import njit
 
+from .._progress import ProgressCallback, report, stage
 from .._validate import as_points, check_choice, check_positive, check_range
 from ..errors import DegenerateGeometryWarning, InvalidPointsError, OptionError
 from ._tin import TIN
@@ -270,7 +271,9 @@ class SegmentPTD(TINParameters):
         labels, radius, _ = self._segment(points, candidates=candidates)
         return labels, radius
 
-    def _segment(self, points: Any, *, candidates: Any = None) -> tuple[np.ndarray, float, Any]:
+    def _segment(
+        self, points: Any, *, candidates: Any = None, progress: ProgressCallback | None = None
+    ) -> tuple[np.ndarray, float, Any]:
         from ..geometry.segmentation import surface_growing
 
         pts = as_points(points)
@@ -300,6 +303,7 @@ class SegmentPTD(TINParameters):
             grow_dist=float(self.grow_dist),
             min_segment_size=int(self.min_segment_size),
             refine_boundaries=False,
+            progress=progress,
         )
         if voxel_of is None:
             labels[ci] = lab_s
@@ -314,6 +318,7 @@ class SegmentPTD(TINParameters):
         labels: Any = None,
         candidates: Any = None,
         object_segments: Any = None,
+        progress: ProgressCallback | None = None,
     ) -> SegmentPTDResult:
         """Run the filter.
 
@@ -327,6 +332,8 @@ class SegmentPTD(TINParameters):
             Points allowed to be ground (others are ignored and never ground).
         object_segments : ndarray of bool, shape (S,), optional
             Object flag per segment; default: orientation / scatterness rule (:ref:`alg-features`).
+        progress : callable, optional
+            Called with the estimated fraction of the work done (0..1).
         """
         pts = as_points(points)
         n = pts.shape[0]
@@ -334,14 +341,20 @@ class SegmentPTD(TINParameters):
         radius = math.nan
         feature_idx = None
         if labels is None:
-            lab, radius, feature_idx = self._segment(pts, candidates=cand)
+            lab, radius, feature_idx = self._segment(
+                pts, candidates=cand, progress=stage(progress, 0.0, 0.4)
+            )
         else:
             lab = np.asarray(labels)
             if lab.shape != (n,):
                 raise InvalidPointsError(f"labels must have shape ({n},), got {lab.shape}")
             lab = lab.astype(np.int64).copy()
         lab[~cand] = -1
-        return _segment_ptd(pts, lab, cand, object_segments, self, radius, feature_idx)
+        result = _segment_ptd(
+            pts, lab, cand, object_segments, self, radius, feature_idx, stage(progress, 0.4, 1.0)
+        )
+        report(progress, 1.0)
+        return result
 
     def ground_mask(self, points: Any, *, labels: Any = None, candidates: Any = None) -> np.ndarray:
         """Boolean ground mask ``(N,)`` of `points` (see :meth:`run`)."""
@@ -567,6 +580,7 @@ def _segment_ptd(
     par: SegmentPTD,
     radius: float,
     feature_idx: Any = None,
+    progress: ProgressCallback | None = None,
 ) -> SegmentPTDResult:
     n = points.shape[0]
     n_seg = int(lab.max()) + 1 if n and lab.max() >= 0 else 0
@@ -624,7 +638,10 @@ def _segment_ptd(
     unseg_ground = np.zeros(n, dtype=bool)
     mixed_ground = np.zeros(n, dtype=bool)
     # 3-4. densify the TIN point-wise, then decide per segment by vote; repeat until stable
-    for _ in range(int(par.max_iter)):
+    report(progress, 0.1)
+    for it in range(int(par.max_iter)):
+        # iteration `it` reports into half of what remains of [0.1, 0.9] (unknown count)
+        span = stage(progress, 0.9 - 0.8 * 0.5**it, 0.9 - 0.8 * 0.5 ** (it + 1))
         in_tin = np.zeros(n, dtype=bool)
         in_tin[_thin(xyz, np.flatnonzero(ground), thin_cell)] = True
         open_ = seg_pt & ~is_ground_seg[lab_c] & ~vetoed[lab_c]
@@ -638,6 +655,7 @@ def _segment_ptd(
             crit,
             max_iter=int(par.max_iter),
             min_gain_frac=float(par.min_gain_frac),
+            progress=span,
         )
         if par.final_distance > 0:
             final_pass(xyz, st, tin, par.final_distance)
@@ -660,6 +678,7 @@ def _segment_ptd(
         accepted.append(int(acc.sum()))
         is_ground_seg |= acc
         ground |= seg_pt & is_ground_seg[lab_c]
+    report(progress, 0.9)
     # 5. leftovers: unsegmented points judged point-wise (or dropped)
     n_pp = int(unseg_ground.sum())
     ground |= unseg_ground | (mixed_ground & ~is_ground_seg[lab_c])

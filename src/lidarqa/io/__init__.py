@@ -6,6 +6,7 @@
 
 import os
 from pathlib import Path
+from typing import Any
 
 from ..errors import ReadError, WriteError
 from ._atomic import atomic_path, check_distinct, check_output
@@ -36,7 +37,7 @@ _PLY = {".ply"}
 CLOUD_SUFFIXES = _LAS | _TEXT | _PLY
 
 
-def read(path: str | os.PathLike, *, z_to_metres: bool = False) -> PointCloud:
+def read(path: str | os.PathLike, *, z_to_metres: bool = False, crs: Any = None) -> PointCloud:
     """Read a point cloud (LAS/LAZ, CSV/XYZ text, PLY) into a :class:`PointCloud`.
 
     Parameters
@@ -48,6 +49,9 @@ def read(path: str | os.PathLike, *, z_to_metres: bool = False) -> PointCloud:
         (e.g. US survey feet in a compound CRS). The converted cloud keeps only
         the horizontal part of a compound CRS and is detached from its LAS
         source scaling: writing it creates new records.
+    crs : pyproj.CRS, optional
+        The CRS of a file that declares none (e.g. ``--crs``); a file whose
+        own CRS differs raises :class:`CRSMismatchError` naming both.
 
     Examples
     --------
@@ -69,6 +73,10 @@ def read(path: str | os.PathLike, *, z_to_metres: bool = False) -> PointCloud:
         raise ReadError(
             f"cannot tell the format of {path}: expected one of {', '.join(sorted(CLOUD_SUFFIXES))}"
         )
+    if crs is not None:
+        from .crs import resolve_crs
+
+        cloud.crs = resolve_crs(cloud.crs, crs, path)
     if z_to_metres:
         from .crs import z_to_metres_factor
 

@@ -1,7 +1,15 @@
-"""CRS helpers: EPSG codes, vertical units, height conversion, CRS comparison."""
+"""CRS helpers: EPSG codes, vertical units, height conversion, CRS comparison, sidecars.
+
+CSV files carry their CRS in a sidecar file next to them: ``points.csv`` ->
+``points.prj``, holding the CRS as WKT (the ESRI/GeoCSV ``.prj`` convention,
+which GDAL/OGR's CSV driver and so QGIS read). lidarqa writes it with every
+CSV output whose source had a CRS and reads it back with every CSV input.
+"""
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -11,17 +19,30 @@ from ..errors import CRSMismatchError
 __all__ = [
     "crs_epsg",
     "crs_name",
+    "horizontal_unit",
+    "require_metric_xy",
     "vertical_unit",
     "z_to_metres_factor",
     "heights_to_metres",
     "reproject",
     "ensure_same_crs",
     "parse_crs",
+    "crs_label",
+    "sidecar_path",
+    "read_crs_sidecar",
+    "write_crs_sidecar",
+    "resolve_crs",
 ]
+
+#: Suffixes of text tables whose CRS lives in a ``.prj`` sidecar.
+SIDECAR_SUFFIXES = {".csv", ".txt", ".xyz", ".pts"}
 
 
 def parse_crs(value: Any) -> Any:
-    """A pyproj CRS from an EPSG int, 'EPSG:xxxx', WKT or a CRS (None stays None)."""
+    """A pyproj CRS from an EPSG int or digits, 'EPSG:xxxx', WKT, a ``.prj`` file or a CRS.
+
+    None stays None; anything else raises :class:`OptionError`.
+    """
     if value is None or value == "":
         return None
     from pyproj import CRS
@@ -29,6 +50,13 @@ def parse_crs(value: Any) -> Any:
 
     from ..errors import OptionError
 
+    if isinstance(value, str) and value.lower().endswith((".prj", ".wkt")):
+        p = Path(value)
+        if not p.is_file():
+            raise OptionError(f"CRS file {value} does not exist")
+        value = p.read_text(encoding="utf-8-sig").strip()
+    elif isinstance(value, str) and value.strip().isdigit():
+        value = int(value)
     try:
         return CRS.from_user_input(value)
     except CRSError as exc:
@@ -50,6 +78,77 @@ def crs_name(crs: Any) -> str | None:
     return None if crs is None else str(crs.name)
 
 
+def crs_label(crs: Any) -> str:
+    """``"RGF93 v1 / Lambert-93 (EPSG:2154)"``, or ``"none"``."""
+    if crs is None:
+        return "none"
+    code = crs_epsg(crs)
+    return f"{crs.name} (EPSG:{code})" if code else str(crs.name)
+
+
+def sidecar_path(path: str | os.PathLike) -> Path:
+    """The ``.prj`` sidecar of a text table (``a/b.csv`` -> ``a/b.prj``)."""
+    return Path(path).with_suffix(".prj")
+
+
+def read_crs_sidecar(path: str | os.PathLike) -> Any:
+    """The CRS in the ``.prj`` sidecar of `path`, or None when there is none.
+
+    Raises
+    ------
+    ReadError
+        If the sidecar exists but holds no CRS that pyproj understands.
+    """
+    from ..errors import ReadError
+
+    prj = sidecar_path(path)
+    if Path(path).suffix.lower() not in SIDECAR_SUFFIXES or not prj.is_file():
+        return None
+    from pyproj import CRS
+    from pyproj.exceptions import CRSError
+
+    try:
+        text = prj.read_text(encoding="utf-8-sig").strip()
+        return CRS.from_user_input(text) if text else None
+    except (CRSError, UnicodeDecodeError) as exc:
+        raise ReadError(f"{prj} (the CRS of {Path(path).name}) is not a CRS: {exc}") from exc
+
+
+def write_crs_sidecar(path: str | os.PathLike, crs: Any, *, overwrite: bool = False) -> Path | None:
+    """Write (or, when `crs` is None, remove a stale) ``.prj`` sidecar of `path`, atomically."""
+    from ._atomic import atomic_path
+
+    prj = sidecar_path(path)
+    if crs is None:  # a sidecar left from an earlier version of this file would lie
+        if overwrite and prj.is_file():
+            prj.unlink()
+        return None
+    with atomic_path(prj, overwrite=overwrite) as tmp:
+        tmp.write_text(crs.to_wkt() + "\n", encoding="utf-8")
+    return prj
+
+
+def resolve_crs(own: Any, given: Any, source: str | os.PathLike) -> Any:
+    """The CRS of an input: its own, else the one given (``--crs``).
+
+    An input whose own CRS differs from the given one is an error that names both.
+    """
+    if given is None:
+        return own
+    if own is None:
+        return given
+    try:
+        same = own.equals(given, ignore_axis_order=True)
+    except Exception:
+        same = own == given
+    if not same:
+        raise CRSMismatchError(
+            f"{source} is in {crs_label(own)} but --crs says {crs_label(given)}; "
+            "drop --crs or reproject the file"
+        )
+    return own
+
+
 def _vertical_axis(crs: Any) -> Any:
     if crs is None:
         return None
@@ -61,6 +160,34 @@ def _vertical_axis(crs: Any) -> Any:
             if axis.direction in ("up", "down"):
                 return axis
     return None
+
+
+def horizontal_unit(crs: Any) -> tuple[str | None, float | None]:
+    """Name and metre factor of the horizontal axes (e.g. ``("US survey foot", 0.3048006)``).
+
+    ``(None, None)`` without a CRS or horizontal axis; a geographic CRS gives
+    its angular unit (``("degree", 0.01745...)``, a factor to radians).
+    """
+    if crs is None:
+        return None, None
+    for c in list(crs.sub_crs_list) if crs.is_compound else [crs]:
+        for axis in c.axis_info:
+            if axis.direction in ("east", "north", "west", "south"):
+                return str(axis.unit_name), float(axis.unit_conversion_factor)
+    return None, None
+
+
+def require_metric_xy(crs: Any, what: str, needs: str) -> None:
+    """Refuse a CRS whose x, y are not metres (feet, degrees), naming it and what `needs` metres.
+
+    A missing CRS is accepted: the user vouches for metres.
+    """
+    unit, factor = horizontal_unit(crs)
+    if unit is not None and (crs.is_geographic or abs(factor - 1.0) > 1e-12):
+        raise CRSMismatchError(
+            f"{what} is in {crs_label(crs)} (x, y unit: {unit}); {needs} a projected CRS in "
+            "metres: reproject it first"
+        )
 
 
 def vertical_unit(crs: Any) -> tuple[str | None, float | None]:
@@ -107,8 +234,8 @@ def ensure_same_crs(
         same = a == b
     if not same:
         raise CRSMismatchError(
-            f"{what[0]} CRS ({crs_name(a)}) differs from {what[1]} CRS ({crs_name(b)}); "
-            "reproject one of them first (or ask for reprojection)"
+            f"{what[0]} CRS ({crs_label(a)}) differs from {what[1]} CRS ({crs_label(b)}); "
+            "reproject one of them first"
         )
 
 

@@ -136,9 +136,17 @@ def describe_cloud(cloud: Any) -> CloudInfo:
     return _finish(acc, cloud.crs, ["X", "Y", "Z", *cloud.fields], {})
 
 
-def describe(path: str | os.PathLike, *, chunk_size: int = 2_000_000) -> CloudInfo:
-    """Describe a point cloud file, streaming LAS/LAZ in chunks (constant memory)."""
+def describe(
+    path: str | os.PathLike, *, chunk_size: int = 2_000_000, crs: Any = None
+) -> CloudInfo:
+    """Describe a point cloud file, streaming LAS/LAZ in chunks (constant memory).
+
+    `crs` (a pyproj CRS) stands for the CRS of a file that declares none.
+    A point list that is not a cloud (CSV with text ids, GeoPackage, GeoJSON)
+    is described by its points.
+    """
     from . import las_header_summary, read
+    from .crs import resolve_crs
     from .las import LasReader
 
     if Path(path).suffix.lower() in {".las", ".laz"}:
@@ -147,6 +155,19 @@ def describe(path: str | os.PathLike, *, chunk_size: int = 2_000_000) -> CloudIn
             acc = _Accumulator(_density_cell(np.array(b[:3]), np.array(b[3:]), reader.n_points))
             for chunk in reader.chunks(chunk_size):
                 acc.add(chunk)
-            return _finish(acc, reader.crs, reader.dimension_names, las_header_summary(reader))
-    cloud = read(path)
+            own = resolve_crs(reader.crs, crs, path)
+            return _finish(acc, own, reader.dimension_names, las_header_summary(reader))
+    from ..errors import ReadError
+    from .vector import VECTOR_SUFFIXES, read_points
+
+    try:
+        cloud = read(path, crs=crs)
+    except ReadError:
+        # a point list (check points, corners, residuals) with text ids or a GIS layer
+        if Path(path).suffix.lower() not in VECTOR_SUFFIXES:
+            raise
+        from .pointcloud import PointCloud
+
+        pts = read_points(path, crs=crs)
+        cloud = PointCloud(xyz=pts.xyz, crs=pts.crs)
     return describe_cloud(cloud)

@@ -280,6 +280,12 @@ def _las_from_source(cloud: PointCloud) -> Any:
     laspy = _laspy()
     src: LasSource = cloud.source
     header = copy.deepcopy(src.header)
+    if cloud.crs is not None and _crs_of(header) is None:
+        # a CRS given by the user (--crs) for a file that had none: the output carries it
+        try:
+            header.add_crs(cloud.crs)
+        except Exception:
+            warnings.warn("could not store the CRS in the LAS header", stacklevel=3)
     records = np.array(src.records, copy=True)
     points = laspy.PackedPointRecord(records, header.point_format)
     las = laspy.LasData(header=header, points=points)

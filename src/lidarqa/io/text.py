@@ -4,15 +4,69 @@ from __future__ import annotations
 
 import csv
 import os
+import re
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from ..errors import InvalidPointsError, ReadError
-from ._atomic import atomic_path, check_input
+from ._atomic import atomic_path, check_input, check_output
+from .crs import read_crs_sidecar, resolve_crs, sidecar_path, write_crs_sidecar
 from .pointcloud import PointCloud
 
-__all__ = ["read_text", "write_text", "sniff_header"]
+__all__ = ["read_text", "write_text", "sniff_header", "dialect_hint", "DECIMAL_COMMA"]
+
+#: A number written with a decimal comma (``770500,05``, ``-0,3``).
+DECIMAL_COMMA = re.compile(r"^\s*[+-]?\d+,\d+\s*$")
+
+
+def _header_commas(text: str) -> int:
+    for ln in text.splitlines():
+        if ln.strip() and not ln.startswith("#"):
+            return ln.count(",")
+    return 0
+
+
+def dialect_hint(path: str | os.PathLike) -> str:
+    """A hint on a text table's dialect, for error messages ("" when nothing stands out).
+
+    Recognises the usual spreadsheet exports that are not plain CSV: UTF-16
+    ("Unicode text"), ';'-separated with decimal commas (European locales),
+    text that is not UTF-8 (Latin-1/Windows-1252), and a byte-order mark.
+    """
+    try:
+        with open(path, "rb") as fh:
+            raw = fh.read(8192)
+    except OSError:
+        return ""
+    if raw.startswith((b"\xff\xfe", b"\xfe\xff")):
+        return (
+            " (the file is UTF-16, 'Unicode text' in spreadsheets: save it as 'CSV UTF-8' with "
+            "',' between values and '.' as decimal point)"
+        )
+    hints = []
+    text = raw.decode("utf-8-sig", errors="replace")
+    if "\ufffd" in text:
+        hints.append("it is not UTF-8 (Latin-1/Windows-1252?): save it as 'CSV UTF-8'")
+    lines = [ln for ln in text.splitlines()[1:20] if ln.strip() and not ln.startswith("#")]
+    if any(";" in ln for ln in lines):
+        tokens = [t for ln in lines for t in ln.split(";")]
+        if any(DECIMAL_COMMA.match(t) for t in tokens):
+            hints.append(
+                "it looks like ';'-separated with decimal commas, which lidarqa reads; "
+                "check for thousands separators or text columns with commas"
+            )
+    elif any(DECIMAL_COMMA.match(t) for ln in lines for t in ln.split("\t")) and "\t" in text:
+        hints.append("it looks like tab-separated with decimal commas")
+    elif lines and any(ln.count(",") > _header_commas(text) for ln in lines):
+        hints.append(
+            "there are more commas than columns: decimal commas in a ','-separated file? "
+            "Export with ';' between values or '.' as decimal point"
+        )
+    if raw.startswith(b"\xef\xbb\xbf") and not hints:
+        return ""  # a UTF-8 byte-order mark is read fine
+    return f" ({'; '.join(hints)})" if hints else ""
 
 
 def _is_number(token: str) -> bool:
@@ -50,12 +104,14 @@ def sniff_header(path: str | os.PathLike) -> tuple[list[str] | None, str | None]
     return [t.lower() for t in tokens], delim
 
 
-def read_text(path: str | os.PathLike) -> PointCloud:
+def read_text(path: str | os.PathLike, *, crs: Any = None) -> PointCloud:
     """Read an XYZ/CSV/TXT point table.
 
     The first line names the columns (``x, y, z`` required, case-insensitive;
     every other numeric column becomes a field). A file whose first line is all
-    numbers has no header: its first three columns are x, y, z.
+    numbers has no header: its first three columns are x, y, z. The CRS comes
+    from a ``.prj`` sidecar next to the file, else from `crs` (a pyproj CRS);
+    a sidecar that differs from `crs` raises :class:`CRSMismatchError`.
 
     Raises
     ------
@@ -67,6 +123,9 @@ def read_text(path: str | os.PathLike) -> PointCloud:
     p = check_input(path)
     names, delim = sniff_header(p)
     skip = 0 if names is None else 1
+    extra: dict[str, Any] = {}
+    if delim in (";", "\t") and "decimal commas" in dialect_hint(p):
+        extra["converters"] = lambda v: float(v.replace(",", "."))
     try:
         data = np.loadtxt(
             p,
@@ -77,10 +136,12 @@ def read_text(path: str | os.PathLike) -> PointCloud:
             dtype=np.float64,
             encoding="utf-8-sig",
             quotechar='"',
+            **extra,
         )
     except ValueError as exc:
         raise ReadError(
             f"cannot read {p} as a numeric table: {str(exc).splitlines()[0][:160]}"
+            + dialect_hint(p)
         ) from exc
     if names is None:
         if data.shape[1] < 3:
@@ -109,20 +170,46 @@ def read_text(path: str | os.PathLike) -> PointCloud:
             fields[name] = col.astype(np.int64)
         else:
             fields[name] = col
-    return PointCloud(xyz=xyz, fields=fields, crs=None, source=None, path=str(p))
+    own = resolve_crs(read_crs_sidecar(p), crs, p)
+    return PointCloud(xyz=xyz, fields=fields, crs=own, source=None, path=str(p))
+
+
+def _decimals(cloud: PointCloud) -> list[int]:
+    """Decimals of x, y, z: those of the LAS scale the cloud came from, else mm."""
+    scales = getattr(cloud.source, "scales", None)
+    if scales is None:
+        return [3, 3, 3]
+    out = []
+    for sc in np.asarray(scales, dtype=float):
+        d = int(np.ceil(-np.log10(sc) - 1e-9)) if 0 < sc < 1 else 0
+        out.append(min(max(d, 0), 9))
+    return out
 
 
 def write_text(cloud: PointCloud, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
-    """Write a cloud as CSV with a header ``x,y,z,<fields>``, atomically."""
+    """Write a cloud as CSV with a header ``x,y,z,<fields>``, atomically.
+
+    Coordinates keep the precision of the cloud's source (the LAS scale, e.g.
+    0.01 m -> 2 decimals), else 1 mm; integer fields are written as integers,
+    other decimals with 15 significant digits (what a float64 holds without
+    noise: GPS time keeps its microseconds). The CRS goes to a ``.prj``
+    sidecar (WKT) that GDAL/QGIS and :func:`read_text` read.
+    """
     names = ["x", "y", "z", *cloud.fields]
     cols = [cloud.x, cloud.y, cloud.z, *(np.asarray(v) for v in cloud.fields.values())]
+    fmts = [f"%.{d}f" for d in _decimals(cloud)]
+    for c in cols[3:]:
+        fmts.append("%d" if c.dtype.kind in "iub" else "%.15g")
+    replacing = Path(path).exists()
+    if cloud.crs is not None:
+        check_output(sidecar_path(path), overwrite=overwrite or replacing)
     with atomic_path(path, overwrite=overwrite) as tmp:
         with tmp.open("w", encoding="utf-8", newline="") as fh:
             fh.write(",".join(names) + "\n")
-            table = (
-                np.column_stack([c.astype(np.float64) for c in cols])
-                if len(cloud)
-                else np.empty((0, len(cols)))
-            )
-            np.savetxt(fh, table, delimiter=",", fmt="%.17g")
+            if len(cloud):
+                table = np.empty(len(cloud), dtype=[(f"c{i}", c.dtype) for i, c in enumerate(cols)])
+                for i, c in enumerate(cols):
+                    table[f"c{i}"] = c
+                np.savetxt(fh, table, delimiter=",", fmt=fmts)
+        write_crs_sidecar(path, cloud.crs, overwrite=replacing or overwrite)
     return Path(path)

@@ -6,6 +6,12 @@ CSV is handled with the standard library; GeoPackage and GeoJSON need the
 - Segments CSV: ``id,x1,y1,z1,x2,y2,z2`` then any attribute columns.
 - Points CSV: ``id,x,y,z`` (``z`` optional where noted) then attributes.
 - GeoPackage/GeoJSON: LineString Z / Point Z features with an ``id`` field.
+
+CRS: GeoPackage/GeoJSON carry it inside; a CSV carries it in a ``.prj``
+sidecar (WKT, read by GDAL/QGIS), written with the CSV and read back with it.
+Every reader takes ``crs=`` for inputs without one (an input whose own CRS
+differs is an error naming both). CSV coordinates are written to 0.1 mm and
+other decimals to 10 significant digits (see :mod:`lidarqa.units`).
 """
 
 from __future__ import annotations
@@ -20,7 +26,10 @@ import numpy as np
 
 from .._validate import MAX_COORDINATE
 from ..errors import InvalidPointsError, ReadError, WriteError
-from ._atomic import atomic_path, check_input
+from ..units import format_coordinate, format_decimal
+from ._atomic import atomic_path, check_input, check_output
+from .crs import read_crs_sidecar, resolve_crs, sidecar_path, write_crs_sidecar
+from .text import DECIMAL_COMMA, dialect_hint
 
 __all__ = [
     "Segments",
@@ -137,6 +146,9 @@ def _convert_column(values: list[str]) -> np.ndarray:
     try:
         arr = np.array([float(v) if v.strip() != "" else np.nan for v in values], dtype=np.float64)
     except ValueError:
+        # decimal commas (';'-separated European exports): every value a number with a comma
+        if values and all(DECIMAL_COMMA.match(v) or _is_float(v) for v in values if v.strip()):
+            return _convert_column([v.replace(",", ".") for v in values])
         return np.array(values, dtype=object)
     if (
         arr.size
@@ -217,9 +229,20 @@ def _read_csv_table(p: Path) -> dict[str, np.ndarray]:
     body = rows[1:]
     for i, r in enumerate(body, start=2):
         if len(r) != len(header):
-            raise ReadError(f"input {p} line {i}: {len(r)} values for {len(header)} columns")
+            raise ReadError(
+                f"input {p} line {i}: {len(r)} values for {len(header)} columns"
+                + dialect_hint(p)
+            )
     cols = list(zip(*body, strict=True)) if body else [() for _ in header]
     return {h: _convert_column(list(c)) for h, c in zip(header, cols, strict=True)}
+
+
+def _is_float(v: str) -> bool:
+    try:
+        float(v)
+    except ValueError:
+        return False
+    return True
 
 
 def _need(table: dict, names: tuple[str, ...], p: Path) -> None:
@@ -231,7 +254,10 @@ def _need(table: dict, names: tuple[str, ...], p: Path) -> None:
 def _floats(table: dict, name: str, p: Path) -> np.ndarray:
     col = table[name]
     if col.dtype == object:
-        raise ReadError(f"input {p}: column {name!r} is not numeric")
+        bad = next((str(v) for v in col if not _is_float(str(v))), "")
+        raise ReadError(
+            f"input {p}: column {name!r} is not numeric (e.g. {bad!r})" + dialect_hint(p)
+        )
     return col.astype(np.float64)
 
 
@@ -267,17 +293,21 @@ def _gis():
 # --------------------------------------------------------------------- segments
 
 
-def read_segments(path: str | os.PathLike) -> Segments:
+def read_segments(path: str | os.PathLike, *, crs: Any = None) -> Segments:
     """Read 3D line segments from CSV (``id,x1,y1,z1,x2,y2,z2``), GeoPackage or GeoJSON.
 
     Multi-vertex LineStrings are split into their consecutive segments (ids
     ``<id>.<k>``). Raises :class:`ReadError` for a missing/empty file, missing
     columns or 2D geometry, and :class:`InvalidPointsError` for NaN coordinates.
+    `crs` (a pyproj CRS) is the CRS of a file that declares none; a file whose
+    own CRS (embedded, or a CSV's ``.prj`` sidecar) differs raises
+    :class:`CRSMismatchError`.
     """
     p = check_input(path)
     suffix = _suffix(p)
-    crs = None
+    given, crs = crs, None
     if suffix == ".csv":
+        crs = read_crs_sidecar(p)
         table = _read_csv_table(p)
         _need(table, ("x1", "y1", "z1", "x2", "y2", "z2"), p)
         start = np.column_stack([_floats(table, c, p) for c in ("x1", "y1", "z1")])
@@ -323,6 +353,7 @@ def read_segments(path: str | os.PathLike) -> Segments:
     if len(start) and max(np.abs(start).max(), np.abs(end).max()) > MAX_COORDINATE:
         raise InvalidPointsError(f"input {p} has coordinates beyond ±{MAX_COORDINATE:g}")
     _check_unique(ids, p)
+    crs = resolve_crs(crs, given, p)
     return Segments(ids=ids, start=start, end=end, attributes=attrs, crs=crs)
 
 
@@ -344,7 +375,7 @@ def write_segments(
         for i, c in enumerate(("x2", "y2", "z2")):
             cols[c] = segments.end[:, i]
         cols.update(segments.attributes)
-        return _write_csv(cols, path, overwrite=overwrite)
+        return _write_csv(cols, path, overwrite=overwrite, crs=segments.crs)
     _, shapely = _gis()
     geoms = shapely.linestrings(segments.endpoints) if len(segments) else np.empty(0, dtype=object)
     return _write_ogr(
@@ -361,15 +392,19 @@ def write_segments(
 # ----------------------------------------------------------------------- points
 
 
-def read_points(path: str | os.PathLike, *, require_z: bool = True) -> PointSet:
+def read_points(path: str | os.PathLike, *, require_z: bool = True, crs: Any = None) -> PointSet:
     """Read a point list from CSV (``id,x,y,z``), GeoPackage or GeoJSON (Point Z).
 
     With ``require_z=False`` a missing z column / 2D geometry gives z = NaN.
+    `crs` (a pyproj CRS) is the CRS of a file that declares none; a file whose
+    own CRS (embedded, or a CSV's ``.prj`` sidecar) differs raises
+    :class:`CRSMismatchError`.
     """
     p = check_input(path)
     suffix = _suffix(p)
-    crs = None
+    given, crs = crs, None
     if suffix == ".csv":
+        crs = read_crs_sidecar(p)
         table = _read_csv_table(p)
         _need(table, ("x", "y") + (("z",) if require_z else ()), p)
         x, y = _floats(table, "x", p), _floats(table, "y", p)
@@ -392,6 +427,7 @@ def read_points(path: str | os.PathLike, *, require_z: bool = True) -> PointSet:
     if len(xyz) and np.nanmax(np.abs(xyz)) > MAX_COORDINATE:
         raise InvalidPointsError(f"input {p} has coordinates beyond ±{MAX_COORDINATE:g}")
     _check_unique(np.asarray(ids), p)
+    crs = resolve_crs(crs, given, p)
     return PointSet(ids=np.asarray(ids), xyz=xyz, attributes=attrs, crs=crs)
 
 
@@ -410,9 +446,19 @@ def write_points(
             "z": points.xyz[:, 2],
         }
         cols.update(points.attributes)
-        return _write_csv(cols, path, overwrite=overwrite)
+        return _write_csv(cols, path, overwrite=overwrite, crs=points.crs)
     _, shapely = _gis()
     geoms = shapely.points(points.xyz) if len(points) else np.empty(0, dtype=object)
+    no_z = ~np.isfinite(points.xyz[:, 2])
+    if suffix in {".geojson", ".json"} and no_z.any():
+        # GeoJSON has no NaN: a point without a height is written as [x, y]
+        geoms = np.array(
+            [
+                shapely.to_wkb(g, output_dimension=2 if flat else 3)
+                for g, flat in zip(geoms, no_z, strict=True)
+            ],
+            dtype=object,
+        )
     return _write_ogr(
         geoms,
         {"id": points.ids, **points.attributes},
@@ -427,23 +473,39 @@ def write_points(
 # ------------------------------------------------------------------- writers
 
 
-def _fmt(v: Any) -> str:
+#: CSV columns holding coordinates and coordinate differences in metres (written to 0.1 mm).
+COORDINATE_COLUMNS = frozenset(
+    {"x", "y", "z", "x1", "y1", "z1", "x2", "y2", "z2", "dx", "dy", "dz", "dh"}
+)
+
+
+def _fmt(v: Any, coordinate: bool = False) -> str:
     if isinstance(v, float | np.floating):
-        return "" if not np.isfinite(v) else repr(float(v))
+        if not np.isfinite(v):
+            return ""
+        return format_coordinate(v) if coordinate else format_decimal(v)
     if isinstance(v, bool | np.bool_):
         return "true" if v else "false"
     return str(v)
 
 
-def _write_csv(cols: dict[str, Any], path: str | os.PathLike, *, overwrite: bool) -> Path:
+def _write_csv(
+    cols: dict[str, Any], path: str | os.PathLike, *, overwrite: bool, crs: Any = None
+) -> Path:
     names = list(cols)
     arrays = [np.asarray(cols[n]) for n in names]
+    is_coord = [n in COORDINATE_COLUMNS for n in names]
+    replacing = Path(path).exists()
+    if crs is not None:
+        check_output(sidecar_path(path), overwrite=overwrite or replacing)
     with atomic_path(path, overwrite=overwrite) as tmp:
         with tmp.open("w", encoding="utf-8", newline="") as fh:
             w = csv.writer(fh)
             w.writerow(names)
             for row in zip(*arrays, strict=True):
-                w.writerow([_fmt(v) for v in row])
+                w.writerow([_fmt(v, c) for v, c in zip(row, is_coord, strict=True)])
+        # the sidecar belongs to the CSV: replaced with it, removed if now stale
+        write_crs_sidecar(path, crs, overwrite=replacing or overwrite)
     return Path(path)
 
 
@@ -469,7 +531,12 @@ def _write_ogr(
         elif a.dtype == bool:
             a = a.astype(np.int32)
         arrays.append(a)
-    wkb = shapely.to_wkb(geoms, output_dimension=3) if len(geoms) else np.empty(0, dtype=object)
+    if len(geoms) and isinstance(geoms[0], bytes):  # already WKB (mixed dimensions)
+        wkb = geoms
+    else:
+        wkb = (
+            shapely.to_wkb(geoms, output_dimension=3) if len(geoms) else np.empty(0, dtype=object)
+        )
     crs_wkt = crs.to_wkt() if crs is not None else None
     import warnings
 

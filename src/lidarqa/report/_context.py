@@ -87,7 +87,11 @@ class ParamDefaults(dict):
 
 
 def keyword_defaults(func: Any, *, exclude: tuple[str, ...] = ()) -> ParamDefaults:
-    """Keyword parameters of `func` with their defaults (required ones map to None)."""
+    """Keyword parameters of `func` with their defaults (required ones map to None).
+
+    ``progress`` (the kernels' progress callback) is a runtime hook, never a parameter.
+    """
+    exclude = (*exclude, "progress")
     out = ParamDefaults()
     for name, p in inspect.signature(func).parameters.items():
         if p.annotation is not inspect.Parameter.empty and name not in exclude:
@@ -169,13 +173,16 @@ class RunContext:
                     break
 
     @contextlib.contextmanager
-    def step(self, description: str) -> Iterator[None]:
-        """Progress display for a long step (nested steps are folded into the outer one)."""
+    def step(self, description: str) -> Iterator[Any]:
+        """Progress display for a long step (nested steps are folded into the outer one).
+
+        Yields a progress callback for the kernels' ``progress=`` keyword, or None.
+        """
         if self._step is None:
-            yield
+            yield None
         else:
-            with self._step(description):
-                yield
+            with self._step(description) as progress:
+                yield progress
 
     # -- inputs
     def cloud(self, name: str) -> Any:

@@ -498,6 +498,9 @@ def read_header_crs(spec: InputSpec) -> Any:
             info = pyogrio.read_info(str(spec.path))
             wkt = info.get("crs")
             return _parse_crs(wkt, f"input {spec.name!r}") if wkt else None
+        from ..io.crs import read_crs_sidecar
+
+        return read_crs_sidecar(spec.path)  # a CSV's .prj sidecar (None without one)
     except ConfigError:
         raise
     except Exception as exc:  # unreadable header: the input is broken, refuse now

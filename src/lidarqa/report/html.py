@@ -11,6 +11,7 @@ from __future__ import annotations
 import base64
 import html
 import math
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -37,6 +38,8 @@ class Table:
     columns: Sequence[str]
     rows: Sequence[Sequence[Any]]
     note: str = ""
+    #: Fixed decimals for every decimal number (e.g. 3: metres to the mm), else :func:`fmt`.
+    decimals: int | None = None
     code_columns: tuple[int, ...] = ()  # columns shown as code (config / JSON keys)
 
 
@@ -87,6 +90,16 @@ class Report:
     section_titles: dict[str, str] = field(default_factory=dict)
 
 
+def _is_float(v: Any) -> bool:
+    if isinstance(v, bool) or v is None:
+        return False
+    kind = getattr(getattr(v, "dtype", None), "kind", "")
+    return (isinstance(v, float) or kind == "f") and math.isfinite(float(v))
+
+
+_ID_HEADER = re.compile(r"(^|\b)(id|ids|epsg|strip|source id|point)(\b|$)", re.IGNORECASE)
+
+
 def fmt(value: Any, digits: int = 4) -> str:
     """A compact, human-readable rendering of a table value."""
     if value is None:
@@ -101,10 +114,10 @@ def fmt(value: Any, digits: int = 4) -> str:
         if value == 0:
             return "0"
         a = abs(value)
-        if a >= 1e5 or a < 1e-4:
+        if a >= 1e9 or a < 1e-4:
             return f"{value:.3e}"
-        if a >= 1000:
-            return f"{value:,.1f}"
+        if a >= 1000:  # coordinates and long distances: to the millimetre, no separators
+            return f"{value:.3f}"
         return f"{value:.{digits}g}"
     try:
         import numpy as np
@@ -229,11 +242,21 @@ def _table(t: Table, *, numeric_right: bool = True) -> str:
         and all(_is_num(r[j]) or r[j] is None for r in t.rows if j < len(r))
         for j in range(ncol)
     ]
+    # identifiers (point ids, strip ids, EPSG codes) are names, not quantities: no separators
+    id_col = [bool(_ID_HEADER.search(str(c))) for c in t.columns] + [False] * ncol
     for row in t.rows:
         cells = []
         for j, v in enumerate(row):
             num = numeric_col[j]
-            text = fmt(v)
+            is_int = (isinstance(v, int) and not isinstance(v, bool)) or (
+                getattr(getattr(v, "dtype", None), "kind", "") in ("i", "u")
+            )
+            if id_col[j] and is_int:
+                text = str(v)
+            elif t.decimals is not None and _is_float(v):
+                text = f"{float(v):.{t.decimals}f}"
+            else:
+                text = fmt(v)
             cls = ' class="num"' if num else (' class="wrap"' if len(text) > 60 else "")
             shown = f"<code>{_e(text)}</code>" if j in t.code_columns else _e(text)
             cells.append(f"<td{cls}>{shown}</td>")

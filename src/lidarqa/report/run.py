@@ -110,20 +110,25 @@ class _Progress:
         self.depth = 0
 
     @contextlib.contextmanager
-    def __call__(self, description: str) -> Iterator[None]:
+    def __call__(self, description: str) -> Iterator[Any]:
+        """Yield the step's progress callback (a no-op for nested steps)."""
         if self.steps is None or self.depth > 0:
             self.depth += 1
             try:
-                yield
+                yield _no_progress
             finally:
                 self.depth -= 1
             return
         self.depth += 1
         try:
-            with self.steps(description):
-                yield
+            with self.steps(description) as progress:
+                yield progress if callable(progress) else _no_progress
         finally:
             self.depth -= 1
+
+
+def _no_progress(fraction: float) -> None:
+    """Progress callback of a step that shows nothing."""
 
 
 def _lookup(results: dict[str, Any], path: tuple[str, ...]) -> Any:

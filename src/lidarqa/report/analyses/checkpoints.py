@@ -212,9 +212,11 @@ def run_checkpoints(ctx: RunContext, item: AnalysisItem) -> SectionResult:
             "(transformed) measured − check."
         )
     res = rep.to_dict()
-    write_vector(ctx, item, rep.residual_points(), "residuals", opts["format"], notes)
+    res_pts = rep.residual_points()
+    res_pts.crs = check.crs if check.crs is not None else ctx.crs  # outputs carry the CRS
+    write_vector(ctx, item, res_pts, "residuals", opts["format"], notes)
     if opts["format"] != "csv":
-        write_vector(ctx, item, rep.residual_points(), "residuals", "csv", notes)
+        write_vector(ctx, item, res_pts, "residuals", "csv", notes)
     # Sample-size warnings qualify the verdict: the report shows them beside it.
     caveats = [str(w) for w in res.get("warnings", []) if _is_sample_size(str(w))]
     notes.extend(str(w) for w in res.get("warnings", []) if not _is_sample_size(str(w)))
@@ -272,10 +274,17 @@ def run_checkpoints(ctx: RunContext, item: AnalysisItem) -> SectionResult:
                 f"Transformation: {tr['name']}",
                 ["parameter", "value", "σ"],
                 [
-                    [k, v, (tr.get("sigmas") or {}).get(k)]
+                    [_with_unit(k), v, (tr.get("sigmas") or {}).get(k)]
                     for k, v in (tr.get("params") or {}).items()
                 ],
-                note=f"σ0 = {fmt_or_dash(tr.get('sigma0'))}",
+                note=f"σ0 = {fmt_or_dash(tr.get('sigma0'))} m"
+                + (
+                    "; tx, ty, tz are the shift of the control-point centroid "
+                    + ", ".join(f"{a} {fmt_or_dash(tr['origin'][a])}" for a in "xyz")
+                    + " m, about which rotations and scale act"
+                    if tr.get("origin")
+                    else ""
+                ),
             )
         )
     if opts["vertical"]:
@@ -295,6 +304,7 @@ def run_checkpoints(ctx: RunContext, item: AnalysisItem) -> SectionResult:
             "Residuals per point (m)",
             resid_cols,
             resid_rows,
+            decimals=3,  # metres to the millimetre, heights and residuals alike
             note="first 100 points; all in the output files"
             if len(res.get("residuals", [])) > 100
             else "",
@@ -319,3 +329,11 @@ def run_checkpoints(ctx: RunContext, item: AnalysisItem) -> SectionResult:
         paragraphs=paragraphs,
         caveats=caveats,
     )
+
+
+def _with_unit(key: str) -> str:
+    """``"tx (m)"``; ``"kappa_deg"`` and ``"scale"`` stay: the unit policy of lidarqa.units."""
+    from ...units import param_unit
+
+    unit = param_unit(key)
+    return f"{key} ({unit})" if unit and not key.endswith("_deg") else key

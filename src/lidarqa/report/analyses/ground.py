@@ -92,10 +92,14 @@ def run_ground(ctx: RunContext, item: AnalysisItem) -> SectionResult:
     ignore = list(opts["ignore_classes"] or [])
     import warnings
 
-    with ctx.step(f"Ground filtering ({opts['method']}, {n:,} points)"), warnings.catch_warnings():
+    with (
+        ctx.step(f"Ground filtering ({opts['method']}, {n:,} points)") as progress,
+        warnings.catch_warnings(),
+    ):
         warnings.simplefilter("ignore")  # reported through result.warnings instead
         result = ground_mod.classify_ground(
             cloud,
+            progress=progress,
             method=opts["method"],
             evaluate=evaluate,
             ignore_classes=ignore or None,

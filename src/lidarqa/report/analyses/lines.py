@@ -139,8 +139,8 @@ def run_lines(ctx: RunContext, item: AnalysisItem) -> SectionResult:
         raise DegenerateGeometryError(
             f"no segments to match: {len(test)} test ({tlabel}), {len(model)} model ({mlabel})"
         )
-    with ctx.step(f"Matching {len(test):,} × {len(model):,} segments"):
-        m = match_segments(test, model, ground_truth=gt, **item.params)
+    with ctx.step(f"Matching {len(test):,} × {len(model):,} segments") as progress:
+        m = match_segments(test, model, ground_truth=gt, progress=progress, **item.params)
     res = m.to_dict()
     res.update(
         test=tlabel,
