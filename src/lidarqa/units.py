@@ -136,6 +136,20 @@ KEY_UNITS: dict[str, str] = {
         """crs_epsg point_format classes point_source_ids source_id source_ids test_source_id
         model_source_id exclude_classes ignore_classes id""",
     ),
+    # flight strips (lidarqa swaths) and 3D roads (lidarqa roads)
+    **_keys(
+        _M,
+        """e4 rmsdz p95_abs max_range median_range p95_range range_cell sigma_dx sigma_dy
+        sigma_dz sigma_robust max_roughness max_step max_shift shift margin repeatability
+        pairs thresholds max_rmsdz max_repeatability max_abs_dz""",
+    ),
+    **_keys(_D, "max_slope offset_max_slope max_normal_angle"),
+    **_keys("m²", "area overlap_area min_area"),
+    **_keys(
+        _N,
+        "min_overlap_cells points_other_level polygons_grown polygons_without_points",
+    ),
+    **_keys(_ID, "strip strip_a strip_b strips reference_strip"),
     # per volume/area densities and curvature
     "max_segment_density": "1/m²",
     # the cloud figures of the automatic ground-filter preset (parameters.measured)

@@ -11,8 +11,7 @@ def test_every_number_in_report_json_has_a_unit(demo_run):
     assert demo_run["result"].exit_code == 0, demo_run["result"].output
     doc = json.loads((demo_run["out"] / "report.json").read_text(encoding="utf-8"))
     missing = undefined_units({k: v for k, v in doc.items() if k != "lidarqa_version"})
-    # known gap: the swaths analysis (merged late) has no units in lidarqa.units yet
-    assert [m for m in missing if "swaths" not in m] == []
+    assert missing == [], "\n".join(missing)
 
 
 def test_every_output_of_the_demo_carries_its_crs(demo_run):

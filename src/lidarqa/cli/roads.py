@@ -17,7 +17,17 @@ from ..accuracy.heights import (
     SIGMA_POINT,
     SIGMA_STRIP,
 )
-from ._common import INT_LIST, Steps, common_options, echo, finish, prepare_outputs, settings
+from ._common import (
+    INT_LIST,
+    Steps,
+    common_options,
+    crs_option,
+    echo,
+    finish,
+    input_crs,
+    prepare_outputs,
+    settings,
+)
 
 
 def _parse_shift(value: str | None) -> tuple[float, float] | None:
@@ -161,6 +171,7 @@ def _fmt_cm(v: float) -> str:
     show_default=True,
     help="Maximum road curvature (1/m) of the model term.",
 )
+@crs_option
 @common_options
 def roads(
     cloud: str,
@@ -180,6 +191,7 @@ def roads(
     sigma_ins: float,
     sigma_strip: float,
     curvature: float,
+    crs: str | None,
 ) -> None:
     """Reconstruct 3D roads: heights for the map polygons of MAP from the CLOUD.
 
@@ -194,18 +206,21 @@ def roads(
     from ..io import read
     from ..io.crs import z_to_metres_factor
 
+    given_crs = input_crs(crs)
     prepare_outputs(output, inputs=(cloud, map_path))
     given = _parse_shift(shift)
     steps = Steps()
     with steps("Reading " + cloud):
-        pc = read(cloud)
+        pc = read(cloud, crs=given_crs)
         if classes:
             pc = pc.select(classes=classes)
         xyz = pc.xyz.copy()
         xyz[:, 2] *= z_to_metres_factor(pc.crs)
     with steps("Reading map polygons"):
-        polys, ids, crs = read_road_polygons(map_path)
-        check_map_crs(pc.crs, crs, polys, map_path)
+        polys, ids, map_crs = read_road_polygons(map_path)
+        if map_crs is None and given_crs is not None:
+            map_crs = given_crs  # --crs: the CRS of inputs that declare none
+        check_map_crs(pc.crs, map_crs, polys, map_path)
     with steps(f"Reconstructing {len(polys):,} polygons from {len(xyz):,} points"):
         rec = reconstruct_roads(
             xyz,
@@ -226,7 +241,7 @@ def roads(
             curvature=curvature,
         )
     with steps("Writing " + output):
-        write_roads(rec, output, crs=pc.crs or crs, overwrite=settings().overwrite)
+        write_roads(rec, output, crs=pc.crs or map_crs, overwrite=settings().overwrite)
     res = rec.to_dict()
     dx, dy = res["shift"]
     how = "estimated" if res["shift_estimated"] else "given"
