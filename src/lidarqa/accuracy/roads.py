@@ -60,6 +60,7 @@ from .heights import (
     SIGMA_STRIP,
     HeightComparison,
     WTestResult,
+    _freeze,
     compare_heights,
     map_point_heights,
     w_test,
@@ -76,14 +77,6 @@ __all__ = [
 
 #: status of a polygon after map growing
 STATUSES = ("ok", "grown_from_neighbour", "no_points")
-
-
-def _freeze(obj: Any) -> None:
-    for name, value in vars(obj).items():
-        if isinstance(value, np.ndarray):
-            view = value.view()
-            view.setflags(write=False)
-            object.__setattr__(obj, name, view)
 
 
 # ------------------------------------------------------------------ segments

@@ -119,17 +119,9 @@ def ground_on_catalog(
         + (f" ({result.n_chunks_resumed} resumed)" if result.n_chunks_resumed else "")
     )
     echo(f"  points          {res['n_points']:,}")
-    echo(
-        f"  ground          {res['n_ground']:,}"
-        + (f" ({100 * res['ground_fraction']:.1f} %)" if res["ground_fraction"] is not None else "")
-    )
-    if result.evaluation is not None:
-        e = result.evaluation
-        echo(f"  evaluated       {e.n:,} points (counts summed over chunks)")
-        echo(
-            f"  type I          {100 * e.type_i:.2f} %   type II {100 * e.type_ii:.2f} %   "
-            f"total {100 * e.total:.2f} %   kappa {e.kappa:.3f}"
-        )
+    from .ground import echo_ground_counts
+
+    echo_ground_counts(res, result.evaluation, " (counts summed over chunks)")
     if catalog.bad:
         echo(f"  skipped         {len(catalog.bad)} bad input(s)")
     finish(

@@ -324,17 +324,7 @@ def ground(
         f"  points          {res['n_points']:,} ({res['n_candidates']:,} candidates, "
         f"returns: {res['return_handling']})"
     )
-    echo(
-        f"  ground          {res['n_ground']:,}"
-        + (f" ({100 * res['ground_fraction']:.1f} %)" if res["ground_fraction"] is not None else "")
-    )
-    if result.evaluation is not None:
-        e = result.evaluation
-        echo(f"  evaluated       {e.n:,} points")
-        echo(
-            f"  type I          {100 * e.type_i:.2f} %   type II {100 * e.type_ii:.2f} %   "
-            f"total {100 * e.total:.2f} %   kappa {e.kappa:.3f}"
-        )
+    echo_ground_counts(res, result.evaluation)
     finish(
         "ground",
         inputs={"path": path, "output": output},
@@ -353,3 +343,17 @@ def ground(
         },
         results=res,
     )
+
+
+def echo_ground_counts(res: dict, evaluation: object, how: str = "") -> None:
+    """The ground count and, with --evaluate, the ISPRS filter errors (one file or a catalog)."""
+    frac = res["ground_fraction"]
+    share = f" ({100 * frac:.1f} %)" if frac is not None else ""
+    echo(f"  ground          {res['n_ground']:,}{share}")
+    if evaluation is not None:
+        e = evaluation
+        echo(f"  evaluated       {e.n:,} points{how}")
+        echo(
+            f"  type I          {100 * e.type_i:.2f} %   type II {100 * e.type_ii:.2f} %   "
+            f"total {100 * e.total:.2f} %   kappa {e.kappa:.3f}"
+        )

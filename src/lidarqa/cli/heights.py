@@ -140,6 +140,32 @@ def _measured_e4(pc: Any) -> float:
     return float(rep.e4)
 
 
+def laser_noise_options(func: Any) -> Any:
+    """``--sigma-point``, ``--sigma-gps``, ``--sigma-ins``: the laser block's error budget
+    (E1–E3 of Oude Elberink & Vosselman), shared by ``heights`` and ``roads``."""
+    for opt in reversed(
+        [
+            click.option(
+                "--sigma-point",
+                type=float,
+                default=SIGMA_POINT,
+                show_default=True,
+                help="E1: laser point height noise (m).",
+            ),
+            click.option(
+                "--sigma-gps", type=float, default=SIGMA_GPS, show_default=True,
+                help="E2: GPS noise (m).",
+            ),
+            click.option(
+                "--sigma-ins", type=float, default=SIGMA_INS, show_default=True,
+                help="E3: INS noise (m).",
+            ),
+        ]
+    ):
+        func = opt(func)
+    return func
+
+
 def _fmt(v: float, scale: float = 1.0, unit: str = "m") -> str:
     """Metres to the millimetre (the unit policy: metres everywhere); % with one decimal."""
     if v is None or not np.isfinite(v):
@@ -172,19 +198,7 @@ def _fmt(v: float, scale: float = 1.0, unit: str = "m") -> str:
     show_default=True,
     help="Laser points needed for a plane fit; map points with fewer are flagged.",
 )
-@click.option(
-    "--sigma-point",
-    type=float,
-    default=SIGMA_POINT,
-    show_default=True,
-    help="E1: laser point height noise (m).",
-)
-@click.option(
-    "--sigma-gps", type=float, default=SIGMA_GPS, show_default=True, help="E2: GPS noise (m)."
-)
-@click.option(
-    "--sigma-ins", type=float, default=SIGMA_INS, show_default=True, help="E3: INS noise (m)."
-)
+@laser_noise_options
 @click.option(
     "--sigma-strip",
     type=_SigmaStrip(),

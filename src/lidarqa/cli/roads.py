@@ -12,9 +12,6 @@ from ..accuracy.heights import (
     MAX_RADIUS,
     MIN_POINTS,
     RADIUS,
-    SIGMA_GPS,
-    SIGMA_INS,
-    SIGMA_POINT,
     SIGMA_STRIP,
 )
 from ._common import (
@@ -28,6 +25,7 @@ from ._common import (
     prepare_outputs,
     settings,
 )
+from .heights import laser_noise_options
 
 
 def _parse_shift(value: str | None) -> tuple[float, float] | None:
@@ -144,19 +142,7 @@ def _fmt_cm(v: float) -> str:
     show_default=True,
     help="Laser points needed for a plane fit.",
 )
-@click.option(
-    "--sigma-point",
-    type=float,
-    default=SIGMA_POINT,
-    show_default=True,
-    help="E1: laser point height noise (m).",
-)
-@click.option(
-    "--sigma-gps", type=float, default=SIGMA_GPS, show_default=True, help="E2: GPS noise (m)."
-)
-@click.option(
-    "--sigma-ins", type=float, default=SIGMA_INS, show_default=True, help="E3: INS noise (m)."
-)
+@laser_noise_options
 @click.option(
     "--sigma-strip",
     type=float,
