@@ -183,3 +183,15 @@ def test_cli_ground_on_a_folder(scene_tiles, tmp_path):
     assert sorted(p.name for p in (tmp_path / "b2").glob("*.laz")) == sorted(
         q.name for q in paths[:2]
     )
+
+
+@pytest.mark.parametrize("bad", [{"workers": -1}, {"scheduler": "tcp://127.0.0.1:1"}])
+def test_bad_engine_options_leave_nothing_at_the_output(scene_tiles, tmp_path, bad):
+    """Found by the fuzz suite: --workers -1 left OUT/.lidarqa-work/run.json behind."""
+    from lidarqa.errors import LidarQAError
+
+    _, paths = scene_tiles
+    out = tmp_path / "out"
+    with pytest.raises(LidarQAError):
+        ground_catalog(paths, out, **bad)
+    assert not out.exists()

@@ -509,6 +509,12 @@ def ground_catalog(
             + (f" (and {len(existing) - 1} more)" if len(existing) > 1 else "")
             + "; pass --overwrite (overwrite=True) to replace, or --resume to finish a run"
         )
+    own = engine is None
+    if own:  # made (not started) before anything is written: bad options fail here
+        engine = Engine("serial") if scheduler is None and workers == 1 else Engine(
+            scheduler, workers=workers
+        )
+    made_dir = not out_dir.exists()
     out_dir.mkdir(parents=True, exist_ok=True)
     work = out_dir / WORK_DIR
     fp = _fingerprint(catalog, chunks, task)
@@ -542,12 +548,6 @@ def ground_catalog(
             _save_chunk(work, oc.result)
             messages.update(oc.result.warnings)
 
-    own = engine is None
-    if own:
-        if scheduler is None and workers == 1:
-            engine = Engine("serial")
-        else:
-            engine = Engine(scheduler, workers=workers)
     try:
         outcomes = run_chunks(
             catalog,
@@ -562,6 +562,11 @@ def ground_catalog(
             description="Ground",
             order_seed=order_seed,
         )
+    except BaseException:
+        # nothing to resume (no chunk finished): leave nothing behind at the output path
+        if not any(work.glob("*.npz")):
+            shutil.rmtree(out_dir if made_dir else work, ignore_errors=True)
+        raise
     finally:
         if own:
             engine.close()
