@@ -198,45 +198,6 @@ def ground(
         "--resume": resume or None,
         "--skip-bad": skip_bad or None,
     }
-    if is_catalog(paths) or any(v is not None for v in catalog_opts.values()):
-        from ._catalog import ground_on_catalog
-
-        ground_on_catalog(
-            paths,
-            output,
-            method=method,
-            preset=preset,
-            sensor=sensor,
-            params={
-                k: v
-                for k, v in {
-                    "cell_size": cell_size,
-                    "max_terrain_angle": max_terrain_angle,
-                    "iter_angle": iter_angle,
-                    "iter_distance": iter_distance,
-                    "min_edge_length": min_edge_length,
-                    "mirror": False if no_mirror else None,
-                    "accept_ratio": accept_ratio,
-                    "orientation_thr": orientation_thr,
-                    "scatter_thr": scatter_thr,
-                    "grow_radius": grow_radius,
-                }.items()
-                if v is not None
-            },
-            all_returns=all_returns,
-            exclude_classes=exclude_classes,
-            evaluate=evaluate,
-            ignore_classes=ignore_classes,
-            chunk_size=chunk_size,
-            buffer=buffer,
-            workers=workers,
-            scheduler=scheduler,
-            resume=resume,
-            skip_bad=skip_bad,
-        )
-        return
-    path = paths[0]
-    prepare_outputs(output, inputs=(path,))
     params = {
         k: v
         for k, v in {
@@ -264,6 +225,30 @@ def ground(
             + " only apply to --method segment-ptd"
         )
     params.update(given)
+    if is_catalog(paths) or any(v is not None for v in catalog_opts.values()):
+        from ._catalog import ground_on_catalog
+
+        ground_on_catalog(
+            paths,
+            output,
+            method=method,
+            preset=preset,
+            sensor=sensor,
+            params=params,
+            all_returns=all_returns,
+            exclude_classes=exclude_classes,
+            evaluate=evaluate,
+            ignore_classes=ignore_classes,
+            chunk_size=chunk_size,
+            buffer=buffer,
+            workers=workers,
+            scheduler=scheduler,
+            resume=resume,
+            skip_bad=skip_bad,
+        )
+        return
+    path = paths[0]
+    prepare_outputs(output, inputs=(path,))
     steps = Steps()
     with steps("Reading " + path):
         cloud = read(path, crs=given_crs)

@@ -368,41 +368,8 @@ def heights(
             require_metric_xy(pc.crs, cloud, "the search radius and the plane fits need")
             xyz = pc.xyz.copy()
             xyz[:, 2] *= z_to_metres_factor(pc.crs)
-    if _is_polygon_map(map_path) and on_catalog:
-        echo("note: on a catalog, polygons are tested as boundary points on one level "
-             "(road levels need one cloud: `lidarqa roads`)")
-    elif _is_polygon_map(map_path):
-        return _heights_by_levels(
-            steps,
-            pc,
-            xyz,
-            cloud,
-            map_path,
-            reference,
-            output,
-            classes=classes,
-            spacing=spacing,
-            radius=radius,
-            max_radius=max_radius,
-            min_points=min_points,
-            sigma_point=sigma_point,
-            sigma_gps=sigma_gps,
-            sigma_ins=sigma_ins,
-            sigma_strip=sigma_strip,
-            sigma_ref=sigma_ref,
-            curvature=curvature,
-            alpha=alpha,
-            estimate_offset=estimate_offset,
-        )
-    with steps("Reading map and reference points"):
-        mp = read_map_points(map_path, spacing=spacing, crs=given)
-        ref = _read_reference(reference, given)
-        _check_crs(pc.crs, mp.crs, ("cloud", "map"))
-        _check_crs(pc.crs, ref.crs, ("cloud", "reference"))
-        _check_crs(mp.crs, ref.crs, ("map", "reference"))
-        ref_xyz = ref.xyz.copy()
-        ref_xyz[:, 2] *= z_to_metres_factor(ref.crs if ref.crs is not None else pc.crs)
-    options = dict(
+    # options shared by the point-map and the road-level (polygon) paths
+    common = dict(
         radius=radius,
         max_radius=max_radius,
         min_points=min_points,
@@ -412,11 +379,28 @@ def heights(
         sigma_strip=sigma_strip,
         sigma_ref=sigma_ref,
         curvature=curvature,
-        correlation=correlation,
         alpha=alpha,
         estimate_offset=estimate_offset,
-        eq8_diagonal=eq8_diagonal,
-        posterior=posterior,
+    )
+    polygon_map = _is_polygon_map(map_path)
+    if polygon_map and on_catalog:
+        echo("note: on a catalog, polygons are tested as boundary points on one level "
+             "(road levels need one cloud: `lidarqa roads`)")
+    elif polygon_map:
+        return _heights_by_levels(
+            steps, pc, xyz, cloud, map_path, reference, output,
+            classes=classes, spacing=spacing, **common,
+        )  # fmt: skip
+    with steps("Reading map and reference points"):
+        mp = read_map_points(map_path, spacing=spacing, crs=given)
+        ref = _read_reference(reference, given)
+        _check_crs(pc.crs, mp.crs, ("cloud", "map"))
+        _check_crs(pc.crs, ref.crs, ("cloud", "reference"))
+        _check_crs(mp.crs, ref.crs, ("map", "reference"))
+        ref_xyz = ref.xyz.copy()
+        ref_xyz[:, 2] *= z_to_metres_factor(ref.crs if ref.crs is not None else pc.crs)
+    options = dict(
+        common, correlation=correlation, eq8_diagonal=eq8_diagonal, posterior=posterior
     )
     catalog_run = None
     if on_catalog:
