@@ -25,7 +25,7 @@ import numpy as np
 
 from .._validate import check_choice
 from ..errors import DataQualityWarning, OptionError
-from .auto import DENSE_ALS, SENSORS, CloudMeasures, auto_parameters, measure_cloud
+from .auto import DENSE_ALS, PERCHED_STEP, SENSORS, CloudMeasures, auto_parameters, measure_cloud
 from .features import SegmentFeatures, detect_object_segments, point_scatterness, segment_features
 from .metrics import FilterErrors, filter_errors, filter_errors_from_counts, filter_errors_from_file
 from .ptd import PTD, PTDResult, mirror_point, ptd_filter
@@ -95,6 +95,7 @@ ALS_SEGMENT_PARAMS: dict[str, Any] = {
     "connect_min_size": 20,
     "connect_ratio": 0.6,
     "below_pass": True,
+    "perched_step": PERCHED_STEP,
 }
 PRESETS: dict[str, dict[str, dict[str, Any]]] = {
     "mls": {"ptd": {}, "segment-ptd": {}},

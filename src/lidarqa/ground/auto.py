@@ -26,6 +26,10 @@ The rules, in short:
   inside a raised region of the lowest-point raster) is measured and reported, but
   the seed cell stays at its default (60 m): on small extracts the footprint
   measure cannot tell a hill from a roof, and seed cells sized from it were worse.
+- **Perched surfaces** (airborne, segment-PTD, both density regimes): accepted
+  ground that drops by more than :data:`PERCHED_STEP` m (a storey) steeply on
+  opposite sides is rejected at the end (roofs reached from a hillside, bridge
+  decks); the test works on a 1 m raster, so it does not depend on density.
 - **Slopes** are measured and reported; the sparse set's steep iteration angle
   and the raised/below passes already cover 30–45° slopes.
 """
@@ -52,6 +56,8 @@ __all__ = [
 SENSORS = ("auto", "als", "mls")
 #: points/m² from which airborne clouds get the dense parameter set
 DENSE_ALS = 4.0
+#: storey height (m): the perched-surface test of airborne segment-PTD (both regimes)
+PERCHED_STEP = 2.0
 #: points/m² above which a cloud without a scan angle is taken for a mobile scan
 MLS_DENSITY = 100.0
 #: height (m) above the opened lowest-point surface from which a cell is "raised"
@@ -281,4 +287,8 @@ def auto_parameters(
         for k, v in PRESETS["als"][method].items():
             params[k] = v
             sources[k] = "measured"  # chosen because of the measured density
+    elif regime == "als-dense" and method == "segment-ptd":
+        # airborne at any density: ground never drops steeply on opposite sides
+        params["perched_step"] = PERCHED_STEP
+        sources["perched_step"] = "default"
     return params, sources, regime

@@ -22,6 +22,7 @@ from numba import njit
 from .._progress import ProgressCallback, report, stage
 from .._validate import as_points, check_choice, check_positive, check_range
 from ..errors import DegenerateGeometryWarning, InvalidPointsError, OptionError
+from ._perched import perched_mask
 from ._tin import TIN
 from .features import detect_object_segments, segment_features
 from .ptd import DensifyState, TINParameters, densify, final_pass, initial_seeds, prepare
@@ -186,6 +187,15 @@ class SegmentPTD(TINParameters):
         Objects stand on the terrain, so a point under the ground surface is terrain
         the densification could not reach (pits, concave slopes), or low noise.
     below_distance : float, default 0.0
+    perched_step : float, default 0.0
+        Perched-surface test, the last step (m; 0 disables): accepted ground whose
+        surroundings drop by more than `perched_step` m, steeper than
+        `perched_angle` degrees, on opposite sides within `perched_radius` m is
+        rejected: roofs reached from a hillside, bridge decks, wall tops. Terrain
+        drops on one side only (terrace edges, cuts) or at a slope's grade
+        (embankments), and stays ground.
+    perched_angle : float, default 45.0
+    perched_radius : float, default 8.0
     """
 
     cell_size: float = 60.0
@@ -229,6 +239,9 @@ class SegmentPTD(TINParameters):
     connect_ratio: float = 0.5
     below_pass: bool = False
     below_distance: float = 0.0
+    perched_step: float = 0.0
+    perched_angle: float = 45.0
+    perched_radius: float = 8.0
 
     def __post_init__(self) -> None:
         self._check_tin_parameters()
@@ -255,6 +268,9 @@ class SegmentPTD(TINParameters):
         check_range(self.connect_angle, "connect_angle", 0.0, 90.0, hi_open=True)
         check_range(self.connect_ratio, "connect_ratio", 0.0, 1.0)
         check_positive(self.below_distance, "below_distance", allow_zero=True)
+        check_positive(self.perched_step, "perched_step", allow_zero=True)
+        check_range(self.perched_angle, "perched_angle", 0.0, 90.0, hi_open=True)
+        check_positive(self.perched_radius, "perched_radius")
         if int(self.connect_min_size) != self.connect_min_size or self.connect_min_size < 0:
             raise OptionError(
                 f"connect_min_size must be an integer >= 0, got {self.connect_min_size!r}"
@@ -717,6 +733,16 @@ def _segment_ptd(
             tin = TIN(xyz, _thin(xyz, np.flatnonzero(ground), thin_cell), virtual)
             h = _height_above_tin(tin, xyz[oi])
             ground[oi[h < -par.below_distance]] = True
+    # 9. perched-surface test: accepted ground that drops steeply on opposite sides
+    if par.perched_step > 0 and ground.any():
+        ground &= ~perched_mask(
+            points,
+            ground,
+            cand,
+            step=float(par.perched_step),
+            angle=float(par.perched_angle),
+            radius=float(par.perched_radius),
+        )
     return SegmentPTDResult(
         ground,
         lab,

@@ -35,6 +35,7 @@ extra; not imported here).
 from . import cases
 from ._shapes import TerrainModel
 from .interchange import InterchangeScene, make_interchange
+from .profiles import ground_profile
 from .scenes import (
     BuildingSpec,
     Scene,
@@ -72,6 +73,7 @@ __all__ = [
     "EdgeScore",
     "CornerScore",
     "cases",
+    "ground_profile",
     "write_tiles",
     "write_block",
     "StripScene",
