@@ -85,3 +85,26 @@ def test_parameters_validated_and_chosen_for_airborne_clouds():
     assert regime == "als-dense" and params["perched_step"] == 2.0
     assert src["perched_step"] == "default"
     assert ALS_SEGMENT_PARAMS["perched_step"] == 2.0
+
+
+@pytest.mark.parametrize("kind", ["deck", "terrace"])
+def test_occupied_cell_path_gives_the_same_result(monkeypatch, kind):
+    from lidarqa.ground import _perched
+
+    p, _ = ground_profile(kind, seed=6, spacing=1.5)
+    p[::7, 2] -= 3.0  # some low candidates too
+    ground = np.ones(len(p), dtype=bool)
+    ground[::7] = False
+    full = perched_mask(p, ground, _all(p), **OPTS)
+    monkeypatch.setattr(_perched, "_RASTER_PER_POINT", 0)
+    monkeypatch.setattr(_perched, "_RASTER_MIN", 0)
+    sparse = perched_mask(p, ground, _all(p), **OPTS)
+    assert full.any() or kind == "terrace"
+    np.testing.assert_array_equal(full, sparse)
+
+
+def test_scattered_coordinates_do_not_allocate_a_raster():
+    p, _ = ground_profile("deck", seed=7)
+    far = np.vstack([p, [[1e12, 0.0, 0.0]]])
+    out = perched_mask(far, _all(far), _all(far), **OPTS)
+    np.testing.assert_array_equal(out[:-1], perched_mask(p, _all(p), _all(p), **OPTS))

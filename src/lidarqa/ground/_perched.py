@@ -34,6 +34,10 @@ __all__ = ["perched_mask", "CELL", "SPREAD", "TOP_BAND"]
 
 #: raster cell (m)
 CELL = 1.0
+#: a full raster is used up to this many cells per point (plus _RASTER_MIN); beyond it,
+#: only the occupied cells (same result, slower lookups)
+_RASTER_PER_POINT = 4
+_RASTER_MIN = 1_000_000
 #: largest mean resultant length of the steep-drop directions (0 = evenly spread, 1 = one side)
 SPREAD = 0.6
 #: points of a perched cell this close (m) below its highest accepted point are rejected
@@ -76,27 +80,59 @@ def perched_mask(
     if n == 0 or not ground.any():
         return out
     base = np.floor(points[:, :2].min(axis=0) / CELL)
-    ij = (np.floor(points[:, :2] / CELL) - base).astype(np.int64)
-    ni, nj = int(ij[:, 0].max()) + 1, int(ij[:, 1].max()) + 1
+    ij = np.floor(points[:, :2] / CELL) - base
+    span = ij.max(axis=0) + 1.0
+    if span[0] * span[1] >= 2.0**62:  # no real cloud: the cell keys would overflow
+        return out
+    ij = ij.astype(np.int64)
+    ni, nj = int(span[0]), int(span[1])
     flat = ij[:, 0] * nj + ij[:, 1]
-    top = np.full(ni * nj, -np.inf)
-    np.maximum.at(top, flat[ground], points[ground, 2])
-    low = np.full(ni * nj, np.inf)
-    np.minimum.at(low, flat[candidates], points[candidates, 2])
     pad = int(math.ceil(radius / CELL))
-    # cells that could be perched: some candidate within the window lies > step lower
-    from scipy import ndimage
+    if ni * nj <= _RASTER_PER_POINT * n + _RASTER_MIN:  # a raster about the cloud's size
+        top = np.full(ni * nj, -np.inf)
+        np.maximum.at(top, flat[ground], points[ground, 2])
+        low = np.full(ni * nj, np.inf)
+        np.minimum.at(low, flat[candidates], points[candidates, 2])
+        # cells that could be perched: some candidate within the window lies > step lower
+        from scipy import ndimage
 
-    win = np.hypot(*np.mgrid[-pad : pad + 1, -pad : pad + 1]) * CELL <= radius
-    lowest = ndimage.minimum_filter(
-        low.reshape(ni, nj), footprint=win, mode="constant", cval=np.inf
-    )
-    cells = np.flatnonzero(np.isfinite(top) & (top - lowest.ravel() > step))
+        win = np.hypot(*np.mgrid[-pad : pad + 1, -pad : pad + 1]) * CELL <= radius
+        lowest = ndimage.minimum_filter(
+            low.reshape(ni, nj), footprint=win, mode="constant", cval=np.inf
+        )
+        cells = np.flatnonzero(np.isfinite(top) & (top - lowest.ravel() > step))
+        lowp = np.pad(low.reshape(ni, nj), pad, constant_values=np.inf)
+
+        def low_at(ci, cj, di, dj):
+            return lowp[ci + pad + di, cj + pad + dj]
+
+        def top_of(keys):
+            return top[keys]
+
+    else:  # sparse or scattered cloud: occupied cells only, looked up by key
+        gk = np.unique(flat[ground])
+        gtop = np.full(gk.size, -np.inf)
+        np.maximum.at(gtop, np.searchsorted(gk, flat[ground]), points[ground, 2])
+        ck = np.unique(flat[candidates])
+        clow = np.full(ck.size, np.inf)
+        np.minimum.at(clow, np.searchsorted(ck, flat[candidates]), points[candidates, 2])
+        cells = gk
+
+        def low_at(ci, cj, di, dj):
+            a, b = ci + di, cj + dj
+            q = a * nj + b
+            pos = np.minimum(np.searchsorted(ck, q), ck.size - 1)
+            ok = (a >= 0) & (a < ni) & (b >= 0) & (b < nj) & (ck[pos] == q)
+            return np.where(ok, clow[pos], np.inf)
+
+        def top_of(keys):
+            pos = np.minimum(np.searchsorted(gk, keys), gk.size - 1)
+            return np.where(gk[pos] == keys, gtop[pos], -np.inf)
+
     if cells.size == 0:
         return out
     ci, cj = cells // nj, cells % nj
-    lowp = np.pad(low.reshape(ni, nj), pad, constant_values=np.inf)
-    t = top[cells]
+    t = top_of(cells)
     sx = np.zeros(cells.size)
     sy = np.zeros(cells.size)
     cnt = np.zeros(cells.size, dtype=np.int64)
@@ -106,15 +142,16 @@ def perched_mask(
             r = math.hypot(di, dj)
             if r == 0 or r * CELL > radius:
                 continue
-            drop = t - lowp[ci + pad + di, cj + pad + dj]
+            drop = t - low_at(ci, cj, di, dj)
             # the two points may sit anywhere in their cells: one cell less of run
             steep = (drop > step) & (drop > grade * (r - 1.0) * CELL)
             sx += steep * (di / r)
             sy += steep * (dj / r)
             cnt += steep
     flagged = (cnt >= 2) & (np.hypot(sx, sy) < SPREAD * np.maximum(cnt, 1))
-    bad = np.zeros(ni * nj, dtype=bool)
-    bad[cells[flagged]] = True
-    out = ground & bad[flat] & (points[:, 2] >= top[flat] - TOP_BAND)
+    bad_keys = cells[flagged]
+    pos = np.minimum(np.searchsorted(bad_keys, flat), max(bad_keys.size - 1, 0))
+    in_bad = (bad_keys[pos] == flat) if bad_keys.size else np.zeros(n, dtype=bool)
+    out = ground & in_bad & (points[:, 2] >= top_of(flat) - TOP_BAND)
     return out
 
