@@ -284,6 +284,7 @@ def repeatability_on_catalog(
     match_options: dict[str, Any],
     cat_opts: dict[str, Any],
     print_rows: Callable[[list[dict]], None],
+    edge_options: dict[str, Any] | None = None,
 ) -> None:
     """``lidarqa repeatability CATALOG --by-source-id``: every strip pair over the whole block."""
     from ..tiling.jobs_api import catalog_repeatability
@@ -293,7 +294,8 @@ def repeatability_on_catalog(
     catalog = _open(paths, cat_opts.get("skip_bad"), steps)
     with _engine(cat_opts.get("scheduler"), cat_opts.get("workers")) as eng:
         run = catalog_repeatability(catalog, classes=classes, source_id=source_id,
-                                    match_options=match_options, **_common(cat_opts, eng))
+                                    match_options=match_options, edge_options=edge_options,
+                                    **_common(cat_opts, eng))
     rows = run.value
     if not rows:
         from ..errors import OptionError
