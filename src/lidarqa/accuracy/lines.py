@@ -288,7 +288,7 @@ def auto_threshold(nearest: Any, *, sensitivity: float = 0.1) -> Threshold:
 #: Centre of the sampling band: this many times the sparser strip's point spacing (m/m).
 SAMPLING_FACTOR = 1.5
 #: Half-width of the sampling band, as a factor on each side of its centre.
-SAMPLING_BAND = 1.35
+SAMPLING_BAND = 1.34
 
 
 def sampling_threshold_range(test: Any, model: Any) -> tuple[float, float] | None:
@@ -302,12 +302,12 @@ def sampling_threshold_range(test: Any, model: Any) -> tuple[float, float] | Non
     through the outermost points) and its ends by up to about one spacing, so
     the distance between matched edges scales with the sparser strip's spacing
     ``s``. The band is centred on ``SAMPLING_FACTOR · s`` (1.5 s) and reaches
-    ``SAMPLING_BAND`` (1.35) times below and above it, about [1.1 s, 2.0 s]:
+    ``SAMPLING_BAND`` (1.34) times below and above it, about [1.1 s, 2.0 s]:
     a knee of the sorted nearest distances below it is a fluctuation among a
     handful of matches, one above it (or no knee at all) means the strips'
     edges disagree by more than their sampling explains. Neighbouring tiles
     of one survey have nearly the same spacing (±10 %), so their thresholds
-    stay within a factor 2 of each other (1.35² · 1.1 = 2.0).
+    stay within a factor 2 of each other (1.34² · 1.1 = 1.98).
 
     Returns None when either set has no ``point_spacing`` attribute (e.g.
     segments read from a file): the plain knee is then used.
@@ -329,9 +329,11 @@ def sampling_threshold_range(test: Any, model: Any) -> tuple[float, float] | Non
 
 def _clip_threshold(auto: Threshold, lo: float, hi: float) -> Threshold:
     """`auto` moved into [lo, hi]; the reason says which bound applied."""
+    if not auto.found:  # no knee: the ceiling, not the farthest edge
+        return replace(auto, threshold=float(hi), reason=f"{auto.reason}, band ceiling")
     if auto.threshold < lo:
         return replace(auto, threshold=float(lo), reason=f"{auto.reason}, raised to the band")
-    if auto.threshold > hi or not auto.found:
+    if auto.threshold > hi:
         return replace(auto, threshold=float(hi), reason=f"{auto.reason}, lowered to the band")
     return auto
 

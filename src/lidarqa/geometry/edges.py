@@ -605,7 +605,8 @@ def step_segments(
     thin walls, and a selection of building points leaves the ground out).
     Boundary points of each non-vertical plane are its inliers whose
     neighbours (within twice the point spacing, in plan) leave an angular gap
-    wider than 120 degrees; a boundary point is a step point when no point
+    wider than 120 degrees and the plane does not resume beyond the gap (a
+    hole in the sampling); a boundary point is a step point when no point
     of the cloud outside its plane lies in that gap (in the half-plane facing
     it, within the same radius) higher than the roof minus `min_step`. A
     boundary against a higher surface is left out: there the roof meets the
@@ -640,7 +641,11 @@ def step_segments(
         idx = idx[order]
         xy = points[idx, :2]
         is_b, g = _boundary_gaps(xy, radius, 120.0)
-        bidx = np.flatnonzero(is_b)
+        # a gap the plane itself closes further out is a hole in the sampling, not its edge
+        own = cKDTree(xy)
+        probe = xy + 1.5 * radius * g
+        dd, _ = own.query(probe, k=1, distance_upper_bound=0.75 * radius)
+        bidx = np.flatnonzero(is_b & ~np.isfinite(dd))
         if len(bidx) < min_points:
             continue
         # look for anything at roof height in the gap (half-plane facing out)
