@@ -37,6 +37,9 @@ def test_steps_recover_the_eaves_and_keep_the_ridge(als_roofs):
     found1, _ = _found(s1, scene.edges, "eave")
     assert n == 6 and found0 == 0  # no wall points: no roof-wall intersection
     assert found1 == n  # every eave is a step edge
+    # gable ends (verges) are short, sloped runs: most are found at this density (3 of 4)
+    verges, nv = _found(s1, scene.edges, "verge")
+    assert nv == 4 and verges >= 2 and _found(s0, scene.edges, "verge")[0] == 0
     # the ridge (roof-roof intersection) is found at this density, and only once
     assert _found(s1, scene.edges, "ridge") == (1, 1)
     ridge = np.asarray(scene.edges.attributes["kind"]) == "ridge"
