@@ -608,8 +608,10 @@ def step_segments(
     wider than 120 degrees and the plane does not resume beyond the gap (a
     hole in the sampling); a boundary point is a step point when no point
     of the cloud outside its plane lies in that gap (in the half-plane facing
-    it, within the same radius) higher than the roof minus `min_step`. A
-    boundary against a higher surface is left out: there the roof meets the
+    it, within the same radius) higher than the roof plus `min_step`, or
+    higher than the roof minus `min_step` and more than 0.75 point spacings
+    out (the top of the roof's own wall, just below the eave, does not
+    count). A boundary against a higher surface is left out: there the roof meets the
     foot of a taller wall, which each strip occludes differently; a boundary
     against a surface at roof height is a ridge or an intersection, found by
     the plane-pair model. Straight runs of step points (sequential RANSAC with
@@ -657,11 +659,15 @@ def step_segments(
             owner = np.repeat(np.arange(len(bidx)), lens)
             other = seg.labels[flat] != k
             rel = points[flat, :2] - xy[bidx][owner]
-            facing = np.einsum("ij,ij->i", rel, g[bidx][owner]) > 0
+            out = np.einsum("ij,ij->i", rel, g[bidx][owner])  # distance out of the roof (m)
             zroof = (seg.rho[k] - points[flat, :2] @ n[:2]) / n[2]
-            high = points[flat, 2] > zroof - min_step
+            dz = points[flat, 2] - zroof
+            # a surface continuing at roof height (beyond the eave's own wall points, which
+            # hang just below it), or anything clearly above the roof
+            level = (dz > -min_step) & (out > 0.75 * sp)
+            above = (dz > min_step) & (out > 0)
             blocked = np.zeros(len(bidx), dtype=bool)
-            np.logical_or.at(blocked, owner, other & facing & high)
+            np.logical_or.at(blocked, owner, other & (level | above))
             step = ~blocked
         sxy = xy[bidx[step]]
         if len(sxy) < min_points:
