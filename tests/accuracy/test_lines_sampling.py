@@ -81,6 +81,9 @@ def test_bad_band_is_an_option_error():
     a, b = _strips(0.05)
     with pytest.raises(OptionError, match="threshold_range"):
         match_segments(a, b, threshold_range=(1.0, 0.5))
+    for bad in ("wide", (1.0,), ("a", "b"), (float("nan"), 1.0)):
+        with pytest.raises(OptionError, match="threshold_range"):
+            match_segments(a, b, threshold_range=bad)
     with pytest.raises(OptionError, match="auto"):
         match_strips(a, b, auto="median")
 

@@ -764,7 +764,10 @@ def match_segments(
         auto_tm = auto_threshold(near_tm, sensitivity=sensitivity)
         auto_mt = auto_threshold(near_mt, sensitivity=sensitivity)
         if threshold_range is not None:
-            lo, hi = (float(v) for v in threshold_range)
+            try:
+                lo, hi = (float(v) for v in threshold_range)
+            except (TypeError, ValueError):
+                lo = hi = float("nan")
             if not (np.isfinite(lo) and np.isfinite(hi) and 0 <= lo <= hi):
                 raise OptionError(f"threshold_range must be 0 <= lo <= hi, got {threshold_range}")
             auto_tm = _clip_threshold(auto_tm, lo, hi)
