@@ -11,6 +11,7 @@ import click
 import numpy as np
 
 from ..accuracy.swaths import DEFAULT_QUALITY_LEVEL, QUALITY_LEVELS
+from ._catalog_jobs import catalog_options, pop_catalog_options, wants_catalog
 from ._common import INT_LIST, Steps, common_options, echo, finish, settings
 
 
@@ -28,7 +29,7 @@ def load_strips(
     and buildings, :func:`~lidarqa.accuracy.swaths.surface_class_mask`). Heights
     are in metres.
     """
-    from ..accuracy.swaths import last_return_mask, surface_class_mask
+    from ..accuracy.swaths import select_surface
     from ..errors import InvalidPointsError
     from ..io import read
     from ..io.crs import ensure_same_crs, z_to_metres_factor
@@ -40,12 +41,7 @@ def load_strips(
             crs = pc.crs
         else:
             ensure_same_crs(crs, pc.crs, what=(files[0], path))
-        keep = np.ones(len(pc), dtype=bool) if all_returns else last_return_mask(pc.fields, len(pc))
-        cls = pc.classification
-        if cls is not None:
-            keep &= np.isin(cls, classes) if classes else surface_class_mask(cls, len(pc))
-        elif classes:
-            raise InvalidPointsError(f"{path} has no classification; cannot select --classes")
+        keep = select_surface(pc, classes=classes, all_returns=all_returns, where=str(path))
         if by_source_id:
             sid = pc.point_source_id
             if sid is None:
@@ -151,6 +147,7 @@ def _cm(v: float | None) -> str:
     help="CRS of the DZ rasters for files that declare none (EPSG code or WKT); a file's own "
     "CRS must agree with it.",
 )
+@catalog_options
 @common_options
 def swaths(
     files: tuple[str, ...],
@@ -169,6 +166,7 @@ def swaths(
     reference_strip: int | None,
     no_maps: bool,
     crs_option: str | None,
+    **cat: Any,
 ) -> None:
     """Relative accuracy of overlapping flight strips (swaths).
 
@@ -179,6 +177,10 @@ def swaths(
     network for more than two strips, and the measured strip noise E4 (use it
     with ``lidarqa heights --sigma-strip``). Pass/fail follows the USGS Lidar
     Base Specification / ASPRS Ed. 2 (2023) relative accuracy of the quality level.
+
+    FILES may be a catalog (a folder, a glob, a .vpc, or several files with any
+    catalog option): the strips are then compared over the whole block, chunk by
+    chunk, with the figures of one in-memory run.
     """
     from ..accuracy.swaths import assess_swaths
     from ..errors import InvalidPointsError, OutputExistsError, WriteError
@@ -202,7 +204,12 @@ def swaths(
         raise WriteError(f"output {out} is also an input")
     if s.json_path:
         check_output(s.json_path, overwrite=s.overwrite)
-    if not by_source_id and len(files) == 1:
+    cat_opts = pop_catalog_options(cat)
+    # several named files without catalog options: one strip per file, in memory (as before);
+    # a folder, a glob, a .vpc or any catalog option: the whole block, chunk by chunk
+    named_files = len(files) > 1 and not any(v not in (None, False) for v in cat_opts.values())
+    on_catalog = wants_catalog(files, cat_opts) and not named_files
+    if not by_source_id and len(files) == 1 and not on_catalog:
         raise InvalidPointsError(
             "one file is one flight strip: give one file per strip, or --by-source-id to split "
             "the file by point_source_id"
@@ -215,29 +222,51 @@ def swaths(
 
     require("rasterio", "raster")
     steps = Steps()
-    with steps("Reading " + ", ".join(Path(f).name for f in files)):
-        xyz, sid, crs, labels = load_strips(
-            files, by_source_id=by_source_id, classes=classes, all_returns=all_returns
-        )
+    options = dict(
+        cell_size=cell_size,
+        min_points=min_points,
+        range_cell=range_cell,
+        max_roughness=max_roughness,
+        max_slope=max_slope,
+        quality_level=quality_level,
+        estimate_offsets=not no_offsets,
+        rotations=rotations,
+        reference_strip=reference_strip,
+    )
+    catalog_run = None
+    if on_catalog:
+        from ._catalog_jobs import _engine, _open
+
+        catalog = _open(files, cat_opts.get("skip_bad"), steps)
+        crs = catalog.crs
+        with _engine(cat_opts.get("scheduler"), cat_opts.get("workers")) as eng:
+            from ..tiling.jobs_swaths import catalog_swaths
+
+            catalog_run = catalog_swaths(
+                catalog,
+                by_source_id=by_source_id,
+                classes=classes,
+                all_returns=all_returns,
+                chunk_size=cat_opts.get("chunk_size"),
+                buffer=cat_opts.get("buffer"),
+                engine=eng,
+                progress=not s.quiet,
+                skip_failed=True,
+                **options,
+            )
+        rep, labels = catalog_run.value, catalog_run.extra["labels"]
+    else:
+        with steps("Reading " + ", ".join(Path(f).name for f in files)):
+            xyz, sid, crs, labels = load_strips(
+                files, by_source_id=by_source_id, classes=classes, all_returns=all_returns
+            )
+        with steps(f"Comparing strips ({len(xyz):,} points, {len(np.unique(sid))} strips)"):
+            rep = assess_swaths(xyz, sid, **options)
     if given_crs is not None:
         if crs is not None:  # the rasters are horizontal: compare horizontal parts
             ensure_same_crs(_horizontal(crs), _horizontal(given_crs), what=(files[0], "--crs"))
         else:
             crs = given_crs
-    with steps(f"Comparing strips ({len(xyz):,} points, {len(np.unique(sid))} strips)"):
-        rep = assess_swaths(
-            xyz,
-            sid,
-            cell_size=cell_size,
-            min_points=min_points,
-            range_cell=range_cell,
-            max_roughness=max_roughness,
-            max_slope=max_slope,
-            quality_level=quality_level,
-            estimate_offsets=not no_offsets,
-            rotations=rotations,
-            reference_strip=reference_strip,
-        )
     written: list[str] = []
     out.mkdir(exist_ok=True)
     with steps(f"Writing {out}"):
@@ -314,6 +343,12 @@ def swaths(
     for f in rep.flags:
         echo("note: " + f)
     echo(f"{'PASS' if rep.passed else 'FAIL'}; wrote {len(written)} file(s) to {out}")
+    results = dict(rep.to_dict(), outputs=written)
+    if catalog_run is not None:
+        from ._catalog_jobs import _echo_run, _run_summary
+
+        _echo_run(catalog_run)
+        results["catalog"] = _run_summary(catalog_run)
     finish(
         "swaths",
         inputs={"files": list(files), "strips": labels},
@@ -323,9 +358,14 @@ def swaths(
             classes=classes,
             all_returns=all_returns,
             crs=crs_option,
+            **({k: v for k, v in cat_opts.items() if v not in (None, False)}),
         ),
-        results=dict(rep.to_dict(), outputs=written),
+        results=results,
     )
+    if catalog_run is not None:
+        from ._catalog_jobs import _failed_exit
+
+        _failed_exit(catalog_run)
 
 
 def _horizontal(crs: Any) -> Any:

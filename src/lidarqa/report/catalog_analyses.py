@@ -304,8 +304,28 @@ def _heights(ctx: Any, item: Any) -> Any:
     return _with_overview(out, run, f"{name}: chunks")
 
 
+def _swaths(ctx: Any, item: Any) -> Any:
+    from ..tiling.jobs_swaths import catalog_swaths
+    from .analyses.swaths import swaths_section
+
+    opts = item.options
+    name = opts["cloud"]
+    with ctx.step(f"Comparing the flight strips of the catalog {name}"):
+        run = catalog_swaths(ctx.config.inputs[name].path, by_source_id=True,
+                             classes=opts["classes"], source_ids=opts["source_ids"],
+                             all_returns=not opts["last_returns"], skip_failed=True,
+                             **item.params)
+    out = swaths_section(ctx, item, run.value, run.catalog.crs)
+    out.paragraphs = [*out.paragraphs,
+                      f"{name} is a catalog: every grid cell is fitted in the chunk that owns "
+                      "it, with all its points; the figures are those of one run over the "
+                      "whole block."]
+    return _with_overview(out, run, f"{name}: chunks")
+
+
 _CATALOG_ANALYSES: dict[str, Callable[[Any, Any], Any]] = {
     "info": _info,
+    "swaths": _swaths,
     "edges": _edges,
     "checkpoints": _checkpoints,
     "heights": _heights,

@@ -126,6 +126,11 @@ def run_swaths(ctx: RunContext, item: AnalysisItem) -> SectionResult:
     xyz[:, 2] *= z_to_metres_factor(cloud.crs)
     with ctx.step(f"Comparing flight strips ({len(xyz):,} points)"):
         rep = assess_swaths(xyz, np.asarray(sid)[keep].astype(np.int64), **item.params)
+    return swaths_section(ctx, item, rep, cloud.crs)
+
+
+def swaths_section(ctx: RunContext, item: AnalysisItem, rep: Any, crs: Any) -> SectionResult:
+    """The report section of a :class:`~lidarqa.accuracy.swaths.SwathReport` (DZ rasters too)."""
     res = rep.to_dict()
     finite = [p.rmsdz for p in rep.pairs if np.isfinite(p.rmsdz)]
     res["max_rmsdz"] = max(finite) if finite else None
@@ -146,7 +151,7 @@ def run_swaths(ctx: RunContext, item: AnalysisItem) -> SectionResult:
 
             path = ctx.output_path(item, f"dz_{g.strip_a}_{g.strip_b}.tif")
             write_geotiff(
-                path, g.dz, x0=g.x0, y1=g.y1, cell_size=g.cell_size, crs=cloud.crs, overwrite=True
+                path, g.dz, x0=g.x0, y1=g.y1, cell_size=g.cell_size, crs=crs, overwrite=True
             )
             outputs.append(path.name)
         figures.append(
