@@ -11,7 +11,8 @@ reading the cloud into memory, and its report section adds the catalog
 overview map (tiles, chunks coloured by status, strips) and the per-chunk
 status table (:mod:`lidarqa.report.catalog_overview`). Available on catalogs:
 ``info`` (the catalog summary from the headers), ``edges``,
-``checkpoints`` with ``vertical = true`` and a check-point file, and
+``checkpoints`` with ``vertical = true`` and a check-point file, ``swaths`` (strips by
+``point_source_id``), and
 ``heights`` with map-point and reference-point inputs. The others
 report a clear error for that analysis while the rest of the report runs.
 Chunks use the default size and buffer and run in this process.
