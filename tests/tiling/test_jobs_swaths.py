@@ -124,6 +124,12 @@ def test_catalog_refuses_one_strip_and_bad_options(tmp_path, strip_tiles):
         catalog_swaths(strip_tiles, by_source_id=True, cell_size=2.0, buffer=1.0)
     with pytest.raises(OptionError, match="unknown option"):
         catalog_swaths(strip_tiles, by_source_id=True, cell_sise=2.0)
+    # a range cell far below the cell size: a clear error on both paths, not an overflow
+    with pytest.raises(OptionError, match="too small"):
+        catalog_swaths(strip_tiles, by_source_id=True, cell_size=1.0, range_cell=1e-300)
+    scene = make_strip_scene(2, noise=0.02, length=60.0, seed=1)
+    with pytest.raises(OptionError, match="too small"):
+        assess_swaths(scene.points, scene.strip, cell_size=1.0, range_cell=1e-300)
 
 
 def test_cli_swaths_on_a_folder(tmp_path, strip_tiles):
@@ -152,6 +158,10 @@ def test_cli_swaths_on_a_folder(tmp_path, strip_tiles):
     r = CliRunner().invoke(cli, ["swaths", folder, "-o", str(tmp_path / "o2"), "--workers", "1"])
     assert r.exit_code == 1 and "Traceback" not in r.output
     assert not (tmp_path / "o2").exists() or not any((tmp_path / "o2").iterdir())
+    # --buffer 0 is a given catalog option (0 is not "unset"): refused, one line
+    r = CliRunner().invoke(cli, ["swaths", str(strip_tiles[0]), "--by-source-id", "-o",
+                                 str(tmp_path / "o3"), "--buffer", "0", "--cell-size", "1"])
+    assert r.exit_code == 1 and "buffer must be at least the cell size" in r.output
 
 
 @needs_shared

@@ -516,8 +516,23 @@ def range_plan(
     if range_cell is None:
         split = max(1, round(float(np.sqrt(np.mean(planes.n[smooth]))) / 2.0))
     else:
-        split = max(1, round(cell_size / range_cell))
+        split = range_split(cell_size, range_cell)
     return smooth, split
+
+
+MAX_RANGE_SPLIT = 64  # range cells per cell side at most (a cell holds ~16 points)
+
+
+def range_split(cell_size: float, range_cell: float) -> int:
+    """Range cells per cell side for an explicit `range_cell` (m)."""
+    check_positive(range_cell, "range_cell")
+    ratio = float(cell_size) / float(range_cell)
+    if not ratio <= MAX_RANGE_SPLIT + 0.5:
+        raise OptionError(
+            f"range_cell {range_cell:g} m is too small for cells of {cell_size:g} m (at least "
+            f"{cell_size / MAX_RANGE_SPLIT:g} m)"
+        )
+    return max(1, round(ratio))
 
 
 def swaths_from_planes(

@@ -11,7 +11,13 @@ import click
 import numpy as np
 
 from ..accuracy.swaths import DEFAULT_QUALITY_LEVEL, QUALITY_LEVELS
-from ._catalog_jobs import catalog_options, pop_catalog_options, wants_catalog
+from ._catalog_jobs import (
+    catalog_options,
+    catalog_options_given,
+    option_given,
+    pop_catalog_options,
+    wants_catalog,
+)
 from ._common import INT_LIST, Steps, common_options, echo, finish, settings
 
 
@@ -208,7 +214,7 @@ def swaths(
     cat_opts = pop_catalog_options(cat)
     # several named files without catalog options: one strip per file, in memory (as before);
     # a folder, a glob, a .vpc or any catalog option: the whole block, chunk by chunk
-    named_files = len(files) > 1 and not any(v not in (None, False) for v in cat_opts.values())
+    named_files = len(files) > 1 and not catalog_options_given(cat_opts)
     on_catalog = wants_catalog(files, cat_opts) and not named_files
     if not by_source_id and len(files) == 1 and not on_catalog:
         raise InvalidPointsError(
@@ -359,7 +365,7 @@ def swaths(
             classes=classes,
             all_returns=all_returns,
             crs=crs_option,
-            **({k: v for k, v in cat_opts.items() if v not in (None, False)}),
+            **({k: v for k, v in cat_opts.items() if option_given(v)}),
         ),
         results=results,
     )

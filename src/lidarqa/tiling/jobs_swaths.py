@@ -224,6 +224,7 @@ def catalog_swaths(
         CELL_TARGET_POINTS,
         assess_options,
         cell_size_from_occupancy,
+        range_split,
         strip_planes,
         swaths_from_planes,
     )
@@ -250,7 +251,9 @@ def catalog_swaths(
         # the densities behind the default cell size, over every point (first pass)
         occ_chunks = make_chunks(catalog, chunk_size=chunk_opts["chunk_size"], buffer=0.0,
                                  origin=chunk_opts["origin"])
-        _, occ_parts = _run(catalog, occ_chunks, OccupancyTask(**sel), run_opts, "Density")
+        occ_outcomes, occ_parts = _run(catalog, occ_chunks, OccupancyTask(**sel), run_opts,
+                                       "Density")
+        _all_failed(occ_outcomes)
         occupancy: dict[int, tuple[int, np.ndarray]] = {}
         for part in occ_parts:
             for s, (n, keys) in (part or {}).items():
@@ -270,12 +273,13 @@ def catalog_swaths(
     if range_cell is None:
         splits = tuple(range(1, MAX_SPLIT + 1))
     else:
-        splits = tuple(sorted({1, max(1, round(cell_size / range_cell))}))
+        splits = tuple(sorted({1, range_split(cell_size, range_cell)}))
     task = SwathCellsTask(grid=grid, z0=z0, clamp=(b[0], b[1], b[2], b[3]), **sel,
                           min_points=int(min_points),
                           max_roughness=float(max_roughness), max_slope=float(max_slope),
                           splits=splits)
     outcomes, parts = _run(catalog, chunks, task, run_opts, "Strips")
+    _all_failed(outcomes)
     per_strip: dict[int, list[Any]] = {}
     for part in parts:
         for s, cells in (part or {}).items():
@@ -318,3 +322,15 @@ def catalog_swaths(
                       {"labels": {int(k): v for k, v in labels.items() if k in set(ids.tolist())},
                        "cell_size": float(cell_size), "buffer": float(chunk_opts["buffer"])})
 
+
+
+def _all_failed(outcomes: Sequence[Any]) -> None:
+    """Raise when no chunk succeeded (nothing to merge): the first chunk's error says why."""
+    if outcomes and not any(o.ok for o in outcomes):
+        from .engine import ChunkFailedError
+
+        first = next(o for o in outcomes if not o.ok)
+        raise ChunkFailedError(
+            f"every chunk failed ({len(outcomes)}); {first.chunk.id}: {first.error}",
+            list(outcomes),
+        )
