@@ -53,11 +53,21 @@ def catalog_options(func: Callable[..., Any]) -> Callable[..., Any]:
     return func
 
 
+def option_given(value: Any) -> bool:
+    """An option the user gave: not None and not an unset flag (``--buffer 0`` is given)."""
+    return value is not None and value is not False
+
+
+def catalog_options_given(opts: dict[str, Any]) -> bool:
+    """Any catalog option given."""
+    return any(option_given(opts.get(k)) for k in _OPTION_NAMES)
+
+
 def wants_catalog(paths: Sequence[str], opts: dict[str, Any]) -> bool:
     """A catalog input, or a catalog option given."""
     from ._catalog import is_catalog
 
-    return is_catalog(paths) or any(opts.get(k) not in (None, False) for k in _OPTION_NAMES)
+    return is_catalog(paths) or catalog_options_given(opts)
 
 
 def pop_catalog_options(opts: dict[str, Any]) -> dict[str, Any]:

@@ -10,7 +10,7 @@ from typing import Any
 import click
 
 from ..units import format_decimal
-from ._catalog_jobs import catalog_options, wants_catalog
+from ._catalog_jobs import catalog_options, catalog_options_given, wants_catalog
 from ._common import (
     CRS_HELP,
     INT_LIST,
@@ -387,7 +387,7 @@ def repeatability(
         raise OptionError("--pool joins the strips of several files and needs --by-source-id")
     # Several named files without catalog options keep the per-file (or --pool) comparison;
     # a folder, a glob, a .vpc or any catalog option compares the strips over the whole block.
-    named_files = len(files) > 1 and not any(v not in (None, False) for v in cat_opts.values())
+    named_files = len(files) > 1 and not catalog_options_given(cat_opts)
     if by_source_id and wants_catalog(files, cat_opts) and not named_files:
         from ._catalog_jobs import repeatability_on_catalog
 
@@ -402,7 +402,7 @@ def repeatability(
                            "rotate": rotate, "denominator": denominator, "auto": auto},
             cat_opts=cat_opts, print_rows=lambda rows: _print_rows(rows, threshold, pool=True))
         return
-    if any(v not in (None, False) for v in cat_opts.values()):
+    if catalog_options_given(cat_opts):
         raise OptionError("catalog options apply to repeatability --by-source-id only")
     prepare_outputs(inputs=files)
     steps = Steps()

@@ -11,7 +11,8 @@ reading the cloud into memory, and its report section adds the catalog
 overview map (tiles, chunks coloured by status, strips) and the per-chunk
 status table (:mod:`lidarqa.report.catalog_overview`). Available on catalogs:
 ``info`` (the catalog summary from the headers), ``edges``,
-``checkpoints`` with ``vertical = true`` and a check-point file, and
+``checkpoints`` with ``vertical = true`` and a check-point file, ``swaths`` (strips by
+``point_source_id``), and
 ``heights`` with map-point and reference-point inputs. The others
 report a clear error for that analysis while the rest of the report runs.
 Chunks use the default size and buffer and run in this process.
@@ -304,8 +305,28 @@ def _heights(ctx: Any, item: Any) -> Any:
     return _with_overview(out, run, f"{name}: chunks")
 
 
+def _swaths(ctx: Any, item: Any) -> Any:
+    from ..tiling.jobs_swaths import catalog_swaths
+    from .analyses.swaths import swaths_section
+
+    opts = item.options
+    name = opts["cloud"]
+    with ctx.step(f"Comparing the flight strips of the catalog {name}"):
+        run = catalog_swaths(ctx.config.inputs[name].path, by_source_id=True,
+                             classes=opts["classes"], source_ids=opts["source_ids"],
+                             all_returns=not opts["last_returns"], skip_failed=True,
+                             **item.params)
+    out = swaths_section(ctx, item, run.value, run.catalog.crs)
+    out.paragraphs = [*out.paragraphs,
+                      f"{name} is a catalog: every grid cell is fitted in the chunk that owns "
+                      "it, with all its points; the figures are those of one run over the "
+                      "whole block."]
+    return _with_overview(out, run, f"{name}: chunks")
+
+
 _CATALOG_ANALYSES: dict[str, Callable[[Any, Any], Any]] = {
     "info": _info,
+    "swaths": _swaths,
     "edges": _edges,
     "checkpoints": _checkpoints,
     "heights": _heights,
