@@ -143,6 +143,9 @@ LABELS: dict[str, Label] = {
     "connect_ratio": _l("connection pass: share of connected points", PCT, 100.0),
     "below_pass": _l("final pass for points below the ground"),
     "below_distance": _l("final pass: distance below the ground", M),
+    "perched_step": _l("perched-surface test: drop on opposite sides (0 = off)", M),
+    "perched_angle": _l("perched-surface test: steepest grade of terrain", DEG),
+    "perched_radius": _l("perched-surface test: search radius", M),
     # plane segmentation and edges
     "near_dist": _l("edge support: distance to the line", M),
     "min_angle": _l("minimum angle between planes", DEG),
