@@ -40,6 +40,14 @@ class Criteria:
     mirror_max_distance: float = np.inf  # m, horizontal P–V* limit of mirroring
 
 
+def tree_workers() -> int:
+    """Threads for cKDTree queries: numba's thread count (``NUMBA_NUM_THREADS``).
+
+    Every query is answered on its own, so the result does not depend on it.
+    """
+    return int(get_num_threads())
+
+
 def lowest_per_cell(
     xyz: np.ndarray, idx: np.ndarray, cell_size: float, origin: np.ndarray
 ) -> np.ndarray:
@@ -735,11 +743,25 @@ def supported_lowest_per_cell(
     ps = p[sub]
     scale = np.array([1.0, 1.0, radius / max(dz, 1e-9)])
     tree = cKDTree(ps * scale)
-    counts = np.asarray(tree.query_ball_point(p[look] * scale, r=radius, return_length=True)) - 1
+    counts = (
+        np.asarray(
+            tree.query_ball_point(
+                p[look] * scale, r=radius, return_length=True, workers=tree_workers()
+            )
+        )
+        - 1
+    )
     good = counts >= min_support
     if min_ratio > 0:
         tree2 = cKDTree(ps[:, :2])
-        total = np.asarray(tree2.query_ball_point(p[look, :2], r=radius, return_length=True)) - 1
+        total = (
+            np.asarray(
+                tree2.query_ball_point(
+                    p[look, :2], r=radius, return_length=True, workers=tree_workers()
+                )
+            )
+            - 1
+        )
         good &= counts >= min_ratio * total
     sup = look[good]
     ps2 = p[sup]
