@@ -171,16 +171,15 @@ def grid_neighbours(pts, q, r2, cx, cy, cz, nyz, nz, cell_keys, cell_start, orde
     py = pts[q, 1]
     pz = pts[q, 2]
     ncell = cell_keys.shape[0]
+    z0 = max(iz - 1, 0)
+    z1 = min(iz + 1, nz - 1)
     for dx in range(-1, 2):
         for dy in range(-1, 2):
-            for dz in range(-1, 2):
-                jz = iz + dz
-                if jz < 0 or jz >= nz:
-                    continue
-                key = (ix + dx) * nyz + (iy + dy) * nz + jz
-                c = np.searchsorted(cell_keys, key)
-                if c >= ncell or cell_keys[c] != key:
-                    continue
+            # the (up to) three cells of a column have consecutive keys: one binary
+            # search, then walk the sorted keys (same cells, same order as 27 searches)
+            col = (ix + dx) * nyz + (iy + dy) * nz
+            c = np.searchsorted(cell_keys, col + z0)
+            while c < ncell and cell_keys[c] <= col + z1:
                 for a in range(cell_start[c], cell_start[c + 1]):
                     j = order[a]
                     if j == q:
@@ -191,6 +190,7 @@ def grid_neighbours(pts, q, r2, cx, cy, cz, nyz, nz, cell_keys, cell_start, orde
                     if ddx * ddx + ddy * ddy + ddz * ddz <= r2:
                         out[m] = j
                         m += 1
+                c += 1
     return m
 
 

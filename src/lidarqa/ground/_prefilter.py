@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ._tin import tree_workers
+
 __all__ = ["low_outliers"]
 
 
@@ -23,7 +25,7 @@ def low_outliers(
         return np.zeros(n, dtype=bool)
     kk = min(k + 1, n)
     tree = cKDTree(xyz[:, :2])
-    d, j = tree.query(xyz[:, :2], k=kk, distance_upper_bound=radius)
+    d, j = tree.query(xyz[:, :2], k=kk, distance_upper_bound=radius, workers=tree_workers())
     d = d[:, 1:]
     j = j[:, 1:]
     valid = np.isfinite(d)

@@ -40,6 +40,14 @@ class Criteria:
     mirror_max_distance: float = np.inf  # m, horizontal P–V* limit of mirroring
 
 
+def tree_workers() -> int:
+    """Threads for cKDTree queries: numba's thread count (``NUMBA_NUM_THREADS``).
+
+    Every query is answered on its own, so the result does not depend on it.
+    """
+    return int(get_num_threads())
+
+
 def lowest_per_cell(
     xyz: np.ndarray, idx: np.ndarray, cell_size: float, origin: np.ndarray
 ) -> np.ndarray:
@@ -127,10 +135,11 @@ class TIN:
         )
         # every triangle made counter-clockwise; adjacency, longest XY edge, upward
         # unit normal and slope of each facet, in one pass
-        self.edge_max, self.normal, self.slope = _setup_kernel(self.vxyz, simp, nb, have_nb)
+        self.edge_max, self.normal, self.slope, self.n_virtual = _setup_kernel(
+            self.vxyz, np.ascontiguousarray(vsrc, dtype=np.int64), simp, nb, have_nb
+        )
         self.simplices = simp
         self.neighbors = nb
-        self.n_virtual = (vsrc[simp] < 0).sum(axis=1).astype(np.int64)
 
     def locate(self, xy: np.ndarray, *, presorted: bool = False) -> np.ndarray:
         """Triangle index of each XY point, -1 outside the TIN.
@@ -391,14 +400,15 @@ def _interleave(v: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True, parallel=True)
-def _setup_kernel(vxyz, simp, nb, have_nb):  # pragma: no cover - numba
+def _setup_kernel(vxyz, vsrc, simp, nb, have_nb):  # pragma: no cover - numba
     """Orient triangles CCW (in place), fill adjacency ``nb`` unless given, facet geometry.
 
     ``nb[k, i]`` is the triangle across the side opposite vertex i (-1 on the hull),
     found through the triangles incident to each vertex (no global sort). Every
     triangle finds its own neighbours (no shared writes), so the loops run in
     parallel and the result does not depend on the thread count.
-    Returns (longest XY edge, upward unit normal, slope in rad) per triangle.
+    Returns (longest XY edge, upward unit normal, slope in rad, number of virtual
+    vertices, i.e. with ``vsrc < 0``) per triangle.
     """
     k = simp.shape[0]
     nv = vxyz.shape[0]
@@ -412,37 +422,42 @@ def _setup_kernel(vxyz, simp, nb, have_nb):  # pragma: no cover - numba
             if have_nb:
                 nb[t, 1], nb[t, 2] = nb[t, 2], nb[t, 1]
     if not have_nb:
-        # incidence lists: for each vertex, 3*triangle + position of the vertex in it
+        # incidence lists: for each vertex, its triangles and the vertex that follows
+        # it in each (CCW), stored side by side so the search below reads no `simp` row
         start = np.zeros(nv + 1, np.int64)
         for t in range(k):
-            for i in range(3):
-                start[simp[t, i] + 1] += 1
+            start[simp[t, 0] + 1] += 1
+            start[simp[t, 1] + 1] += 1
+            start[simp[t, 2] + 1] += 1
         for v in range(nv):
             start[v + 1] += start[v]
         fill = start[:-1].copy()
-        inc = np.empty(3 * k, np.int64)
+        inc_t = np.empty(3 * k, np.int64)
+        inc_next = np.empty(3 * k, np.int64)
         for t in range(k):
             for i in range(3):
                 v = simp[t, i]
-                inc[fill[v]] = 3 * t + i
+                inc_t[fill[v]] = t
+                inc_next[fill[v]] = simp[t, (i + 1) % 3]
                 fill[v] += 1
         for t in prange(k):
             for i in range(3):
                 a = simp[t, (i + 1) % 3]
                 b = simp[t, (i + 2) % 3]
-                nb[t, i] = -1
+                r = -1
                 # the neighbour holds the same side in the opposite direction: b, then a
                 for q in range(start[b], start[b + 1]):
-                    u = inc[q] // 3
-                    pos = inc[q] - 3 * u
-                    if simp[u, (pos + 1) % 3] == a and u != t:
-                        nb[t, i] = u
+                    if inc_next[q] == a and inc_t[q] != t:
+                        r = inc_t[q]
                         break
+                nb[t, i] = r
     edge_max = np.empty(k)
     normal = np.empty((k, 3))
     slope = np.empty(k)
+    n_virtual = np.empty(k, np.int64)
     for t in prange(k):
         i0, i1, i2 = simp[t, 0], simp[t, 1], simp[t, 2]
+        n_virtual[t] = (vsrc[i0] < 0) + (vsrc[i1] < 0) + (vsrc[i2] < 0)
         x0, y0, z0 = vxyz[i0, 0], vxyz[i0, 1], vxyz[i0, 2]
         ux, uy, uz = vxyz[i1, 0] - x0, vxyz[i1, 1] - y0, vxyz[i1, 2] - z0
         wx, wy, wz = vxyz[i2, 0] - x0, vxyz[i2, 1] - y0, vxyz[i2, 2] - z0
@@ -462,7 +477,7 @@ def _setup_kernel(vxyz, simp, nb, have_nb):  # pragma: no cover - numba
         normal[t, 1] = ny / norm
         normal[t, 2] = nz / norm
         slope[t] = math.acos(min(abs(normal[t, 2]), 1.0))
-    return edge_max, normal, slope
+    return edge_max, normal, slope, n_virtual
 
 
 @njit(cache=True)
@@ -735,11 +750,25 @@ def supported_lowest_per_cell(
     ps = p[sub]
     scale = np.array([1.0, 1.0, radius / max(dz, 1e-9)])
     tree = cKDTree(ps * scale)
-    counts = np.asarray(tree.query_ball_point(p[look] * scale, r=radius, return_length=True)) - 1
+    counts = (
+        np.asarray(
+            tree.query_ball_point(
+                p[look] * scale, r=radius, return_length=True, workers=tree_workers()
+            )
+        )
+        - 1
+    )
     good = counts >= min_support
     if min_ratio > 0:
         tree2 = cKDTree(ps[:, :2])
-        total = np.asarray(tree2.query_ball_point(p[look, :2], r=radius, return_length=True)) - 1
+        total = (
+            np.asarray(
+                tree2.query_ball_point(
+                    p[look, :2], r=radius, return_length=True, workers=tree_workers()
+                )
+            )
+            - 1
+        )
         good &= counts >= min_ratio * total
     sup = look[good]
     ps2 = p[sup]

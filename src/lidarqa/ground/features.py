@@ -17,6 +17,7 @@ from scipy.spatial import cKDTree
 
 from .._validate import as_points, check_positive, check_range
 from ..errors import InvalidPointsError
+from ._tin import tree_workers
 
 __all__ = [
     "SegmentFeatures",
@@ -94,9 +95,9 @@ def point_scatterness(points: Any, *, k: int = 10, subset: Any = None) -> np.nda
     c = pts - pts.mean(axis=0)
     tree = cKDTree(c)
     out = np.empty(idx.size)
-    step = 200_000
-    for s in range(0, idx.size, step):
-        q = idx[s : s + step]
+
+    def chunk(s: int) -> None:
+        q = idx[s : s + _SCATTER_CHUNK]
         _, nb = tree.query(c[q], k=kk)
         nb = nb.reshape(q.size, kk)
         nbp = c[nb]
@@ -104,8 +105,24 @@ def point_scatterness(points: Any, *, k: int = 10, subset: Any = None) -> np.nda
         cov = np.einsum("nki,nkj->nij", nbp, nbp) / kk
         w, _ = _eig_sym3(cov)
         with np.errstate(divide="ignore", invalid="ignore"):
-            out[s : s + step] = np.where(w[:, 2] > 0, np.sqrt(w[:, 0] / w[:, 2]), np.nan)
+            out[s : s + _SCATTER_CHUNK] = np.where(w[:, 2] > 0, np.sqrt(w[:, 0] / w[:, 2]), np.nan)
+
+    # chunks are independent (each writes its own slice) and NumPy / cKDTree release
+    # the GIL, so threads give the same result as one loop, whatever their number
+    starts = range(0, idx.size, _SCATTER_CHUNK)
+    workers = min(tree_workers(), len(starts))
+    if workers > 1:
+        from concurrent.futures import ThreadPoolExecutor
+
+        with ThreadPoolExecutor(workers) as pool:
+            list(pool.map(chunk, starts))
+    else:
+        for s in starts:
+            chunk(s)
     return out
+
+
+_SCATTER_CHUNK = 100_000  # points per chunk of point_scatterness (bounds the (n, k, 3) arrays)
 
 
 def segment_features(

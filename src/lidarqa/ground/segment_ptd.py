@@ -23,7 +23,7 @@ from .._progress import ProgressCallback, report, stage
 from .._validate import as_points, check_choice, check_positive, check_range
 from ..errors import DegenerateGeometryWarning, InvalidPointsError, OptionError
 from ._perched import perched_mask
-from ._tin import TIN
+from ._tin import TIN, tree_workers
 from .features import detect_object_segments, segment_features
 from .ptd import DensifyState, TINParameters, densify, final_pass, initial_seeds, prepare
 
@@ -561,7 +561,7 @@ def _border_tests(
     tree = cKDTree(xyz[pool, :2])
     k = min(_BORDER_K, pool.size)
     d, j = tree.query(
-        xyz[src, :2], k=k, distance_upper_bound=float(par.raised_radius), workers=-1
+        xyz[src, :2], k=k, distance_upper_bound=float(par.raised_radius), workers=tree_workers()
     )
     d = d.reshape(src.size, k)
     j = j.reshape(src.size, k)
