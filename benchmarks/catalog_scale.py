@@ -109,7 +109,10 @@ def run_ground(block: Path, out: Path, workers: int, chunk_size: float | None) -
         cmd += ["--chunk-size", str(chunk_size)]
     t0 = time.perf_counter()
     env = _env()
-    env["NUMBA_NUM_THREADS"] = "1"  # 1 worker = 1 core (Dask workers are single-threaded too)
+    # 1 worker = 1 core, as each Dask worker: no kernel or LAZ-codec threads beyond it
+    for var in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS",
+                "RAYON_NUM_THREADS"):
+        env[var] = "1"
     p = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     sampler = _RssSampler(p.pid)
     stdout, stderr = p.communicate()

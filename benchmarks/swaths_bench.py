@@ -3,6 +3,8 @@
 Run:  /work/venv/bin/python benchmarks/swaths_bench.py calibration [--runs 1000]
       /work/venv/bin/python benchmarks/swaths_bench.py speed        (1 km², 4 strips, ~1 M points)
       /work/venv/bin/python benchmarks/swaths_bench.py real         (needs ../shared/lidar-data)
+      /work/venv/bin/python benchmarks/swaths_bench.py lines        (strip-pair lines per
+                                                  50 m tile and on St-Barth)
 
 Prints tables; timing goals live here, never in the unit tests. CPU time is printed
 next to wall time because the machine may be shared.
@@ -154,16 +156,63 @@ def real() -> None:
             )
 
 
+def lines() -> None:
+    """Strip-to-strip line pairs per IGN 50 m tile and on St-Barth, four edge/threshold set-ups."""
+    from lidarqa import read
+    from lidarqa.accuracy._lines_io import with_point_spacing
+    from lidarqa.accuracy.lines import match_segments, match_strips
+    from lidarqa.geometry.edges import extract_edges
+    from lidarqa.geometry.segmentation import segment_planes
+
+    tiles = sorted(SHARED.glob("test_data_770*_6277*_LA93_IGN69.laz"))
+    sb = SHARED / "St_Barth_RGAF09_UTM20N_IGN_1988_SB_subset_100m.laz"
+    setups = {"edges, knee": ({}, "knee"), "edges, band": ({}, "sampling"),
+              "edges+steps, knee": ({"steps": True}, "knee"),
+              "edges+steps, band": ({"steps": True}, "sampling")}
+    sets: dict = {}
+    for path in [*tiles, sb]:
+        cloud = read(path).select(classes=[6])
+        sid = cloud.point_source_id
+        name = path.name[10:22] if path.name.startswith("test_data") else "St-Barth"
+        pair = (706, 707) if name != "St-Barth" else (4320, 4330)
+        for s in pair:
+            xyz = cloud.xyz[sid == s]
+            seg = segment_planes(xyz)
+            for label, (opts, _) in setups.items():
+                e = with_point_spacing(extract_edges(xyz, segmentation=seg, **opts), xyz)
+                sets.setdefault((label, name), []).append(e)
+    print(f"{'set-up':<20}{'tile':<14}{'p':>5}{'q':>5}{'<=0.5 m':>9}{'pairs':>11}"
+          f"{'δ T→M':>8}{'δ M→T':>8}{'LHD':>7}")
+    for label, (_, auto) in setups.items():
+        deltas = []
+        for name in [p.name[10:22] for p in tiles] + ["St-Barth"]:
+            a, b = sets[(label, name)]
+            if min(len(a), len(b)) == 0:
+                print(f"{label:<20}{name:<14}{len(a):>5}{len(b):>5}   no edges in one strip")
+                continue
+            r = match_strips(a, b, auto=auto)
+            near = match_segments(a, b, threshold=0.5)
+            if name != "St-Barth":
+                deltas += [r["threshold_tm"], r["threshold_mt"]]
+            print(f"{label:<20}{name:<14}{r['p']:>5}{r['q']:>5}"
+                  f"{min(near.n_pairs_tm, near.n_pairs_mt):>9}"
+                  f"{str(r['n_pairs_tm']) + '/' + str(r['n_pairs_mt']):>11}"
+                  f"{r['threshold_tm']:>8.2f}{r['threshold_mt']:>8.2f}{r['lhd']:>7.3f}")
+        print(f"{label:<20}{'six tiles':<14} thresholds {min(deltas):.2f}-{max(deltas):.2f} m "
+              f"(x{max(deltas) / min(deltas):.2f})")
+
+
 def _cm3(v):
     return "n/a" if v is None else "/".join(f"{x:.3f}" for x in v)
 
 
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("what", choices=("calibration", "speed", "real"))
+    ap.add_argument("what", choices=("calibration", "speed", "real", "lines"))
     ap.add_argument("--runs", type=int, default=1000)
     a = ap.parse_args()
-    {"calibration": lambda: calibration(a.runs), "speed": speed, "real": real}[a.what]()
+    {"calibration": lambda: calibration(a.runs), "speed": speed, "real": real,
+     "lines": lines}[a.what]()
 
 
 if __name__ == "__main__":

@@ -77,7 +77,7 @@ def test_shared_threshold_conflicts_with_a_fixed_one(tmp_path):
 def test_outlines_raise_strip_pairs_on_an_ign_tile(tmp_path):
     f = SHARED / "ign-lidarhd" / "test_data_77055_627755_LA93_IGN69.laz"
     counts = []
-    for extra in ([], ["--outlines"]):
+    for extra in (["--no-steps"], ["--no-steps", "--outlines"]):
         out = tmp_path / f"r{len(extra)}.json"
         r = CliRunner().invoke(
             cli,

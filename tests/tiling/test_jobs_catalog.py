@@ -319,6 +319,9 @@ cloud = "block"
 cloud = "block"
 map = "map"
 reference = "href"
+[lines]
+test = {{ cloud = "block", classes = [6], source_id = [1] }}
+model = {{ cloud = "block", classes = [6], source_id = [2] }}
 """)
     run = run_assessment(cfg, tmp_path / "out")
     doc = json.loads((tmp_path / "out" / "report.json").read_text())
@@ -336,12 +339,21 @@ reference = "href"
     assert h["comparison"]["rms"] == mem["comparison"]["rms"]  # bit for bit
     assert h["w"]["n_outliers"] == mem["w"]["n_outliers"]
     assert h["catalog"]["chunk_status"]["failed"] == 0
-    # ground on a catalog is not an assess analysis yet: a clear error, the rest still ran
-    assert "cannot run on the catalog input" in doc["errors"]["ground"]
+    # ground on a catalog: the catalog ground job, ISPRS counts summed over its chunks
+    assert not doc.get("errors"), doc.get("errors")
+    from lidarqa.ground import classify_ground
+
+    g, mem = doc["results"]["ground"], classify_ground(whole, evaluate=True).evaluation
+    assert g["n_points"] == len(whole) and g["catalog"]["n_chunks"] >= 1
+    assert g["kappa"] == pytest.approx(mem.kappa, abs=0.01)  # tiled = untiled (>= 99.9 %)
+    assert list((tmp_path / "out").glob("**/block_ground/*.vpc"))
+    # lines between two strips of the catalog: edges extracted chunk by chunk
+    ln = doc["results"]["lines"]
+    assert ln["p"] > 0 and ln["q"] > 0
     assert run.results["info"]["n_tiles"] == info["n_tiles"]
     html = (tmp_path / "out" / "report.html").read_text()
     assert "tiles, chunks" in html and "Chunks" in html
-    assert "cannot run on the catalog input" in html
+    assert "cannot run on the catalog input" not in html
 
 
 @needs_shared
@@ -388,3 +400,21 @@ def test_semis_tile_in_4_chunks_gives_the_whole_tile_rmse_and_w_statistics():
     for part in ("comparison", "w"):
         for k, v in mem.to_dict()[part].items():
             assert h.to_dict()[part][k] == pytest.approx(v, rel=0, abs=0, nan_ok=True), (part, k)
+
+
+def test_an_analysis_without_a_catalog_version_says_so(tiles):
+    """roads has no catalog version yet: a clear error naming the available ones."""
+    from types import SimpleNamespace
+
+    from lidarqa.errors import AnalysisError
+    from lidarqa.report.catalog_analyses import catalog_analysis
+
+    _, folder, _ = tiles
+    spec = SimpleNamespace(kind="clouds", path=folder)
+    ctx = SimpleNamespace(config=SimpleNamespace(inputs={"block": spec}))
+    item = SimpleNamespace(kind="roads", options={"cloud": "block"})
+    func = catalog_analysis(ctx, item)
+    with pytest.raises(AnalysisError, match="cannot run on the catalog input 'block'.*ground"):
+        func(ctx, item)
+    ctx.config.inputs["one"] = SimpleNamespace(kind="clouds", path=next(folder.glob("*.las")))
+    assert catalog_analysis(ctx, SimpleNamespace(kind="roads", options={"cloud": "one"})) is None

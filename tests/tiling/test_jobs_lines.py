@@ -37,14 +37,19 @@ def test_every_strip_pair_over_the_block_equals_the_in_memory_run(scene):
     for s in whole:
         assert len(merged[s]) == len(whole[s]), s  # each edge once, none lost
         assert len(set(merged[s].attributes["chunk"].tolist())) > 1  # the strip spans chunks
-    rows_m = strip_pairs(merged)
-    rows_w = strip_pairs(whole)
+    # the plain knee: the whole-area edges carry no point spacing to bound it by
+    rows_m = strip_pairs(merged, auto="knee")
+    rows_w = strip_pairs(whole, auto="knee")
     assert len(rows_m) == 3  # every pair of the three strips
     for rm, rw in zip(rows_m, rows_w, strict=True):
         assert (rm["test"], rm["model"]) == (rw["test"], rw["model"])
         assert rm["n_pairs_tm"] == rw["n_pairs_tm"]
         for k in ("olhd_tm", "olhd_mt", "lhd", "threshold_tm", "threshold_mt"):
             assert rm[k] == pytest.approx(rw[k], abs=1e-9), k
+    # by default each pair's threshold is kept in its strips' sampling band
+    for row in strip_pairs(merged):
+        lo, hi = row["threshold_floor_m"], row["threshold_ceiling_m"]
+        assert 0 < lo < hi and lo <= row["threshold_tm"] <= hi and lo <= row["threshold_mt"] <= hi
     # the merge does not depend on the chunk completion order
     again = merge_strip_edges(parts)
     for s in merged:

@@ -62,6 +62,20 @@ def extract_segments(points: np.ndarray, *, crs: Any = None, **options: Any) -> 
     seg = extract_edges(points, **options)
     if crs is not None and getattr(seg, "crs", None) is None:
         seg.crs = crs
+    return with_point_spacing(seg, points)
+
+
+def with_point_spacing(seg: Segments, points: np.ndarray) -> Segments:
+    """`seg` with a ``point_spacing`` attribute (m): the sampling of the points it came from.
+
+    The median distance of a point to its 10th neighbour, the same for every
+    segment of the set; the automatic threshold between two flight strips is
+    bounded by it (:func:`lidarqa.accuracy.lines.sampling_threshold_range`).
+    """
+    from ..geometry.segmentation import point_spacing
+
+    sp = point_spacing(np.asarray(points, dtype=np.float64)) if len(points) else float("nan")
+    seg.attributes["point_spacing"] = np.full(len(seg), sp, dtype=np.float64)
     return seg
 
 

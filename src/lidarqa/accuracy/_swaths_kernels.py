@@ -141,6 +141,74 @@ def fit_cell_planes(
     )
 
 
+def residual_extremes(
+    points: np.ndarray,
+    grid: Grid,
+    planes: CellPlanes,
+    selected: np.ndarray,
+    *,
+    split: int = 1,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Highest and lowest plane residual and point count per (sub-)cell.
+
+    The mergeable part of :func:`residual_ranges`: ``(keys, hi, lo, count)`` for
+    every selected cell (``split == 1``, keys of ``planes.keys[selected]``) or
+    sub-cell (``cell_index * split² + row * split + col``, cell_index into the
+    selected cells) that holds points. Chunks of a block give parts that
+    :func:`merge_extremes` combines exactly (max, min, sum per key).
+    """
+    sel_keys = planes.keys[selected]
+    empty = np.empty(0, dtype=np.int64)
+    if len(sel_keys) == 0 or len(points) == 0:
+        return empty, np.empty(0), np.empty(0), empty
+    keys = grid.cell_of(points[:, :2])
+    pos = np.searchsorted(sel_keys, keys)
+    pos = np.minimum(pos, len(sel_keys) - 1)
+    inside = sel_keys[pos] == keys
+    pos = pos[inside]
+    pts = points[inside]
+    idx = np.flatnonzero(selected)[pos]
+    centres = grid.centres(sel_keys[pos])
+    dx = pts[:, 0] - centres[:, 0]
+    dy = pts[:, 1] - centres[:, 1]
+    r = pts[:, 2] - (planes.a[idx] + planes.b[idx] * dx + planes.c[idx] * dy)
+    if split <= 1:
+        sub = pos.astype(np.int64)
+    else:
+        size = grid.cell_size / split
+        h = 0.5 * grid.cell_size
+        col = np.clip(np.floor((dx + h) / size).astype(np.int64), 0, split - 1)
+        row = np.clip(np.floor((dy + h) / size).astype(np.int64), 0, split - 1)
+        sub = pos * split * split + row * split + col
+    ukeys, inv, counts = np.unique(sub, return_inverse=True, return_counts=True)
+    hi = np.full(len(ukeys), -np.inf)
+    lo = np.full(len(ukeys), np.inf)
+    np.maximum.at(hi, inv, r)
+    np.minimum.at(lo, inv, r)
+    if split <= 1:
+        ukeys = sel_keys[ukeys]
+    return ukeys, hi, lo, counts.astype(np.int64)
+
+
+def merge_extremes(
+    parts: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]],
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Combine :func:`residual_extremes` parts of several chunks (same planes)."""
+    parts = [p for p in parts if len(p[0])]
+    if not parts:
+        e = np.empty(0, dtype=np.int64)
+        return e, np.empty(0), np.empty(0), e
+    keys = np.concatenate([p[0] for p in parts])
+    ukeys, inv = np.unique(keys, return_inverse=True)
+    hi = np.full(len(ukeys), -np.inf)
+    lo = np.full(len(ukeys), np.inf)
+    n = np.zeros(len(ukeys), dtype=np.int64)
+    np.maximum.at(hi, inv, np.concatenate([p[1] for p in parts]))
+    np.minimum.at(lo, inv, np.concatenate([p[2] for p in parts]))
+    np.add.at(n, inv, np.concatenate([p[3] for p in parts]))
+    return ukeys, hi, lo, n
+
+
 def residual_ranges(
     points: np.ndarray,
     grid: Grid,
@@ -159,36 +227,16 @@ def residual_ranges(
     for sub-cells ``cell_index * split² + row * split + col`` with cell_index
     into the selected cells.
     """
-    sel_keys = planes.keys[selected]
-    if len(sel_keys) == 0:
-        return sel_keys, np.empty(0)
-    keys = grid.cell_of(points[:, :2])
-    pos = np.searchsorted(sel_keys, keys)
-    pos = np.minimum(pos, len(sel_keys) - 1)
-    inside = sel_keys[pos] == keys
-    pos = pos[inside]
-    pts = points[inside]
-    idx = np.flatnonzero(selected)[pos]
-    centres = grid.centres(sel_keys[pos])
-    dx = pts[:, 0] - centres[:, 0]
-    dy = pts[:, 1] - centres[:, 1]
-    r = pts[:, 2] - (planes.a[idx] + planes.b[idx] * dx + planes.c[idx] * dy)
-    if split <= 1:
-        hi = np.full(len(sel_keys), -np.inf)
-        lo = np.full(len(sel_keys), np.inf)
-        np.maximum.at(hi, pos, r)
-        np.minimum.at(lo, pos, r)
-        return sel_keys, hi - lo
-    sub = grid.cell_size / split
-    h = 0.5 * grid.cell_size
-    col = np.clip(np.floor((dx + h) / sub).astype(np.int64), 0, split - 1)
-    row = np.clip(np.floor((dy + h) / sub).astype(np.int64), 0, split - 1)
-    sub_keys, inv, counts = np.unique(
-        pos * split * split + row * split + col, return_inverse=True, return_counts=True
+    return ranges_from_extremes(
+        residual_extremes(points, grid, planes, selected, split=split),
+        min_points=min_points if split > 1 else 1,
     )
-    hi = np.full(len(sub_keys), -np.inf)
-    lo = np.full(len(sub_keys), np.inf)
-    np.maximum.at(hi, inv, r)
-    np.minimum.at(lo, inv, r)
-    keep = counts >= min_points
-    return sub_keys[keep], (hi - lo)[keep]
+
+
+def ranges_from_extremes(
+    extremes: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray], *, min_points: int = 3
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(keys, max − min)`` of the (sub-)cells with at least `min_points` points."""
+    keys, hi, lo, n = extremes
+    keep = n >= min_points
+    return keys[keep], (hi - lo)[keep]

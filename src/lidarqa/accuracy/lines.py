@@ -20,7 +20,7 @@ computation.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -44,6 +44,10 @@ __all__ = [
     "hausdorff",
     "detection_rate",
     "DEFAULT_CUTOFF",
+    "sampling_threshold_range",
+    "match_strips",
+    "SAMPLING_FACTOR",
+    "SAMPLING_BAND",
 ]
 
 #: Initial pruning cutoff (data units, metres): only a speed knob, never changes results.
@@ -279,6 +283,59 @@ def auto_threshold(nearest: Any, *, sensitivity: float = 0.1) -> Threshold:
             k = pos - 1
             return Threshold(float(s[k + 1]), True, s, d2, k, "peak")
     return Threshold(float(s[-1]), False, s, d2, -1, "no peak")
+
+
+#: Centre of the sampling band: this many times the sparser strip's point spacing (m/m).
+SAMPLING_FACTOR = 1.5
+#: Half-width of the sampling band, as a factor on each side of its centre.
+SAMPLING_BAND = 1.34
+
+
+def sampling_threshold_range(test: Any, model: Any) -> tuple[float, float] | None:
+    """Band (m) an automatic threshold between two flight strips must fall into.
+
+    Edges of two strips of one survey are found from points of a known
+    sampling: the ``point_spacing`` attribute of each set (the median distance
+    of a point to its 10th neighbour in the strip, metres, written by the edge
+    extraction of ``lidarqa repeatability``). The same edge seen by two strips
+    is displaced by a fraction of that spacing (outline and step edges run
+    through the outermost points) and its ends by up to about one spacing, so
+    the distance between matched edges scales with the sparser strip's spacing
+    ``s``. The band is centred on ``SAMPLING_FACTOR · s`` (1.5 s) and reaches
+    ``SAMPLING_BAND`` (1.34) times below and above it, about [1.1 s, 2.0 s]:
+    a knee of the sorted nearest distances below it is a fluctuation among a
+    handful of matches, one above it (or no knee at all) means the strips'
+    edges disagree by more than their sampling explains. Neighbouring tiles
+    of one survey have nearly the same spacing (±10 %), so their thresholds
+    stay within a factor 2 of each other (1.34² · 1.1 = 1.98).
+
+    Returns None when either set has no ``point_spacing`` attribute (e.g.
+    segments read from a file): the plain knee is then used.
+    """
+    spacings = []
+    for seg in (test, model):
+        attrs = getattr(seg, "attributes", None) or {}
+        v = attrs.get("point_spacing")
+        if v is None:
+            return None
+        v = np.asarray(v, dtype=np.float64)
+        v = v[np.isfinite(v) & (v > 0)]
+        if len(v) == 0:
+            return None
+        spacings.append(float(np.median(v)))
+    centre = SAMPLING_FACTOR * max(spacings)
+    return centre / SAMPLING_BAND, centre * SAMPLING_BAND
+
+
+def _clip_threshold(auto: Threshold, lo: float, hi: float) -> Threshold:
+    """`auto` moved into [lo, hi]; the reason says which bound applied."""
+    if not auto.found:  # no knee: the ceiling, not the farthest edge
+        return replace(auto, threshold=float(hi), reason=f"{auto.reason}, band ceiling")
+    if auto.threshold < lo:
+        return replace(auto, threshold=float(lo), reason=f"{auto.reason}, raised to the band")
+    if auto.threshold > hi:
+        return replace(auto, threshold=float(hi), reason=f"{auto.reason}, lowered to the band")
+    return auto
 
 
 # ---------------------------------------------------------------- measures
@@ -564,6 +621,7 @@ def match_segments(
     denominator: str = "matched",
     ground_truth: Any = None,
     cutoff: float | None = None,
+    threshold_range: tuple[float, float] | None = None,
     progress: Any = None,
 ) -> LineMatch:
     """Match a test set of 3D segments to a model set, both ways ([S-PG]; :ref:`alg-lines`).
@@ -590,6 +648,13 @@ def match_segments(
     cutoff : float, optional
         Initial pruning cutoff (metres, default 1.0, or the fixed threshold). Only a
         speed knob: results equal the dense computation for any cutoff.
+    threshold_range : (float, float), optional
+        Band (metres) the automatic thresholds are moved into (a knee below it is
+        raised to its floor; one above it, or no knee, lowered to its ceiling), e.g.
+        :func:`sampling_threshold_range` for two flight strips. Ignored with a fixed
+        `threshold`. ``Threshold.reason`` says when a bound applied.
+
+        .. versionadded:: 0.2
     progress : callable, optional
         Called with the fraction of the work done (0..1).
 
@@ -698,6 +763,15 @@ def match_segments(
     if threshold is None:
         auto_tm = auto_threshold(near_tm, sensitivity=sensitivity)
         auto_mt = auto_threshold(near_mt, sensitivity=sensitivity)
+        if threshold_range is not None:
+            try:
+                lo, hi = (float(v) for v in threshold_range)
+            except (TypeError, ValueError):
+                lo = hi = float("nan")
+            if not (np.isfinite(lo) and np.isfinite(hi) and 0 <= lo <= hi):
+                raise OptionError(f"threshold_range must be 0 <= lo <= hi, got {threshold_range}")
+            auto_tm = _clip_threshold(auto_tm, lo, hi)
+            auto_mt = _clip_threshold(auto_mt, lo, hi)
     else:
         fixed = float(threshold)
         auto_tm = Threshold(
@@ -774,3 +848,26 @@ def match_segments(
         hausdorff_mt=float(near_mt.max()),
         ground_truth=gt,
     )
+
+
+def match_strips(test: Any, model: Any, *, auto: str = "sampling", threshold: float | None = None,
+                 **options: Any) -> dict:
+    """Match the edges of two flight strips: the ``LineMatch.to_dict()`` row of the pair.
+
+    With ``auto="sampling"`` (and no fixed `threshold`) the automatic threshold
+    of each direction is kept in the band of :func:`sampling_threshold_range`;
+    the row then also has ``threshold_floor_m``, ``threshold_ceiling_m`` and
+    ``threshold_rule_tm``/``threshold_rule_mt`` (how each threshold was found,
+    e.g. ``"peak"`` or ``"no peak, lowered to the band"``). ``auto="knee"``
+    (or sets without a ``point_spacing`` attribute) is the plain knee.
+    `options` go to :func:`match_segments`.
+    """
+    check_choice(auto, ("sampling", "knee"), "auto")
+    band = sampling_threshold_range(test, model) if auto == "sampling" and threshold is None \
+        else None
+    r = match_segments(test, model, threshold=threshold, threshold_range=band, **options)
+    row = r.to_dict()
+    if band is not None:
+        row.update(threshold_floor_m=band[0], threshold_ceiling_m=band[1],
+                   threshold_rule_tm=r.auto_tm.reason, threshold_rule_mt=r.auto_mt.reason)
+    return row

@@ -56,7 +56,7 @@ from typing import Any
 import numpy as np
 
 from .._validate import as_points, check_choice, check_positive, check_range
-from ..errors import DegenerateGeometryError, InvalidPointsError
+from ..errors import DegenerateGeometryError, InvalidPointsError, OptionError
 from . import _swaths_kernels as K
 
 __all__ = [
@@ -72,6 +72,11 @@ __all__ = [
     "surface_class_mask",
     "SURFACE_CLASSES",
     "auto_cell_size",
+    "select_surface",
+    "assess_options",
+    "strip_planes",
+    "range_plan",
+    "swaths_from_planes",
 ]
 
 #: Relative vertical accuracy (m): (intraswath max difference, interswath RMSDz,
@@ -249,6 +254,25 @@ def surface_class_mask(classification: np.ndarray | None, n: int) -> np.ndarray:
     return keep if keep.any() else ~np.isin(cls, EXCLUDED_CLASSES)
 
 
+def select_surface(
+    cloud: Any, *, classes: Any = None, all_returns: bool = False, where: str = "the cloud"
+) -> np.ndarray:
+    """The points compared between strips: last/single returns of the surface classes.
+
+    `classes` given: those classes; else :func:`surface_class_mask` (ground and
+    buildings; every class but noise when the cloud has no classification).
+    `all_returns` keeps every return.
+    """
+    n = len(cloud)
+    keep = np.ones(n, dtype=bool) if all_returns else last_return_mask(cloud.fields, n)
+    cls = cloud.classification
+    if cls is not None:
+        keep &= np.isin(cls, classes) if classes else surface_class_mask(cls, n)
+    elif classes:
+        raise InvalidPointsError(f"{where} has no classification; cannot select --classes")
+    return keep
+
+
 def auto_cell_size(
     points: np.ndarray, strip: np.ndarray, *, target: int = CELL_TARGET_POINTS
 ) -> float:
@@ -257,13 +281,32 @@ def auto_cell_size(
     The density of each strip is its point count over the area of the 5 m cells
     it occupies; the median over strips is used.
     """
-    dens = []
-    for s in np.unique(strip):
+    return cell_size_from_occupancy(strip_occupancy(points, strip), target=target)
+
+
+DENSITY_CELL = 5.0  # m: cells over which auto_cell_size measures each strip's density
+
+
+def strip_occupancy(points: np.ndarray, strip: np.ndarray) -> dict[int, tuple[int, np.ndarray]]:
+    """Per strip: its point count and the keys of the 5 m cells it occupies.
+
+    Keys are on one lattice for any input (multiples of 5 m), so the parts of
+    several chunks combine: counts add, keys unite.
+    """
+    out = {}
+    for s in np.unique(strip).tolist():
         xy = points[strip == s, :2]
-        if len(xy) < 3:
-            continue
-        g = K.grid_for(xy, 5.0)
-        dens.append(len(xy) / (len(np.unique(g.cell_of(xy))) * 25.0))
+        ix = np.floor(xy[:, 0] / DENSITY_CELL).astype(np.int64)
+        iy = np.floor(xy[:, 1] / DENSITY_CELL).astype(np.int64)
+        out[int(s)] = (len(xy), np.unique(ix * (1 << 32) + iy))
+    return out
+
+
+def cell_size_from_occupancy(
+    occupancy: dict[int, tuple[int, np.ndarray]], *, target: int = CELL_TARGET_POINTS
+) -> float:
+    """:func:`auto_cell_size` from :func:`strip_occupancy` (of the whole data)."""
+    dens = [n / (len(keys) * DENSITY_CELL**2) for n, keys in occupancy.values() if n >= 3]
     if not dens:
         return 1.0
     size = np.sqrt(target / float(np.median(dens)))
@@ -355,13 +398,14 @@ def assess_swaths(
         raise InvalidPointsError(f"strip must have shape ({len(points)},), got {strip.shape}")
     if strip.dtype.kind not in "iu":
         raise InvalidPointsError(f"strip ids must be integers, got dtype {strip.dtype}")
-    check_choice(quality_level, tuple(QUALITY_LEVELS), "quality_level")
-    check_positive(max_roughness, "max_roughness")
-    check_range(max_slope, "max_slope", 0.0, 90.0)
-    check_range(offset_max_slope, "offset_max_slope", 0.0, 90.0)
-    check_range(max_normal_angle, "max_normal_angle", 0.0, 90.0)
-    if min_points < 4:
-        raise InvalidPointsError(f"min_points must be >= 4, got {min_points}")
+    assess_options(
+        quality_level=quality_level,
+        max_roughness=max_roughness,
+        max_slope=max_slope,
+        offset_max_slope=offset_max_slope,
+        max_normal_angle=max_normal_angle,
+        min_points=min_points,
+    )
     ids = np.unique(strip)
     if len(ids) < 2:
         raise InvalidPointsError(
@@ -370,27 +414,159 @@ def assess_swaths(
         )
     if cell_size is None:
         cell_size = auto_cell_size(points, strip, target=max(CELL_TARGET_POINTS, 2 * min_points))
-    check_positive(cell_size, "cell_size")
-    if range_cell is not None:
-        check_positive(range_cell, "range_cell")
-    thr_rep, thr_rms, thr_max = QUALITY_LEVELS[quality_level]
+    assess_options(cell_size=cell_size, range_cell=range_cell)
 
     grid = K.grid_for(points[:, :2], cell_size)
     z0 = float(np.median(points[:, 2]))
-    strips: list[_Strip] = []
     order = np.argsort(strip, kind="stable")
     bounds = np.searchsorted(strip[order], ids)
     bounds = np.append(bounds, len(order))
     per_strip_points = []
-    for i, s in enumerate(ids):
+    planes = []
+    for i in range(len(ids)):
         sel = np.sort(order[bounds[i] : bounds[i + 1]])  # original order within a strip
         pts = points[sel]
         per_strip_points.append(pts)
         keys, sums = K.cell_sums(pts, grid, z0)
-        planes = K.fit_cell_planes(
-            keys, sums, z0, min_points=min_points, min_spread=0.15 * cell_size
+        planes.append(strip_planes(keys, sums, z0, cell_size=cell_size, min_points=min_points))
+
+    def extremes(i: int, selected: np.ndarray, split: int) -> tuple:
+        return K.residual_extremes(per_strip_points[i], grid, planes[i], selected, split=split)
+
+    return swaths_from_planes(
+        grid,
+        z0,
+        ids,
+        planes,
+        extremes,
+        min_points=min_points,
+        max_roughness=max_roughness,
+        max_slope=max_slope,
+        offset_max_slope=offset_max_slope,
+        max_normal_angle=max_normal_angle,
+        quality_level=quality_level,
+        estimate_offsets=estimate_offsets,
+        rotations=rotations,
+        reference_strip=reference_strip,
+        min_overlap_cells=min_overlap_cells,
+        range_cell=range_cell,
+        return_grids=return_grids,
+    )
+
+
+def assess_options(
+    *,
+    quality_level: str = DEFAULT_QUALITY_LEVEL,
+    max_roughness: float = 0.05,
+    max_slope: float = 10.0,
+    offset_max_slope: float = 60.0,
+    max_normal_angle: float = 10.0,
+    min_points: int = 8,
+    cell_size: float | None = None,
+    range_cell: float | None = None,
+    **other: Any,
+) -> None:
+    """Check the options of :func:`assess_swaths` (raises on a bad value)."""
+    check_choice(quality_level, tuple(QUALITY_LEVELS), "quality_level")
+    check_positive(max_roughness, "max_roughness")
+    check_range(max_slope, "max_slope", 0.0, 90.0)
+    check_range(offset_max_slope, "offset_max_slope", 0.0, 90.0)
+    check_range(max_normal_angle, "max_normal_angle", 0.0, 90.0)
+    if min_points < 4:
+        raise InvalidPointsError(f"min_points must be >= 4, got {min_points}")
+    if cell_size is not None:
+        check_positive(cell_size, "cell_size")
+    if range_cell is not None:
+        check_positive(range_cell, "range_cell")
+    known = {"estimate_offsets", "rotations", "reference_strip", "min_overlap_cells",
+             "return_grids"}
+    unknown = sorted(set(other) - known)
+    if unknown:
+        raise OptionError(f"unknown option(s): {', '.join(unknown)}")
+
+
+def strip_planes(
+    keys: np.ndarray, sums: np.ndarray, z0: float, *, cell_size: float, min_points: int
+) -> K.CellPlanes:
+    """One strip's cell planes from its (merged) cell sums."""
+    return K.fit_cell_planes(keys, sums, z0, min_points=min_points, min_spread=0.15 * cell_size)
+
+
+def range_plan(
+    planes: K.CellPlanes,
+    *,
+    cell_size: float,
+    max_roughness: float,
+    max_slope: float,
+    range_cell: float | None,
+) -> tuple[np.ndarray, int]:
+    """The smooth cells of one strip and the split of each into range cells.
+
+    Returns ``(smooth, split)``; ``split`` is 0 when the strip has no smooth cell.
+    """
+    tan_smooth = np.tan(np.radians(max_slope))
+    with np.errstate(invalid="ignore"):
+        smooth = (
+            planes.ok
+            & (planes.rms <= max_roughness)
+            & (planes.b**2 + planes.c**2 <= tan_smooth**2)
         )
-        strips.append(_Strip(int(s), planes))
+    if not smooth.any():
+        return smooth, 0
+    if range_cell is None:
+        split = max(1, round(float(np.sqrt(np.mean(planes.n[smooth]))) / 2.0))
+    else:
+        split = range_split(cell_size, range_cell)
+    return smooth, split
+
+
+MAX_RANGE_SPLIT = 64  # range cells per cell side at most (a cell holds ~16 points)
+
+
+def range_split(cell_size: float, range_cell: float) -> int:
+    """Range cells per cell side for an explicit `range_cell` (m)."""
+    check_positive(range_cell, "range_cell")
+    ratio = float(cell_size) / float(range_cell)
+    if not ratio <= MAX_RANGE_SPLIT + 0.5:
+        raise OptionError(
+            f"range_cell {range_cell:g} m is too small for cells of {cell_size:g} m (at least "
+            f"{cell_size / MAX_RANGE_SPLIT:g} m)"
+        )
+    return max(1, round(ratio))
+
+
+def swaths_from_planes(
+    grid: K.Grid,
+    z0: float,
+    ids: np.ndarray,
+    planes: list[K.CellPlanes],
+    extremes: Any,
+    *,
+    min_points: int = 8,
+    max_roughness: float = 0.05,
+    max_slope: float = 10.0,
+    offset_max_slope: float = 60.0,
+    max_normal_angle: float = 10.0,
+    quality_level: str = DEFAULT_QUALITY_LEVEL,
+    estimate_offsets: bool = True,
+    rotations: bool = False,
+    reference_strip: int | None = None,
+    min_overlap_cells: int = 10,
+    range_cell: float | None = None,
+    return_grids: bool = True,
+) -> SwathReport:
+    """The :class:`SwathReport` of strips whose cell planes are known.
+
+    What :func:`assess_swaths` does after fitting the planes, for callers that
+    fit them another way (a tile catalog adds the cell sums of its chunks).
+    ``extremes(i, selected, split)`` gives the residual extremes of strip ``i``
+    (:func:`~lidarqa.accuracy._swaths_kernels.residual_extremes`) for its
+    ``selected`` cells split ``split × split``. `z0` is the height of the
+    rotation centre (with `rotations`).
+    """
+    cell_size = grid.cell_size
+    thr_rep, thr_rms, thr_max = QUALITY_LEVELS[quality_level]
+    strips = [_Strip(int(s), p) for s, p in zip(ids, planes, strict=True)]
 
     tan_smooth = np.tan(np.radians(max_slope))
     tan_off = np.tan(np.radians(offset_max_slope))
@@ -406,10 +582,15 @@ def assess_swaths(
     flags: list[str] = []
     # ---- intraswath repeatability
     repeat: list[StripRepeatability] = []
-    for st, pts in zip(strips, per_strip_points, strict=True):
+    for i, st in enumerate(strips):
         p = st.planes
-        with np.errstate(invalid="ignore"):
-            smooth = good(p) & (slope2(p) <= tan_smooth**2)
+        smooth, split = range_plan(
+            p,
+            cell_size=cell_size,
+            max_roughness=max_roughness,
+            max_slope=max_slope,
+            range_cell=range_cell,
+        )
         off_ok = good(p) & (slope2(p) <= tan_off**2)
         st.sigma = float(np.sqrt(np.median(p.rms[off_ok] ** 2))) if off_ok.any() else np.nan
         n_c = int(smooth.sum())
@@ -419,14 +600,10 @@ def assess_swaths(
             )
             flags.append(f"strip {st.id}: no smooth surface, repeatability not assessed")
             continue
-        if range_cell is None:
-            split = max(1, round(float(np.sqrt(np.mean(p.n[smooth]))) / 2.0))
-        else:
-            split = max(1, round(cell_size / range_cell))
-        _, ranges = K.residual_ranges(pts, grid, p, smooth, split=split)
+        _, ranges = K.ranges_from_extremes(extremes(i, smooth, split), min_points=3)
         if len(ranges) == 0:  # no range cell with 3 points: fall back to whole cells
             split = 1
-            _, ranges = K.residual_ranges(pts, grid, p, smooth)
+            _, ranges = K.ranges_from_extremes(extremes(i, smooth, 1), min_points=1)
         dof = np.maximum(p.n[smooth] - 3, 1)
         rmse = float(np.sqrt(np.sum(p.rms[smooth] ** 2 * dof) / np.sum(dof)))
         med = float(np.median(ranges))

@@ -53,11 +53,21 @@ def catalog_options(func: Callable[..., Any]) -> Callable[..., Any]:
     return func
 
 
+def option_given(value: Any) -> bool:
+    """An option the user gave: not None and not an unset flag (``--buffer 0`` is given)."""
+    return value is not None and value is not False
+
+
+def catalog_options_given(opts: dict[str, Any]) -> bool:
+    """Any catalog option given."""
+    return any(option_given(opts.get(k)) for k in _OPTION_NAMES)
+
+
 def wants_catalog(paths: Sequence[str], opts: dict[str, Any]) -> bool:
     """A catalog input, or a catalog option given."""
     from ._catalog import is_catalog
 
-    return is_catalog(paths) or any(opts.get(k) not in (None, False) for k in _OPTION_NAMES)
+    return is_catalog(paths) or catalog_options_given(opts)
 
 
 def pop_catalog_options(opts: dict[str, Any]) -> dict[str, Any]:
@@ -284,6 +294,7 @@ def repeatability_on_catalog(
     match_options: dict[str, Any],
     cat_opts: dict[str, Any],
     print_rows: Callable[[list[dict]], None],
+    edge_options: dict[str, Any] | None = None,
 ) -> None:
     """``lidarqa repeatability CATALOG --by-source-id``: every strip pair over the whole block."""
     from ..tiling.jobs_api import catalog_repeatability
@@ -293,7 +304,8 @@ def repeatability_on_catalog(
     catalog = _open(paths, cat_opts.get("skip_bad"), steps)
     with _engine(cat_opts.get("scheduler"), cat_opts.get("workers")) as eng:
         run = catalog_repeatability(catalog, classes=classes, source_id=source_id,
-                                    match_options=match_options, **_common(cat_opts, eng))
+                                    match_options=match_options, edge_options=edge_options,
+                                    **_common(cat_opts, eng))
     rows = run.value
     if not rows:
         from ..errors import OptionError

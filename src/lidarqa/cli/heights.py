@@ -20,7 +20,7 @@ from ..accuracy.heights import (
     SIGMA_REF,
     SIGMA_STRIP,
 )
-from ._catalog_jobs import catalog_options, wants_catalog
+from ._catalog_jobs import catalog_options, option_given, wants_catalog
 from ._common import (
     INT_LIST,
     Steps,
@@ -465,7 +465,7 @@ def heights(
 
         _echo_run(catalog_run)
         res["catalog"] = _run_summary(catalog_run)
-        params.update({k: v for k, v in cat_opts.items() if v not in (None, False)})
+        params.update({k: v for k, v in cat_opts.items() if option_given(v)})
     finish(
         "heights",
         inputs={"cloud": cloud, "map": map_path, "reference": reference, "output": output},

@@ -10,7 +10,7 @@ from typing import Any
 import click
 
 from ..units import format_decimal
-from ._catalog_jobs import catalog_options, wants_catalog
+from ._catalog_jobs import catalog_options, catalog_options_given, wants_catalog
 from ._common import (
     CRS_HELP,
     INT_LIST,
@@ -321,6 +321,24 @@ def _write_pairs(r: Any, path: Any) -> None:
     "strips they can blur the automatic threshold.",
 )
 @click.option(
+    "--steps/--no-steps",
+    "step_edges",
+    default=True,
+    show_default=True,
+    help="Also use step edges: straight roof boundaries where the surface next to the roof is "
+    "at least 0.5 m lower or absent (thin walls airborne scans barely see).",
+)
+@click.option(
+    "--auto-threshold",
+    "auto",
+    type=click.Choice(["sampling", "knee"]),
+    default="sampling",
+    show_default=True,
+    help="With --by-source-id: 'sampling' keeps each pair's automatic threshold within "
+    "[1.1, 2.0] x the sparser strip's point spacing (10th-neighbour distance), so tiles of "
+    "one survey get the same answer; 'knee' is the plain knee of the nearest distances.",
+)
+@click.option(
     "--shared-threshold",
     is_flag=True,
     help="One automatic threshold for every pair: the median of the pairs' own automatic "
@@ -335,6 +353,8 @@ def repeatability(
     source_id: list[int] | None,
     pool: bool,
     outlines: bool,
+    step_edges: bool,
+    auto: str,
     shared_threshold: bool,
     weight: float,
     sensitivity: float,
@@ -357,7 +377,7 @@ def repeatability(
     strip's edges found chunk by chunk (an edge once, by its midpoint's chunk).
     """
     from ..accuracy._lines_io import load_passes, pool_passes
-    from ..accuracy.lines import match_segments
+    from ..accuracy.lines import match_segments, match_strips
     from ..errors import CRSMismatchError, LidarQAError, OptionError
 
     given = input_crs(crs)
@@ -367,7 +387,7 @@ def repeatability(
         raise OptionError("--pool joins the strips of several files and needs --by-source-id")
     # Several named files without catalog options keep the per-file (or --pool) comparison;
     # a folder, a glob, a .vpc or any catalog option compares the strips over the whole block.
-    named_files = len(files) > 1 and not any(v not in (None, False) for v in cat_opts.values())
+    named_files = len(files) > 1 and not catalog_options_given(cat_opts)
     if by_source_id and wants_catalog(files, cat_opts) and not named_files:
         from ._catalog_jobs import repeatability_on_catalog
 
@@ -377,12 +397,12 @@ def repeatability(
             )
 
         repeatability_on_catalog(
-            files, classes=classes, source_id=source_id,
+            files, classes=classes, source_id=source_id, edge_options={"steps": step_edges},
             match_options={"weight": weight, "sensitivity": sensitivity, "threshold": threshold,
-                           "rotate": rotate, "denominator": denominator},
+                           "rotate": rotate, "denominator": denominator, "auto": auto},
             cat_opts=cat_opts, print_rows=lambda rows: _print_rows(rows, threshold, pool=True))
         return
-    if any(v not in (None, False) for v in cat_opts.values()):
+    if catalog_options_given(cat_opts):
         raise OptionError("catalog options apply to repeatability --by-source-id only")
     prepare_outputs(inputs=files)
     steps = Steps()
@@ -394,7 +414,7 @@ def repeatability(
             source_id=source_id,
             crs=given,
             progress=progress,
-            edge_options={"outlines": True} if outlines else None,
+            edge_options={"outlines": outlines, "steps": step_edges},
         )
     if pool:
         passes = pool_passes(passes)
@@ -443,14 +463,17 @@ def repeatability(
             rows.append(row)
             continue
         try:
-            r = match_segments(
-                a,
-                b,
-                weight=weight,
-                sensitivity=sensitivity,
-                threshold=threshold,
-                rotate=rotate,
-                denominator=denominator,
+            row.update(
+                match_strips(
+                    a,
+                    b,
+                    auto=auto if by_source_id else "knee",
+                    weight=weight,
+                    sensitivity=sensitivity,
+                    threshold=threshold,
+                    rotate=rotate,
+                    denominator=denominator,
+                )
             )
         except CRSMismatchError:
             raise
@@ -458,7 +481,6 @@ def repeatability(
             row.update(p=len(a), q=len(b), error=str(exc))
             rows.append(row)
             continue
-        row.update(r.to_dict())
         rows.append(row)
 
     _print_rows(rows, threshold, pool=pool)
@@ -481,6 +503,8 @@ def repeatability(
             "threshold": threshold,
             "shared_threshold": shared_threshold,
             "outlines": outlines,
+            "steps": step_edges,
+            "auto_threshold": auto if by_source_id and threshold is None else None,
             "rotate": rotate,
             "denominator": denominator,
             "classes": classes,

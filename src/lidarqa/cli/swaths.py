@@ -11,6 +11,13 @@ import click
 import numpy as np
 
 from ..accuracy.swaths import DEFAULT_QUALITY_LEVEL, QUALITY_LEVELS
+from ._catalog_jobs import (
+    catalog_options,
+    catalog_options_given,
+    option_given,
+    pop_catalog_options,
+    wants_catalog,
+)
 from ._common import INT_LIST, Steps, common_options, echo, finish, settings
 
 
@@ -28,7 +35,7 @@ def load_strips(
     and buildings, :func:`~lidarqa.accuracy.swaths.surface_class_mask`). Heights
     are in metres.
     """
-    from ..accuracy.swaths import last_return_mask, surface_class_mask
+    from ..accuracy.swaths import select_surface
     from ..errors import InvalidPointsError
     from ..io import read
     from ..io.crs import ensure_same_crs, z_to_metres_factor
@@ -40,12 +47,7 @@ def load_strips(
             crs = pc.crs
         else:
             ensure_same_crs(crs, pc.crs, what=(files[0], path))
-        keep = np.ones(len(pc), dtype=bool) if all_returns else last_return_mask(pc.fields, len(pc))
-        cls = pc.classification
-        if cls is not None:
-            keep &= np.isin(cls, classes) if classes else surface_class_mask(cls, len(pc))
-        elif classes:
-            raise InvalidPointsError(f"{path} has no classification; cannot select --classes")
+        keep = select_surface(pc, classes=classes, all_returns=all_returns, where=str(path))
         if by_source_id:
             sid = pc.point_source_id
             if sid is None:
@@ -83,8 +85,9 @@ def _csv(rows: list[dict[str, Any]]) -> str:
     return buf.getvalue()
 
 
-def _cm(v: float | None) -> str:
-    return "n/a" if v is None or not np.isfinite(v) else f"{v * 100:6.1f}"
+def _m(v: float | None) -> str:
+    """A length in metres to the millimetre (the unit policy: lengths in metres)."""
+    return "   n/a" if v is None or not np.isfinite(v) else f"{v:6.3f}"
 
 
 @click.command()
@@ -151,6 +154,7 @@ def _cm(v: float | None) -> str:
     help="CRS of the DZ rasters for files that declare none (EPSG code or WKT); a file's own "
     "CRS must agree with it.",
 )
+@catalog_options
 @common_options
 def swaths(
     files: tuple[str, ...],
@@ -169,6 +173,7 @@ def swaths(
     reference_strip: int | None,
     no_maps: bool,
     crs_option: str | None,
+    **cat: Any,
 ) -> None:
     """Relative accuracy of overlapping flight strips (swaths).
 
@@ -179,6 +184,10 @@ def swaths(
     network for more than two strips, and the measured strip noise E4 (use it
     with ``lidarqa heights --sigma-strip``). Pass/fail follows the USGS Lidar
     Base Specification / ASPRS Ed. 2 (2023) relative accuracy of the quality level.
+
+    FILES may be a catalog (a folder, a glob, a .vpc, or several files with any
+    catalog option): the strips are then compared over the whole block, chunk by
+    chunk, with the figures of one in-memory run.
     """
     from ..accuracy.swaths import assess_swaths
     from ..errors import InvalidPointsError, OutputExistsError, WriteError
@@ -202,7 +211,12 @@ def swaths(
         raise WriteError(f"output {out} is also an input")
     if s.json_path:
         check_output(s.json_path, overwrite=s.overwrite)
-    if not by_source_id and len(files) == 1:
+    cat_opts = pop_catalog_options(cat)
+    # several named files without catalog options: one strip per file, in memory (as before);
+    # a folder, a glob, a .vpc or any catalog option: the whole block, chunk by chunk
+    named_files = len(files) > 1 and not catalog_options_given(cat_opts)
+    on_catalog = wants_catalog(files, cat_opts) and not named_files
+    if not by_source_id and len(files) == 1 and not on_catalog:
         raise InvalidPointsError(
             "one file is one flight strip: give one file per strip, or --by-source-id to split "
             "the file by point_source_id"
@@ -215,29 +229,51 @@ def swaths(
 
     require("rasterio", "raster")
     steps = Steps()
-    with steps("Reading " + ", ".join(Path(f).name for f in files)):
-        xyz, sid, crs, labels = load_strips(
-            files, by_source_id=by_source_id, classes=classes, all_returns=all_returns
-        )
+    options = dict(
+        cell_size=cell_size,
+        min_points=min_points,
+        range_cell=range_cell,
+        max_roughness=max_roughness,
+        max_slope=max_slope,
+        quality_level=quality_level,
+        estimate_offsets=not no_offsets,
+        rotations=rotations,
+        reference_strip=reference_strip,
+    )
+    catalog_run = None
+    if on_catalog:
+        from ._catalog_jobs import _engine, _open
+
+        catalog = _open(files, cat_opts.get("skip_bad"), steps)
+        crs = catalog.crs
+        with _engine(cat_opts.get("scheduler"), cat_opts.get("workers")) as eng:
+            from ..tiling.jobs_swaths import catalog_swaths
+
+            catalog_run = catalog_swaths(
+                catalog,
+                by_source_id=by_source_id,
+                classes=classes,
+                all_returns=all_returns,
+                chunk_size=cat_opts.get("chunk_size"),
+                buffer=cat_opts.get("buffer"),
+                engine=eng,
+                progress=not s.quiet,
+                skip_failed=True,
+                **options,
+            )
+        rep, labels = catalog_run.value, catalog_run.extra["labels"]
+    else:
+        with steps("Reading " + ", ".join(Path(f).name for f in files)):
+            xyz, sid, crs, labels = load_strips(
+                files, by_source_id=by_source_id, classes=classes, all_returns=all_returns
+            )
+        with steps(f"Comparing strips ({len(xyz):,} points, {len(np.unique(sid))} strips)"):
+            rep = assess_swaths(xyz, sid, **options)
     if given_crs is not None:
         if crs is not None:  # the rasters are horizontal: compare horizontal parts
             ensure_same_crs(_horizontal(crs), _horizontal(given_crs), what=(files[0], "--crs"))
         else:
             crs = given_crs
-    with steps(f"Comparing strips ({len(xyz):,} points, {len(np.unique(sid))} strips)"):
-        rep = assess_swaths(
-            xyz,
-            sid,
-            cell_size=cell_size,
-            min_points=min_points,
-            range_cell=range_cell,
-            max_roughness=max_roughness,
-            max_slope=max_slope,
-            quality_level=quality_level,
-            estimate_offsets=not no_offsets,
-            rotations=rotations,
-            reference_strip=reference_strip,
-        )
     written: list[str] = []
     out.mkdir(exist_ok=True)
     with steps(f"Writing {out}"):
@@ -277,43 +313,49 @@ def swaths(
 
     lvl = rep.thresholds
     echo(
-        f"quality level {rep.quality_level}: RMSDz ≤ {lvl['rmsdz'] * 100:.0f} cm, max |dz| ≤ "
-        f"{lvl['max_abs'] * 100:.0f} cm, repeatability ≤ {lvl['repeatability'] * 100:.0f} cm; "
+        f"quality level {rep.quality_level}: RMSDz ≤ {lvl['rmsdz']:.2f} m, max |dz| ≤ "
+        f"{lvl['max_abs']:.2f} m, repeatability ≤ {lvl['repeatability']:.2f} m; "
         f"cell {rep.cell_size:g} m"
     )
     echo(
         f"{'pair':>13} {'overlap m²':>11} {'area m²':>9} {'RMSDz':>6} {'mean':>6} "
-        f"{'median':>6} {'p95':>6} {'max':>6}  (cm)"
+        f"{'median':>6} {'p95':>6} {'max':>6}  (m)"
     )
     for p in rep.pairs:
         echo(
-            f"{p.strip_a:>6}-{p.strip_b:<6} {p.overlap_area:11,.0f} {p.area:9,.0f} {_cm(p.rmsdz)} "
-            f"{_cm(p.mean)} {_cm(p.median)} {_cm(p.p95_abs)} {_cm(p.max_abs)}  "
+            f"{p.strip_a:>6}-{p.strip_b:<6} {p.overlap_area:11,.0f} {p.area:9,.0f} {_m(p.rmsdz)} "
+            f"{_m(p.mean)} {_m(p.median)} {_m(p.p95_abs)} {_m(p.max_abs)}  "
             f"{'pass' if p.passed else 'FAIL'}"
         )
     for r in rep.repeatability:
         if r.assessed:
             echo(
-                f"strip {r.strip}: repeatability RMSE {_cm(r.rmse)} cm, median max−min "
-                f"{_cm(r.median_range)} cm ({r.range_cell:g} m cells) on {r.area:,.0f} m²  "
+                f"strip {r.strip}: repeatability RMSE {_m(r.rmse)} m, median max−min "
+                f"{_m(r.median_range)} m ({r.range_cell:g} m cells) on {r.area:,.0f} m²  "
                 f"{'pass' if r.passed else 'FAIL'}"
             )
     for o in rep.network_offsets or rep.pair_offsets:
         if o.strip_a == o.strip_b:  # the reference strip itself
             continue
         echo(
-            f"offset {o.strip_b} − {o.strip_a} ({o.method}): dx {o.dx * 100:+.1f} ± "
-            f"{o.sigma_dx * 100:.1f}, dy {o.dy * 100:+.1f} ± {o.sigma_dy * 100:.1f}, dz "
-            f"{o.dz * 100:+.1f} ± {o.sigma_dz * 100:.1f} cm"
+            f"offset {o.strip_b} − {o.strip_a} ({o.method}): dx {o.dx:+.3f} ± "
+            f"{o.sigma_dx:.3f}, dy {o.dy:+.3f} ± {o.sigma_dy:.3f}, dz "
+            f"{o.dz:+.3f} ± {o.sigma_dz:.3f} m"
         )
     if np.isfinite(rep.e4):
         echo(
-            f"E4 (strip height noise) {rep.e4 * 100:.1f} cm; use: lidarqa heights ... "
+            f"E4 (strip height noise) {rep.e4:.3f} m; use: lidarqa heights ... "
             f"--sigma-strip {rep.e4:.3f}"
         )
     for f in rep.flags:
         echo("note: " + f)
     echo(f"{'PASS' if rep.passed else 'FAIL'}; wrote {len(written)} file(s) to {out}")
+    results = dict(rep.to_dict(), outputs=written)
+    if catalog_run is not None:
+        from ._catalog_jobs import _echo_run, _run_summary
+
+        _echo_run(catalog_run)
+        results["catalog"] = _run_summary(catalog_run)
     finish(
         "swaths",
         inputs={"files": list(files), "strips": labels},
@@ -323,9 +365,14 @@ def swaths(
             classes=classes,
             all_returns=all_returns,
             crs=crs_option,
+            **({k: v for k, v in cat_opts.items() if option_given(v)}),
         ),
-        results=dict(rep.to_dict(), outputs=written),
+        results=results,
     )
+    if catalog_run is not None:
+        from ._catalog_jobs import _failed_exit
+
+        _failed_exit(catalog_run)
 
 
 def _horizontal(crs: Any) -> Any:

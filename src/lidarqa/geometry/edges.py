@@ -15,7 +15,7 @@ from .planes import PlaneFit
 from .segmentation import PlaneSegmentation, segment_planes
 
 __all__ = ["PlanePairSegment", "plane_pair_segment", "extract_edges", "edges_from_segmentation",
-           "EDGE_ATTRIBUTES"]
+           "step_segments", "EDGE_ATTRIBUTES"]
 
 EDGE_ATTRIBUTES = ("plane_a", "plane_b", "angle_deg", "support_a", "support_b", "sigma_line",
                    "sigma_line_max", "length")
@@ -393,6 +393,7 @@ def extract_edges(
     min_length: float = 0.5,
     crs: Any = None,
     outlines: bool = False,
+    steps: bool = False,
     **segment_options: Any,
 ) -> Segments:
     """3D edges of a cloud: intersections of adjacent planes bounded by their support.
@@ -425,6 +426,14 @@ def extract_edges(
         without a wall plane; the result then has a ``kind`` attribute
         (``"intersection"`` or ``"outline"``). Outline sides along an
         intersection edge are dropped.
+    steps : bool, default False
+        Also return step edges (:func:`step_segments`): straight runs of roof
+        boundary points where the surface next to the roof is lower by at
+        least 0.5 m or absent (thin or unseen walls). ``kind`` is then
+        ``"step"`` for them; steps along an intersection edge (or, with
+        `outlines`, along an outline side) are dropped.
+
+        .. versionadded:: 0.2
     **segment_options
         Passed to :func:`~lidarqa.geometry.segmentation.segment_planes`.
 
@@ -454,14 +463,15 @@ def extract_edges(
                                        q_lo=q_lo, q_hi=q_hi, min_support=int(min_support),
                                        min_length=min_length, crs=crs)
     if outlines:
-        edges = _with_outlines(pts, segmentation, edges, near_dist)
+        edges = _with_extra(edges, outline_segments(pts, segmentation), near_dist, "outline")
+    if steps:
+        edges = _with_extra(edges, step_segments(pts, segmentation), near_dist, "step")
     return edges
 
 
-def _with_outlines(pts: np.ndarray, seg: PlaneSegmentation, edges: Segments,
-                   near_dist: float) -> Segments:
-    rows = [r for r in outline_segments(pts, seg)
-            if not _near_any(r[0], r[1], edges, max(2.0 * near_dist, 0.5))]
+def _with_extra(edges: Segments, rows: list, near_dist: float, kind: str) -> Segments:
+    """Append one-plane segments (outline sides, steps) not running along `edges`."""
+    rows = [r for r in rows if not _near_any(r[0], r[1], edges, max(2.0 * near_dist, 0.5))]
     n0, n1 = len(edges), len(rows)
     start = np.vstack([edges.start, np.array([r[0] for r in rows]).reshape(n1, 3)])
     end = np.vstack([edges.end, np.array([r[1] for r in rows]).reshape(n1, 3)])
@@ -476,7 +486,196 @@ def _with_outlines(pts: np.ndarray, seg: PlaneSegmentation, edges: Segments,
         "sigma_line_max": nan,
         "length": np.linalg.norm(end[n0:] - start[n0:], axis=1),
     }
-    attrs = {k: np.concatenate([edges.attributes[k], extra[k]]) for k in edges.attributes}
-    attrs["kind"] = np.array(["intersection"] * n0 + ["outline"] * n1, dtype=object)
+    attrs = {k: np.concatenate([edges.attributes[k], extra[k]]) for k in EDGE_ATTRIBUTES}
+    old = edges.attributes.get("kind", np.array(["intersection"] * n0, dtype=object))
+    attrs["kind"] = np.concatenate([np.asarray(old, dtype=object),
+                                    np.array([kind] * n1, dtype=object)])
     return Segments(ids=np.arange(n0 + n1, dtype=np.int64), start=start, end=end,
                     attributes=attrs, crs=edges.crs)
+
+
+# ---------------------------------------------------------------- step edges
+
+
+def _boundary_gaps(xy: np.ndarray, radius: float, min_gap_deg: float, k: int = 16
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Boundary points of a 2-D point set: ``(is_boundary, gap direction (n, 2))``.
+
+    A point is on the boundary when its neighbours within `radius` leave an
+    angular gap wider than `min_gap_deg`; the gap direction is the unit vector
+    through the middle of the widest gap (pointing out of the set).
+    """
+    from scipy.spatial import cKDTree
+
+    n = len(xy)
+    kk = min(k + 1, n)
+    d, j = cKDTree(xy).query(xy, k=kk, distance_upper_bound=radius)
+    d, j = d[:, 1:], j[:, 1:]
+    ok = np.isfinite(d)
+    jj = np.where(ok, j, 0)
+    v = xy[jj] - xy[:, None, :]
+    none = 100.0  # sorts after every angle (radians)
+    ang = np.where(ok, np.arctan2(v[..., 1], v[..., 0]), none)
+    ang.sort(axis=1)
+    m = ok.sum(axis=1)
+    gap = np.full(n, 2 * np.pi)
+    mid = np.zeros(n)
+    if ang.shape[1] > 0:
+        nxt = np.concatenate([ang[:, 1:], np.full((n, 1), none)], axis=1)
+        inner = np.where(nxt < none, nxt - ang, -1.0)
+        last = np.take_along_axis(ang, np.maximum(m - 1, 0)[:, None], axis=1)[:, 0]
+        wrap = np.where(m > 0, ang[:, 0] + 2 * np.pi - last, 2 * np.pi)
+        ki = np.argmax(inner, axis=1)
+        gi = inner[np.arange(n), ki]
+        use_wrap = wrap >= gi
+        gap = np.where(use_wrap, wrap, gi)
+        start = np.where(use_wrap, last, ang[np.arange(n), ki])
+        mid = np.where(m > 0, start + gap / 2.0, 0.0)
+    is_b = gap > math.radians(min_gap_deg)
+    return is_b, np.stack([np.cos(mid), np.sin(mid)], axis=1)
+
+
+def _fit_lines_2d(xy: np.ndarray, *, tolerance: float, min_points: int, max_gap: float,
+                  min_length: float, rng: np.random.Generator, iterations: int = 200
+                  ) -> list[tuple[np.ndarray, np.ndarray, int]]:
+    """Straight runs of 2-D points by sequential RANSAC: ``[(start_xy, end_xy, n_points)]``.
+
+    Each accepted line is refitted by least squares (principal axis) to its
+    inliers, split where consecutive inliers are more than `max_gap` apart
+    along it, and every run of at least `min_points` points and `min_length`
+    metres becomes a segment through its extreme projections.
+    """
+    out: list[tuple[np.ndarray, np.ndarray, int]] = []
+    left = np.ones(len(xy), dtype=bool)
+    while left.sum() >= min_points:
+        p = xy[left]
+        n = len(p)
+        a = rng.integers(0, n, iterations)
+        b = rng.integers(0, n, iterations)
+        d = p[b] - p[a]
+        ln = np.hypot(d[:, 0], d[:, 1])
+        good = ln > 1e-9
+        if not good.any():
+            break
+        a, d, ln = a[good], d[good], ln[good]
+        nrm = np.stack([-d[:, 1], d[:, 0]], axis=1) / ln[:, None]
+        res = np.abs((p[None, :, :] - p[a][:, None, :]) @ nrm[..., None])[..., 0]  # (it, n)
+        cnt = (res <= tolerance).sum(axis=1)
+        best = int(np.argmax(cnt))
+        if cnt[best] < min_points:
+            break
+        inl = res[best] <= tolerance
+        q = p[inl]
+        c = q.mean(axis=0)
+        _, _, vt = np.linalg.svd(q - c, full_matrices=False)
+        u = vt[0]
+        inl = np.abs((p - c) @ np.array([-u[1], u[0]])) <= tolerance
+        q = p[inl]
+        t = (q - c) @ u
+        order = np.argsort(t, kind="stable")
+        t, q = t[order], q[order]
+        cuts = np.flatnonzero(np.diff(t) > max_gap) + 1
+        for run_t, run_q in zip(np.split(t, cuts), np.split(q, cuts), strict=True):
+            if len(run_t) < min_points or run_t[-1] - run_t[0] < min_length:
+                continue
+            cc = run_q.mean(axis=0)
+            _, _, w = np.linalg.svd(run_q - cc, full_matrices=False)
+            uu = w[0]
+            tt = (run_q - cc) @ uu
+            out.append((cc + tt.min() * uu, cc + tt.max() * uu, len(run_t)))
+        idx = np.flatnonzero(left)
+        left[idx[inl]] = False
+    return out
+
+
+def step_segments(
+    points: np.ndarray,
+    seg: PlaneSegmentation,
+    *,
+    min_step: float = 0.5,
+    min_length: float = 1.0,
+    min_points: int = 6,
+    max_slope: float = 75.0,
+    seed: int = 0,
+) -> list[tuple[np.ndarray, np.ndarray, int, int]]:
+    """Step edges of roof planes: ``[(start, end, plane, n_points)]``.
+
+    A step edge is where a roof plane ends and the surface next to it is lower
+    by at least `min_step` metres, or absent (airborne scans see little of
+    thin walls, and a selection of building points leaves the ground out).
+    Boundary points of each non-vertical plane are its inliers whose
+    neighbours (within twice the point spacing, in plan) leave an angular gap
+    wider than 120 degrees and the plane does not resume beyond the gap (a
+    hole in the sampling); a boundary point is a step point when no point
+    of the cloud outside its plane lies in that gap (in the half-plane facing
+    it, within the same radius) higher than the roof plus `min_step`, or
+    higher than the roof minus `min_step` and more than 0.75 point spacings
+    out (the top of the roof's own wall, just below the eave, does not
+    count). A boundary against a higher surface is left out: there the roof meets the
+    foot of a taller wall, which each strip occludes differently; a boundary
+    against a surface at roof height is a ridge or an intersection, found by
+    the plane-pair model. Straight runs of step points (sequential RANSAC with
+    a tolerance of half the point spacing, split at gaps wider than three
+    spacings) of at least `min_points` points and `min_length` metres become
+    segments, lifted onto their roof plane. The line runs through the
+    outermost points, so it lies about half a point spacing inside the true
+    edge; both strips of a survey share that bias, which is what matters for
+    strip-to-strip repeatability. `seed` makes the RANSAC sampling
+    reproducible; points are put in a canonical order first, so the result
+    does not depend on the input order.
+    """
+    from scipy.spatial import cKDTree
+
+    sp = seg.parameters.get("point_spacing")
+    sp = float(sp) if sp is not None and np.isfinite(sp) else 0.5
+    radius = 2.0 * sp
+    nz_min = math.cos(math.radians(max_slope))
+    tree = cKDTree(points[:, :2])
+    rows = []
+    for k in range(len(seg.normal)):
+        n = seg.normal[k]
+        if abs(n[2]) < nz_min:
+            continue
+        idx = np.flatnonzero((seg.labels == k) & seg.inliers)
+        if len(idx) < max(min_points, 10):
+            continue
+        order = np.lexsort((points[idx, 2], points[idx, 1], points[idx, 0]))
+        idx = idx[order]
+        xy = points[idx, :2]
+        is_b, g = _boundary_gaps(xy, radius, 120.0)
+        # a gap the plane itself closes further out is a hole in the sampling, not its edge
+        own = cKDTree(xy)
+        probe = xy + 1.5 * radius * g
+        dd, _ = own.query(probe, k=1, distance_upper_bound=0.75 * radius)
+        bidx = np.flatnonzero(is_b & ~np.isfinite(dd))
+        if len(bidx) < min_points:
+            continue
+        # look for anything at roof height in the gap (half-plane facing out)
+        nb = tree.query_ball_point(xy[bidx], radius)
+        step = np.ones(len(bidx), dtype=bool)
+        lens = np.fromiter((len(v) for v in nb), dtype=np.int64, count=len(nb))
+        if lens.sum():
+            flat = np.concatenate([np.asarray(v, dtype=np.int64) for v in nb])
+            owner = np.repeat(np.arange(len(bidx)), lens)
+            other = seg.labels[flat] != k
+            rel = points[flat, :2] - xy[bidx][owner]
+            out = np.einsum("ij,ij->i", rel, g[bidx][owner])  # distance out of the roof (m)
+            zroof = (seg.rho[k] - points[flat, :2] @ n[:2]) / n[2]
+            dz = points[flat, 2] - zroof
+            # a surface continuing at roof height (beyond the eave's own wall points, which
+            # hang just below it), or anything clearly above the roof
+            level = (dz > -min_step) & (out > 0.75 * sp)
+            above = (dz > min_step) & (out > 0)
+            blocked = np.zeros(len(bidx), dtype=bool)
+            np.logical_or.at(blocked, owner, other & (level | above))
+            step = ~blocked
+        sxy = xy[bidx[step]]
+        if len(sxy) < min_points:
+            continue
+        rng = np.random.default_rng([seed, k])
+        for a, b, cnt in _fit_lines_2d(sxy, tolerance=0.5 * sp, min_points=min_points,
+                                       max_gap=3.0 * sp, min_length=min_length, rng=rng):
+            ends = np.array([a, b])
+            z = (seg.rho[k] - ends @ n[:2]) / n[2]
+            rows.append((np.r_[a, z[0]], np.r_[b, z[1]], k, cnt))
+    return rows

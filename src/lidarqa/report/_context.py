@@ -233,6 +233,14 @@ class RunContext:
     def edges(self, cloud: str, classes: Any, source_id: Any, options: dict[str, Any]) -> Any:
         """Edges extracted from a cloud selection (cached on selection + options)."""
         key = (cloud, _norm_ids(classes), _norm_ids(source_id), _freeze(options))
+        spec = self.config.inputs.get(cloud)
+        if key not in self._edges and spec is not None and spec.kind == "clouds":
+            from .catalog_analyses import catalog_edges, is_catalog_path
+
+            if is_catalog_path(spec.path):  # chunk by chunk, each edge once
+                label = selection_label(cloud, classes, source_id)
+                with self.step(f"Extracting edges ({label}, catalog)"):
+                    self._edges[key] = catalog_edges(spec.path, classes, source_id, options)
         if key not in self._edges:
             extract_edges = library_attr("lidarqa.geometry.edges", "extract_edges", "edges")
             sub = self.select(cloud, classes, source_id)

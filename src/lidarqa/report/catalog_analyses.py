@@ -11,7 +11,9 @@ reading the cloud into memory, and its report section adds the catalog
 overview map (tiles, chunks coloured by status, strips) and the per-chunk
 status table (:mod:`lidarqa.report.catalog_overview`). Available on catalogs:
 ``info`` (the catalog summary from the headers), ``edges``,
-``checkpoints`` with ``vertical = true`` and a check-point file, and
+``checkpoints`` with ``vertical = true`` and a check-point file, ``swaths`` (strips by
+``point_source_id``), ``ground`` (the catalog ground job, ISPRS counts summed over the
+chunks), ``lines`` (edges of catalog inputs extracted chunk by chunk), and
 ``heights`` with map-point and reference-point inputs. The others
 report a clear error for that analysis while the rest of the report runs.
 Chunks use the default size and buffer and run in this process.
@@ -19,6 +21,7 @@ Chunks use the default size and buffer and run in this process.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 from collections.abc import Callable
 from pathlib import Path
@@ -99,8 +102,7 @@ def catalog_analysis(ctx: Any, item: Any) -> Callable[[Any, Any], Any] | None:
             raise AnalysisError(
                 f"analysis [{item.kind}] cannot run on the catalog input {name!r} yet "
                 f"(available on catalogs: {', '.join(sorted(_CATALOG_ANALYSES))}); "
-                + ("run `lidarqa ground` on the folder instead" if item.kind == "ground"
-                   else "give it one cloud file")
+                "give it one cloud file"
             )
 
         return unavailable
@@ -153,6 +155,29 @@ def _info(ctx: Any, item: Any) -> Any:
                          notes=sec["notes"])
 
 
+_SEGMENT_KEYS = ("grow_radius", "grow_dist", "seed_method", "min_segment_size", "max_rmse")
+
+
+def _edge_options(options: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
+    """(plane segmentation options, edge options) from ``extract_edges`` keywords."""
+    params = dict(options)
+    return {k: params.pop(k) for k in _SEGMENT_KEYS if k in params}, params
+
+
+def catalog_edges(path: Any, classes: Any, source_id: Any, options: dict[str, Any]) -> Any:
+    """The edges of a catalog selection, each edge once (what ``ctx.edges`` gives for a
+    catalog input, e.g. for the ``lines`` analysis)."""
+    from ..tiling.jobs_api import catalog_features
+
+    seg_opts, params = _edge_options(options)
+    run = catalog_features(path, kind="edges", classes=classes, source_id=source_id,
+                           segment_options=seg_opts, options=params)
+    if run.failed:
+        raise AnalysisError(f"edges of the catalog {path}: chunk(s) {', '.join(run.failed)} "
+                            "failed")
+    return run.value
+
+
 def _edges(ctx: Any, item: Any) -> Any:
     from ..tiling.jobs_api import catalog_features
     from . import plots
@@ -161,9 +186,7 @@ def _edges(ctx: Any, item: Any) -> Any:
 
     opts = item.options
     name = opts["cloud"]
-    seg_keys = ("grow_radius", "grow_dist", "seed_method", "min_segment_size", "max_rmse")
-    params = dict(item.params)
-    seg_opts = {k: params.pop(k) for k in seg_keys if k in params}
+    seg_opts, params = _edge_options(item.params)
     per: dict[str, Any] = {}
     groups, rows, notes, runs = [], [], [], []
     for sid in opts["source_ids"] or [None]:
@@ -304,8 +327,105 @@ def _heights(ctx: Any, item: Any) -> Any:
     return _with_overview(out, run, f"{name}: chunks")
 
 
+def _swaths(ctx: Any, item: Any) -> Any:
+    from ..tiling.jobs_swaths import catalog_swaths
+    from .analyses.swaths import swaths_section
+
+    opts = item.options
+    name = opts["cloud"]
+    with ctx.step(f"Comparing the flight strips of the catalog {name}"):
+        run = catalog_swaths(ctx.config.inputs[name].path, by_source_id=True,
+                             classes=opts["classes"], source_ids=opts["source_ids"],
+                             all_returns=not opts["last_returns"], skip_failed=True,
+                             **item.params)
+    out = swaths_section(ctx, item, run.value, run.catalog.crs)
+    out.paragraphs = [*out.paragraphs,
+                      f"{name} is a catalog: every grid cell is fitted in the chunk that owns "
+                      "it, with all its points; the figures are those of one run over the "
+                      "whole block."]
+    return _with_overview(out, run, f"{name}: chunks")
+
+
+def _ground(ctx: Any, item: Any) -> Any:
+    """Ground over the catalog (:func:`~lidarqa.tiling.ground.ground_catalog`, in this process)."""
+    import tempfile
+    from types import SimpleNamespace
+
+    from ..tiling.ground import ground_catalog
+    from ._context import SectionResult
+
+    opts = item.options
+    name = opts["cloud"]
+    cat = _open(ctx.config.inputs[name].path)
+    params = {k: v for k, v in item.params.items() if k != "progress"}
+    ignore = list(opts["ignore_classes"] or [])
+    notes: list[str] = []
+    with contextlib.ExitStack() as stack:
+        if opts["write_cloud"]:
+            out_dir = ctx.output_path(item, f"{name}_ground")
+            if opts["cloud_format"] != "laz":
+                notes.append("on a catalog the output tiles keep the input tiles' format "
+                             "(cloud_format is not used)")
+        else:
+            out_dir = Path(stack.enter_context(tempfile.TemporaryDirectory())) / "ground"
+        with ctx.step(f"Ground filtering the catalog {name} ({int(cat.n_points):,} points, "
+                      f"{opts['method']})"):
+            res = ground_catalog(cat, out_dir, method=opts["method"],
+                                 evaluate=bool(opts["evaluate"]), ignore_classes=ignore or None,
+                                 workers=1, overwrite=True, **params)
+    d = res.to_dict()
+    notes.extend(res.warnings)
+    e = res.evaluation
+    tables = []
+    if e is not None:
+        d.update(type_i_pct=e.type_i_pct, type_ii_pct=e.type_ii_pct, total_pct=e.total_pct,
+                 ignore_classes=ignore)
+        tables.append(Table("Cross table (points)", ["reference \\ filter", "ground", "object",
+                                                     "total"],
+                            [["ground", e.a, e.b, e.a + e.b], ["object", e.c, e.d, e.c + e.d],
+                             ["total", e.a + e.c, e.b + e.d, e.n]],
+                            note=("classes " + ", ".join(map(str, ignore)) + " not evaluated")
+                            if ignore else ""))
+        headline = (f"total error {e.total_pct:.2f} % (type I {e.type_i_pct:.2f} %, type II "
+                    f"{e.type_ii_pct:.2f} %), κ {e.kappa:.3f} (catalog)")
+    else:
+        headline = (f"{res.n_ground:,} of {res.n_points:,} points classified as ground "
+                    "(catalog)")
+    tables.append(Table("Filter run", ["quantity", "value"],
+                        [["points", res.n_points], ["ground points", res.n_ground],
+                         ["chunks", res.n_chunks], ["chunk size (m)", res.chunk_size],
+                         ["buffer (m)", res.buffer]]))
+    out = SectionResult(
+        results=d, headline=headline, tables=tables, notes=notes,
+        parameters={"filter": dict(res.parameters)},
+        paragraphs=[f"{name} is a catalog: the filter runs chunk by chunk with a {res.buffer:g} m "
+                    "buffer and keeps each chunk's core labels; the ISPRS counts are summed "
+                    "over the chunks, which gives those of one run over the whole area."
+                    + (" The classified tiles and a .vpc of them are in the outputs."
+                       if opts["write_cloud"] else "")],
+    )
+    chunks = tuple(SimpleNamespace(id=c["id"], core=tuple(c["core"])) for c in res.chunks)
+    status = [{"chunk": c["id"], "status": "ok", "attempts": 1, "error": None}
+              for c in res.chunks]
+    run = SimpleNamespace(catalog=cat, chunks=chunks, extra={}, chunk_status=lambda: status)
+    return _with_overview(out, run, f"{name}: chunks")
+
+
+def _lines(ctx: Any, item: Any) -> Any:
+    from .analyses.lines import run_lines
+
+    out = run_lines(ctx, item)  # ctx.edges extracts a catalog's edges chunk by chunk
+    out.paragraphs = [*out.paragraphs,
+                      "Edges of catalog inputs were extracted chunk by chunk, each edge kept by "
+                      "the chunk holding its midpoint (the edges of one run over the whole area)."]
+    return out
+
+
 _CATALOG_ANALYSES: dict[str, Callable[[Any, Any], Any]] = {
     "info": _info,
+    "ground": _ground,
+    "lines": _lines,
+    "swaths": _swaths,
     "edges": _edges,
     "checkpoints": _checkpoints,
     "heights": _heights,

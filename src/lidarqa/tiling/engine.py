@@ -32,7 +32,7 @@ from typing import Any
 
 from ..errors import MissingDependencyError, OptionError, TilingError
 
-__all__ = ["Engine", "ChunkOutcome", "ChunkFailedError", "run_chunks", "run_task"]
+__all__ = ["Engine", "ChunkOutcome", "ChunkFailedError", "run_chunks", "run_task", "run_tasks"]
 
 
 class ChunkFailedError(TilingError):
@@ -64,7 +64,14 @@ class ChunkOutcome:
         }
 
 
-_THREAD_VARS = ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+# RAYON_NUM_THREADS: the LAZ codec (lazrs) decompresses with one thread per core too
+_THREAD_VARS = (
+    "NUMBA_NUM_THREADS",
+    "OMP_NUM_THREADS",
+    "OPENBLAS_NUM_THREADS",
+    "MKL_NUM_THREADS",
+    "RAYON_NUM_THREADS",
+)
 
 
 def _dask():
@@ -398,3 +405,71 @@ def _run_dask(engine, catalog, chunks, order, task, retries, record, bar) -> Non
         for fut in list(fut_index):
             fut.cancel()
         raise
+
+
+def run_tasks(
+    func: Callable[..., Any],
+    items: Sequence[tuple],
+    *,
+    engine: Engine | None = None,
+    progress: bool = False,
+    description: str = "Tasks",
+    names: Sequence[str] | None = None,
+) -> list[Any]:
+    """Run ``func(*item)`` for every item, on the engine's workers; results in item order.
+
+    For the work that follows the chunks (e.g. writing one output tile per input
+    tile): each call must be independent and deterministic, and may read and write
+    files that every worker can reach. The first failure cancels the calls not yet
+    started and is raised as a :class:`TilingError` naming the item (``names``).
+    A worker lost mid-call is handled by Dask (the call runs again elsewhere).
+    """
+    items = list(items)
+    names = list(names) if names is not None else [str(i) for i in range(len(items))]
+    own = engine is None
+    engine = engine or Engine("serial")
+    results: list[Any] = [None] * len(items)
+    try:
+        engine.start()
+        bar = _Progress(len(items), progress, description, engine.dashboard_link)
+        try:
+            if engine.serial:
+                for i, item in enumerate(items):
+                    try:
+                        results[i] = func(*item)
+                    except (KeyboardInterrupt, SystemExit, TilingError):
+                        raise
+                    except Exception as exc:
+                        raise TilingError(f"{names[i]}: {_error_text(exc)}") from exc
+                    bar.advance()
+            else:
+                distributed = _dask()
+                token = f"{os.getpid()}-{time.monotonic_ns()}"
+                futs = {
+                    engine.client.submit(
+                        func, *item, key=f"lidarqa-task-{i}-{token}", pure=False
+                    ): i
+                    for i, item in enumerate(items)
+                }
+                try:
+                    for fut in distributed.as_completed(list(futs)):
+                        i = futs[fut]
+                        if fut.status != "finished":
+                            exc = fut.exception() if fut.status == "error" else None
+                            if isinstance(exc, TilingError):
+                                raise exc
+                            why = _error_text(exc) if exc is not None else fut.status
+                            raise TilingError(f"{names[i]}: {why}")
+                        results[i] = fut.result()
+                        fut.release()
+                        bar.advance()
+                except BaseException:
+                    for fut in futs:
+                        fut.cancel()
+                    raise
+        finally:
+            bar.close()
+    finally:
+        if own:
+            engine.close()
+    return results

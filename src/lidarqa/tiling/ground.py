@@ -239,6 +239,53 @@ def _load_chunk(work: Path, chunk_id: str) -> ChunkGround | None:
     return ChunkGround(chunk_id, tiles, n_core, ground, counts=counts)
 
 
+def _load_counts(work: Path, chunk_id: str) -> tuple[int, int, int, int] | None:
+    """The chunk's ISPRS counts (None when it was run without ``evaluate``)."""
+    try:
+        with np.load(work / f"{chunk_id}.npz") as z:
+            c = z["counts"]
+    except Exception as exc:
+        raise TilingError(f"chunk {chunk_id}: its saved labels are missing or damaged") from exc
+    return None if c[0] < 0 else tuple(int(v) for v in c)
+
+
+def _assemble_tile(
+    src: str, dst: str, tile: int, n_points: int, work: str, chunk_ids: list[str]
+) -> int:
+    """Write output tile `dst`: `src` with the ground labels saved by its chunks.
+
+    Runs on a worker (one call per tile) or in the calling process; the result
+    depends only on the saved labels. Returns the number of ground points.
+    """
+    from ..ground import relabel_classification
+    from ..io.las import rewrite_las_classification
+
+    mask = np.zeros(n_points, dtype=bool)
+    covered = 0
+    for cid in chunk_ids:
+        try:
+            with np.load(Path(work) / f"{cid}.npz") as z:
+                tiles = [int(v) for v in z["tiles"]]
+                if tile not in tiles:
+                    continue
+                pos = tiles.index(tile)
+                covered += int(z["n_core"][pos])
+                mask[np.asarray(z[f"g{pos}"], dtype=np.int64)] = True
+        except (OSError, KeyError, ValueError) as exc:
+            raise TilingError(f"chunk {cid}: its saved labels are missing or damaged") from exc
+    if covered != n_points:
+        raise TilingError(
+            f"{src}: the chunks hold {covered:,} of its {n_points:,} points "
+            "(points outside the header bounds?)"
+        )
+
+    def new_classes(start: int, cls: np.ndarray) -> np.ndarray:
+        return relabel_classification(cls, mask[start : start + len(cls)])
+
+    rewrite_las_classification(src, dst, new_classes, overwrite=True)
+    return int(mask.sum())
+
+
 _AUTO_FIELDS = ("return_number", "number_of_returns", "scan_angle", "scan_angle_rank")
 
 
@@ -421,12 +468,11 @@ def ground_catalog(
     CatalogGroundResult
     """
     from .._validate import check_choice
-    from ..ground import METHODS, PRESETS, filter_errors_from_counts, relabel_classification
+    from ..ground import METHODS, PRESETS, filter_errors_from_counts
     from ..ground.auto import SENSORS
-    from ..io.las import rewrite_las_classification
     from .catalog import Catalog, open_catalog
     from .chunks import DEFAULT_BUFFER, make_chunks
-    from .engine import Engine, run_chunks
+    from .engine import Engine, run_chunks, run_tasks
 
     if method not in METHODS:
         raise OptionError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
@@ -549,82 +595,62 @@ def ground_catalog(
             messages.update(oc.result.warnings)
 
     try:
-        outcomes = run_chunks(
-            catalog,
-            todo,
-            task,
-            engine=engine,
-            progress=progress,
-            retries=retries,
-            skip_failed=True,
-            on_outcome=save,
-            keep_results=False,
-            description="Ground",
-            order_seed=order_seed,
+        try:
+            outcomes = run_chunks(
+                catalog,
+                todo,
+                task,
+                engine=engine,
+                progress=progress,
+                retries=retries,
+                skip_failed=True,
+                on_outcome=save,
+                keep_results=False,
+                description="Ground",
+                order_seed=order_seed,
+            )
+        except BaseException:
+            # nothing to resume (no chunk finished): leave nothing behind at the output path
+            if not any(work.glob("*.npz")):
+                shutil.rmtree(out_dir if made_dir else work, ignore_errors=True)
+            raise
+        failed = tuple((o.chunk.id, o.error or "failed") for o in outcomes if not o.ok)
+        if failed:
+            from .engine import ChunkFailedError
+
+            raise ChunkFailedError(
+                f"{len(failed)} of {len(chunks)} chunk(s) failed (run again with --resume to "
+                "retry only those): " + "; ".join(f"{c}: {e}" for c, e in failed[:5]),
+                list(outcomes),
+            )
+        # --- final pass: one output tile per input tile, on the workers too -------------------
+        per_tile: dict[int, list[str]] = {}
+        for c in chunks:
+            for t in c.tiles:
+                per_tile.setdefault(t, []).append(c.id)
+        counts = np.zeros(4, dtype=np.int64)
+        have_counts = False
+        for c in chunks:
+            cc = _load_counts(work, c.id)
+            if cc is not None:
+                counts += np.asarray(cc, dtype=np.int64)
+                have_counts = True
+        n_ground = sum(
+            run_tasks(
+                _assemble_tile,
+                [
+                    (tile.path, str(outputs[k]), k, tile.n_points, str(work), per_tile.get(k, []))
+                    for k, tile in enumerate(catalog.tiles)
+                ],
+                engine=engine,
+                progress=progress,
+                description="Writing tiles",
+                names=[str(t.path) for t in catalog.tiles],
+            )
         )
-    except BaseException:
-        # nothing to resume (no chunk finished): leave nothing behind at the output path
-        if not any(work.glob("*.npz")):
-            shutil.rmtree(out_dir if made_dir else work, ignore_errors=True)
-        raise
     finally:
         if own:
             engine.close()
-    failed = tuple((o.chunk.id, o.error or "failed") for o in outcomes if not o.ok)
-    if failed:
-        from .engine import ChunkFailedError
-
-        raise ChunkFailedError(
-            f"{len(failed)} of {len(chunks)} chunk(s) failed (run again with --resume to retry "
-            "only those): " + "; ".join(f"{c}: {e}" for c, e in failed[:5]),
-            list(outcomes),
-        )
-    # --- final pass: assemble the output tiles in catalog order ---------------------------
-    per_tile: dict[int, list[str]] = {}
-    for c in chunks:
-        for t in c.tiles:
-            per_tile.setdefault(t, []).append(c.id)
-    cache: dict[str, ChunkGround] = {}
-
-    def load(cid: str) -> ChunkGround:
-        r = cache.get(cid)
-        if r is None:
-            r = _load_chunk(work, cid)
-            if r is None:
-                raise TilingError(f"chunk {cid}: its saved labels are missing or damaged")
-            if len(cache) > 64:
-                cache.pop(next(iter(cache)))
-            cache[cid] = r
-        return r
-
-    n_ground = 0
-    counts = np.zeros(4, dtype=np.int64)
-    have_counts = False
-    for c in chunks:
-        r = load(c.id)
-        if r.counts is not None:
-            counts += np.asarray(r.counts, dtype=np.int64)
-            have_counts = True
-    for k, tile in enumerate(catalog.tiles):
-        mask = np.zeros(tile.n_points, dtype=bool)
-        covered = 0
-        for cid in per_tile.get(k, []):
-            r = load(cid)
-            if k in r.tiles:
-                pos = r.tiles.index(k)
-                covered += r.n_core[pos]
-                mask[np.asarray(r.ground[pos], dtype=np.int64)] = True
-        if covered != tile.n_points:
-            raise TilingError(
-                f"{tile.path}: the chunks hold {covered:,} of its {tile.n_points:,} points "
-                "(points outside the header bounds?)"
-            )
-        n_ground += int(mask.sum())
-
-        def new_classes(start: int, cls: np.ndarray, mask: np.ndarray = mask) -> np.ndarray:
-            return relabel_classification(cls, mask[start : start + len(cls)])
-
-        rewrite_las_classification(tile.path, outputs[k], new_classes, overwrite=True)
     out_catalog = Catalog(
         tiles=tuple(
             type(t)(

@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from ..accuracy._lines_io import with_point_spacing
 from ..errors import CRSMismatchError, InvalidPointsError, LidarQAError
 from ..io.vector import Segments
 from .jobs_vector import merge_vector_parts, vector_features
@@ -78,7 +79,7 @@ class StripEdgesTask:
             except LidarQAError:
                 continue  # no usable planes for this strip here: no edges
             if len(seg):
-                out[int(s)] = seg
+                out[int(s)] = with_point_spacing(seg, xyz)
         return chunk_data.chunk.id, out
 
 
@@ -105,7 +106,10 @@ def strip_pairs(strips: dict[int, Segments], **match_options: Any) -> list[dict[
         From :func:`merge_strip_edges`.
     **match_options
         Passed to :func:`lidarqa.accuracy.lines.match_segments` (weight,
-        sensitivity, threshold, rotate, denominator).
+        sensitivity, threshold, rotate, denominator), and ``auto``:
+        ``"sampling"`` (default) bounds each pair's automatic threshold by the
+        strips' point spacing (:func:`~lidarqa.accuracy.lines.sampling_threshold_range`),
+        ``"knee"`` keeps the plain knee.
 
     Returns
     -------
@@ -114,13 +118,13 @@ def strip_pairs(strips: dict[int, Segments], **match_options: Any) -> list[dict[
         figures, or ``error`` when a pair cannot be matched. Pairs in
         increasing strip order.
     """
-    from ..accuracy.lines import match_segments
+    from ..accuracy.lines import match_strips
 
     rows: list[dict[str, Any]] = []
     for a, b in combinations(sorted(strips), 2):
         row: dict[str, Any] = {"test": str(a), "model": str(b)}
         try:
-            row.update(match_segments(strips[a], strips[b], **match_options).to_dict())
+            row.update(match_strips(strips[a], strips[b], **match_options))
         except CRSMismatchError:
             raise
         except LidarQAError as exc:

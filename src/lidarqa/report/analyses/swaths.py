@@ -60,8 +60,9 @@ def _params(options: dict) -> Any:
     return out
 
 
-def _fmt_cm(v: Any) -> str:
-    return "–" if v is None or not np.isfinite(v) else f"{v * 100:.1f}"
+def _fmt_m(v: Any) -> str:
+    """A length in metres to the millimetre (the unit policy: lengths in metres)."""
+    return "–" if v is None or not np.isfinite(v) else f"{v:.3f}"
 
 
 KEYS = {
@@ -126,6 +127,11 @@ def run_swaths(ctx: RunContext, item: AnalysisItem) -> SectionResult:
     xyz[:, 2] *= z_to_metres_factor(cloud.crs)
     with ctx.step(f"Comparing flight strips ({len(xyz):,} points)"):
         rep = assess_swaths(xyz, np.asarray(sid)[keep].astype(np.int64), **item.params)
+    return swaths_section(ctx, item, rep, cloud.crs)
+
+
+def swaths_section(ctx: RunContext, item: AnalysisItem, rep: Any, crs: Any) -> SectionResult:
+    """The report section of a :class:`~lidarqa.accuracy.swaths.SwathReport` (DZ rasters too)."""
     res = rep.to_dict()
     finite = [p.rmsdz for p in rep.pairs if np.isfinite(p.rmsdz)]
     res["max_rmsdz"] = max(finite) if finite else None
@@ -146,7 +152,7 @@ def run_swaths(ctx: RunContext, item: AnalysisItem) -> SectionResult:
 
             path = ctx.output_path(item, f"dz_{g.strip_a}_{g.strip_b}.tif")
             write_geotiff(
-                path, g.dz, x0=g.x0, y1=g.y1, cell_size=g.cell_size, crs=cloud.crs, overwrite=True
+                path, g.dz, x0=g.x0, y1=g.y1, cell_size=g.cell_size, crs=crs, overwrite=True
             )
             outputs.append(path.name)
         figures.append(
@@ -159,17 +165,17 @@ def run_swaths(ctx: RunContext, item: AnalysisItem) -> SectionResult:
     t = rep.thresholds
     tables = [
         Table(
-            f"Swath overlap ({rep.quality_level}: RMSDz ≤ {t['rmsdz'] * 100:.0f} cm, "
-            f"max ≤ {t['max_abs'] * 100:.0f} cm)",
+            f"Swath overlap ({rep.quality_level}: RMSDz ≤ {t['rmsdz']:.2f} m, "
+            f"max ≤ {t['max_abs']:.2f} m)",
             [
                 "pair",
                 "overlap (m²)",
                 "compared (m²)",
-                "RMSDz (cm)",
-                "mean (cm)",
-                "median (cm)",
-                "p95 |dz| (cm)",
-                "max |dz| (cm)",
+                "RMSDz (m)",
+                "mean (m)",
+                "median (m)",
+                "p95 |dz| (m)",
+                "max |dz| (m)",
                 "result",
             ],
             [
@@ -177,35 +183,35 @@ def run_swaths(ctx: RunContext, item: AnalysisItem) -> SectionResult:
                     f"{p.strip_a}–{p.strip_b}",
                     round(p.overlap_area),
                     round(p.area),
-                    _fmt_cm(p.rmsdz),
-                    _fmt_cm(p.mean),
-                    _fmt_cm(p.median),
-                    _fmt_cm(p.p95_abs),
-                    _fmt_cm(p.max_abs),
+                    _fmt_m(p.rmsdz),
+                    _fmt_m(p.mean),
+                    _fmt_m(p.median),
+                    _fmt_m(p.p95_abs),
+                    _fmt_m(p.max_abs),
                     "pass" if p.passed else "FAIL",
                 ]
                 for p in rep.pairs
             ],
         ),
         Table(
-            f"Smooth-surface repeatability (≤ {t['repeatability'] * 100:.0f} cm)",
+            f"Smooth-surface repeatability (≤ {t['repeatability']:.2f} m)",
             [
                 "strip",
                 "area (m²)",
-                "RMSE (cm)",
+                "RMSE (m)",
                 "range cell (m)",
-                "median max−min (cm)",
-                "p95 (cm)",
+                "median max−min (m)",
+                "p95 (m)",
                 "result",
             ],
             [
                 [
                     r.strip,
                     round(r.area),
-                    _fmt_cm(r.rmse),
+                    _fmt_m(r.rmse),
                     f"{r.range_cell:g}",
-                    _fmt_cm(r.median_range),
-                    _fmt_cm(r.p95_range),
+                    _fmt_m(r.median_range),
+                    _fmt_m(r.p95_range),
                     "pass" if r.passed else "FAIL",
                 ]
                 for r in rep.repeatability
@@ -219,27 +225,27 @@ def run_swaths(ctx: RunContext, item: AnalysisItem) -> SectionResult:
             Table(
                 "Strip offsets"
                 + (f" (network, strip {rep.reference_strip} fixed)" if rep.network_offsets else ""),
-                ["strip − reference", "dx (cm)", "dy (cm)", "dz (cm)", "σ dx / dy / dz (cm)"],
+                ["strip − reference", "dx (m)", "dy (m)", "dz (m)", "σ dx / dy / dz (m)"],
                 [
                     [
                         f"{o.strip_b} − {o.strip_a}",
-                        _fmt_cm(o.dx),
-                        _fmt_cm(o.dy),
-                        _fmt_cm(o.dz),
-                        f"{_fmt_cm(o.sigma_dx)} / {_fmt_cm(o.sigma_dy)} / {_fmt_cm(o.sigma_dz)}",
+                        _fmt_m(o.dx),
+                        _fmt_m(o.dy),
+                        _fmt_m(o.dz),
+                        f"{_fmt_m(o.sigma_dx)} / {_fmt_m(o.sigma_dy)} / {_fmt_m(o.sigma_dz)}",
                     ]
                     for o in offs
                     if o.strip_a != o.strip_b or not rep.network_offsets
                 ],
-                note=f"E4 (strip height noise) = {_fmt_cm(rep.e4)} cm",
+                note=f"E4 (strip height noise) = {_fmt_m(rep.e4)} m",
             )
         )
     worst = res["max_rmsdz"]
     overlap_ok = all(p.passed for p in rep.pairs)
     repeat_ok = all(r.passed for r in rep.repeatability if r.assessed)
     headline = (
-        f"{len(rep.pairs)} overlapping pair(s), worst RMSDz {_fmt_cm(worst)} cm, "
-        f"E4 {_fmt_cm(rep.e4)} cm; {rep.quality_level}: overlap "
+        f"{len(rep.pairs)} overlapping pair(s), worst RMSDz {_fmt_m(worst)} m, "
+        f"E4 {_fmt_m(rep.e4)} m; {rep.quality_level}: overlap "
         f"{'pass' if overlap_ok else 'FAIL'}, repeatability {'pass' if repeat_ok else 'FAIL'}"
     )
     return SectionResult(
