@@ -26,6 +26,12 @@ def _run(
         check_out_dir(out, overwrite=s.overwrite)
     except OutputExistsError as exc:  # the library's message also names the Python keyword
         raise OutputExistsError(str(exc).replace(" (overwrite=True)", "")) from None
+    if command == "demo" and not s.quiet and not _demo_kernels_cached():
+        click.echo(
+            "First run: compiling the numeric kernels (about 30-60 s, once; "
+            "they are cached for later runs)",
+            err=True,
+        )
     run = run_assessment(cfg, out, overwrite=s.overwrite, steps=steps, command=command)
     echo(f"{cfg.title}")
     width = max((len(r.analysis) for r in run.summary), default=10)
@@ -69,6 +75,15 @@ def _run(
             f"{len(failed)} analysis(es) missed their target: {', '.join(failed)} "
             f"(details in {run.html_path})"
         )
+
+
+def _demo_kernels_cached() -> bool:
+    """Whether the compiled kernels the demo needs (ground TIN, kNN, surface growing) are cached."""
+    from .._jitcache import kernels_cached
+    from ..geometry import _kernels
+    from ..ground import _tin
+
+    return kernels_cached(_tin._judge_kernel, _kernels.knn_grid, _kernels.surface_growing_kernel)
 
 
 @click.command()

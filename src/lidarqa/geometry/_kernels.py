@@ -405,7 +405,9 @@ def surface_growing_kernel(pts, trial_order, knn, knn_k, method, seed_dist, min_
         i = trial_order[t]
         if labels[i] != -1:
             continue
-        m = 0
+        # typed int64 from the start: a literal 0 makes numba compile _seed_plane (and
+        # what it calls) a second time for a Literal[int](0) argument (first-run cost)
+        m = np.int64(0)
         for a in range(knn_k):
             j = knn[i, a]
             if labels[j] == -1:
@@ -535,7 +537,9 @@ def _knn_one(pts, i, k, rmax, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, 
                         m += 1
                     c += 1
         if m >= k:
-            kth = np.partition(dist[:m], k - 1)[k - 1]
+            # np.sort, not np.partition: same k-th value, and numba compiles its sort
+            # several times faster than its partition (first-run cost; this is a rare path)
+            kth = np.sort(dist[:m])[k - 1]
             if kth <= (r * cell) ** 2:
                 c = 0
                 for a in range(m):  # strictly closer first, then ties in gather order

@@ -177,22 +177,13 @@ def kernels_cached() -> bool:
 
     The kernels are compiled with ``cache=True``: the first run after installing
     (or upgrading) spends 20-30 s compiling, later runs load them. The CLI uses
-    this to say so before a first run. A heuristic: it looks for the cache index
-    of the TIN kernels next to the source or under ``NUMBA_CACHE_DIR``.
+    this to say so before a first run. It asks numba where the TIN kernels'
+    cache index lives and whether it is valid for the installed source.
     """
-    import glob
-    import os
-    from pathlib import Path
+    from .._jitcache import kernels_cached as _cached
+    from . import _tin
 
-    here = Path(__file__).resolve().parent
-    dirs = [here / "__pycache__"]
-    env = os.environ.get("NUMBA_CACHE_DIR")
-    if env:
-        dirs.append(Path(env))
-    for d in dirs:
-        if glob.glob(str(d / "**" / "_tin._judge_kernel-*.nbi"), recursive=True):
-            return True
-    return False
+    return _cached(_tin._judge_kernel, _tin._setup_kernel)
 
 
 def ground_candidates(
