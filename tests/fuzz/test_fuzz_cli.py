@@ -5,7 +5,14 @@ from __future__ import annotations
 import shutil
 
 import pytest
-from hostile import SPECIAL_KINDS, make_special, run_cli, text_cases, toml_cases
+from hostile import (
+    SPECIAL_KINDS,
+    TIME_LIMIT,
+    make_special,
+    run_cli,
+    text_cases,
+    toml_cases,
+)
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -130,6 +137,10 @@ def _numeric_options(command: str) -> list[str]:
 
 
 BAD_NUMBERS = ["nan", "inf", "-inf", "-1", "0", "1e308", "1e-300", "99999999999999999999", "x"]
+# A valid catalog option (e.g. --buffer 0 or 1e-300) runs the job on a local Dask cluster: starting
+# its worker processes takes seconds, more on a loaded machine. That is not a hang.
+CATALOG_OPTIONS = {"--chunk-size", "--buffer", "--workers"}
+CLUSTER_TIME_LIMIT = 60.0
 
 
 @settings(max_examples=120, deadline=None, suppress_health_check=list(HealthCheck))
@@ -143,4 +154,5 @@ def test_bad_numeric_options(data, baseline, tmp_path_factory):
     opt = data.draw(st.sampled_from(options))
     value = data.draw(st.sampled_from(BAD_NUMBERS))
     out = tmp_path_factory.mktemp("opt")
-    run_cli(["-q", *baseline(out)[command], opt, value], out_dir=out)
+    limit = CLUSTER_TIME_LIMIT if opt in CATALOG_OPTIONS else TIME_LIMIT
+    run_cli(["-q", *baseline(out)[command], opt, value], out_dir=out, limit=limit)
