@@ -6,22 +6,14 @@ import numpy as np
 import pytest
 
 from lidarqa.geometry.edges import extract_edges
-from lidarqa.testing import make_building_scene, score_edges
+from lidarqa.testing import make_building_scene, roof_points, score_edges
 
 
 @pytest.fixture(scope="module")
 def roofs_without_walls():
     """Building points of a synthetic scene with the wall points removed (as ALS sees them)."""
     scene = make_building_scene(seed=1)
-    nz = np.array([abs(p.normal[2]) for p in scene.planes])
-    pid = scene.plane_id
-    keep = (scene.classification == 6) & (pid >= 0) & (nz[np.maximum(pid, 0)] > 0.3)
-    return scene, scene.points[keep]
-
-
-def _found(score, truth, kind):
-    kinds = np.asarray(truth.attributes["kind"])[score.true_index]
-    return int((score.matched[kinds == kind] >= 0).sum()), int((kinds == kind).sum())
+    return scene, roof_points(scene)
 
 
 def test_outlines_recover_eaves_and_verges_without_walls(roofs_without_walls):
@@ -34,12 +26,13 @@ def test_outlines_recover_eaves_and_verges_without_walls(roofs_without_walls):
     s0 = score_edges(plain, scene.edges, max_rms=0.4, min_overlap=0.5)
     s1 = score_edges(both, scene.edges, max_rms=0.4, min_overlap=0.5)
     for kind in ("eave", "verge"):
-        found0, n = _found(s0, scene.edges, kind)
-        found1, _ = _found(s1, scene.edges, kind)
+        found0, n = s0.found_of_kind(scene.edges, kind)
+        found1, _ = s1.found_of_kind(scene.edges, kind)
         assert n > 0 and found0 == 0  # no wall plane, no roof-wall intersection
         assert found1 == n  # every eave and verge has an outline side
     # the ridge is an intersection; its roofs' hull sides along it are not duplicated
-    assert _found(s1, scene.edges, "ridge")[0] == _found(s0, scene.edges, "ridge")[0] == 1
+    ridges = [s.found_of_kind(scene.edges, "ridge")[0] for s in (s1, s0)]
+    assert ridges[0] == ridges[1] == 1
     out = both.attributes["plane_b"][kinds == "outline"]
     assert np.all(out == -1) and np.all(np.isnan(both.attributes["sigma_line"][kinds == "outline"]))
 

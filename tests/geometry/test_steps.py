@@ -7,22 +7,14 @@ import pytest
 
 from lidarqa.geometry.edges import extract_edges, step_segments
 from lidarqa.geometry.segmentation import segment_planes
-from lidarqa.testing import make_building_scene, score_edges
+from lidarqa.testing import make_building_scene, roof_points, score_edges
 
 
 @pytest.fixture(scope="module")
 def als_roofs():
     """Roof points of a flat and a gable building at an ALS density (10 pts/m²), no walls."""
     scene = make_building_scene(seed=1, density=10.0)
-    nz = np.array([abs(p.normal[2]) for p in scene.planes])
-    pid = scene.plane_id
-    keep = (scene.classification == 6) & (pid >= 0) & (nz[np.maximum(pid, 0)] > 0.3)
-    return scene, scene.points[keep]
-
-
-def _found(score, truth, kind):
-    kinds = np.asarray(truth.attributes["kind"])[score.true_index]
-    return int((score.matched[kinds == kind] >= 0).sum()), int((kinds == kind).sum())
+    return scene, roof_points(scene)
 
 
 def test_steps_recover_the_eaves_and_keep_the_ridge(als_roofs):
@@ -33,15 +25,15 @@ def test_steps_recover_the_eaves_and_keep_the_ridge(als_roofs):
     assert (kinds == "intersection").sum() == len(plain)  # the plane-pair edges are kept
     s0 = score_edges(plain, scene.edges, max_rms=0.4, min_overlap=0.5)
     s1 = score_edges(steps, scene.edges, max_rms=0.4, min_overlap=0.5)
-    found0, n = _found(s0, scene.edges, "eave")
-    found1, _ = _found(s1, scene.edges, "eave")
+    found0, n = s0.found_of_kind(scene.edges, "eave")
+    found1, _ = s1.found_of_kind(scene.edges, "eave")
     assert n == 6 and found0 == 0  # no wall points: no roof-wall intersection
     assert found1 == n  # every eave is a step edge
     # gable ends (verges) are short, sloped runs: most are found at this density (3 of 4)
-    verges, nv = _found(s1, scene.edges, "verge")
-    assert nv == 4 and verges >= 2 and _found(s0, scene.edges, "verge")[0] == 0
+    verges, nv = s1.found_of_kind(scene.edges, "verge")
+    assert nv == 4 and verges >= 2 and s0.found_of_kind(scene.edges, "verge")[0] == 0
     # the ridge (roof-roof intersection) is found at this density, and only once
-    assert _found(s1, scene.edges, "ridge") == (1, 1)
+    assert s1.found_of_kind(scene.edges, "ridge") == (1, 1)
     ridge = np.asarray(scene.edges.attributes["kind"]) == "ridge"
     r0, r1 = scene.edges.start[ridge][0], scene.edges.end[ridge][0]
     u = (r1 - r0) / np.linalg.norm(r1 - r0)

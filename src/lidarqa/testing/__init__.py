@@ -47,6 +47,7 @@ from .scenes import (
     make_terrain_scene,
     plane_area,
     rigid_motion,
+    roof_points,
     rotation_matrix,
     sample_checkpoints,
 )
@@ -61,6 +62,7 @@ __all__ = [
     "TerrainModel",
     "make_scene",
     "make_building_scene",
+    "roof_points",
     "make_terrain_scene",
     "make_plane_pair",
     "make_corner",

@@ -895,3 +895,15 @@ def sample_checkpoints(
     cand, z0 = cand[ok][:n], z0[ok][:n]
     ids = np.array([f"CP{i + 1:04d}" for i in range(len(cand))])
     return PointSet(ids, np.column_stack([cand, z0]))
+
+
+def roof_points(scene: Any) -> np.ndarray:
+    """The building points of a :func:`make_building_scene` scene on its roof planes only.
+
+    Wall points are left out (planes steeper than ~73°), as an airborne scan
+    barely sees thin walls: the input of outline and step-edge tests.
+    """
+    nz = np.array([abs(p.normal[2]) for p in scene.planes])
+    pid = scene.plane_id
+    keep = (scene.classification == 6) & (pid >= 0) & (nz[np.maximum(pid, 0)] > 0.3)
+    return scene.points[keep]

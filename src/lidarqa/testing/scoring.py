@@ -73,6 +73,11 @@ class EdgeScore(_Counts):
     overlap: np.ndarray
     n_found: int
 
+    def found_of_kind(self, truth: Segments, kind: str) -> tuple[int, int]:
+        """``(matched, scored)`` counts of the true edges of one `kind` (e.g. "eave")."""
+        kinds = np.asarray(truth.attributes["kind"])[self.true_index]
+        return int((self.matched[kinds == kind] >= 0).sum()), int((kinds == kind).sum())
+
     def to_dict(self) -> dict[str, Any]:
         ok = self.matched >= 0
         return {
