@@ -236,3 +236,36 @@ def test_permutation_invariance_als_preset():
     a = f.ground_mask(pts, labels=lab)
     b = f.ground_mask(pts[perm], labels=lab[perm])
     np.testing.assert_array_equal(a[perm], b)
+
+
+@pytest.mark.parametrize("cell", [1e-300, 1e-12, 1e150])
+def test_thinning_cells_never_overflow(cell):
+    """A cell far finer (or coarser) than the points' extent: no int64 overflow, same winners.
+
+    `--min-edge-length 1e-300` once gave int64-overflowed cell keys and a segfault.
+    """
+    from lidarqa.ground.segment_ptd import _thin
+
+    rng = np.random.default_rng(4)
+    xyz = np.column_stack([rng.uniform(6.5e5, 6.6e5, 500), rng.uniform(6.8e6, 6.81e6, 500),
+                           rng.uniform(0, 50, 500)])
+    xyz[1, :2] = xyz[0, :2]  # a shared position: one cell at any size
+    idx = np.arange(500)
+    kept = _thin(xyz, idx, cell)
+    if cell < 1.0:  # every distinct position is its own cell: all but the higher duplicate
+        expect = np.delete(idx, 1 if xyz[1, 2] > xyz[0, 2] else 0)
+    else:  # one cell holds everything: the lowest point
+        expect = np.array([int(np.argmin(xyz[:, 2]))])
+    np.testing.assert_array_equal(kept, expect)
+
+
+def test_ground_with_tiny_min_edge_length():
+    """The API path of the same option: a ground mask, as with no thinning at all."""
+    from lidarqa.ground import classify_ground
+    from lidarqa.testing import make_scene
+
+    pts = make_scene(seed=3, size=(40.0, 40.0), density=4.0).points
+    a = classify_ground(pts, min_edge_length=1e-300).ground_mask
+    b = classify_ground(pts, min_edge_length=0.0).ground_mask
+    assert 0 < a.sum() < len(a)
+    np.testing.assert_array_equal(a, b)

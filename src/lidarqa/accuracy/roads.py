@@ -77,6 +77,8 @@ __all__ = [
 
 #: status of a polygon after map growing
 STATUSES = ("ok", "grown_from_neighbour", "no_points")
+# map points along the polygon boundaries: more would not fit in memory
+MAX_MAP_POINTS = 10_000_000
 
 
 # ------------------------------------------------------------------ segments
@@ -786,6 +788,13 @@ def reconstruct_roads(
             "same area and use the same CRS"
         )
     outside = ~hits
+    boundary = float(shapely.length(shapely.boundary(geoms[hits])).sum())
+    if boundary / step > MAX_MAP_POINTS:
+        raise OptionError(
+            f"spacing {step:g} m would put {boundary / step:.3g} map points on the "
+            f"{boundary:.0f} m of polygon boundary (at most {MAX_MAP_POINTS:,}): use a "
+            f"spacing of at least {boundary / MAX_MAP_POINTS:.3g} m"
+        )
     # segments
     lab_seg, node, node_xyz, node_count, edges = _segments(pts, cell, mstep, amin)
     if labels is not None:

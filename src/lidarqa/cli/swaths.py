@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import io
+import os
 from pathlib import Path
 from typing import Any
 
@@ -206,8 +207,9 @@ def swaths(
         )
     if not out.parent.exists():
         raise WriteError(f"output folder {out.parent} does not exist")
-    resolved = {Path(f).resolve() for f in files}
-    if out.resolve() in resolved:
+    # realpath, not Path.resolve: a symlink loop among the inputs is reported by the reader
+    resolved = {os.path.realpath(f) for f in files}
+    if os.path.realpath(out) in resolved:
         raise WriteError(f"output {out} is also an input")
     if s.json_path:
         check_output(s.json_path, overwrite=s.overwrite)

@@ -404,7 +404,7 @@ def _argmin_per_group(
     """
     value = np.ascontiguousarray(value, dtype=np.float64)
     n_keys = int(key.max()) + 1 if key.size else 0
-    if 0 < n_keys <= 4 * key.size + 1024:  # small key range: one linear pass, no sort
+    if 0 < n_keys <= 4 * key.size + 1024 and key.min() >= 0:  # small range: one pass, no sort
         return _group_argmin_dense(
             np.ascontiguousarray(key, dtype=np.int64), value,
             np.ascontiguousarray(p, dtype=np.float64), n_keys,
@@ -488,12 +488,30 @@ def _group_argmin_scan(sorted_key, order, value, p):  # pragma: no cover - numba
 
 def _voxel_sample(p: np.ndarray, voxel: float) -> tuple[np.ndarray, np.ndarray]:
     """The point nearest each occupied voxel's centre, and each point's voxel number."""
-    q = np.floor(p / voxel).astype(np.int64)
-    q -= q.min(axis=0)
-    dims = q.max(axis=0) + 1
-    key = (q[:, 0] * dims[1] + q[:, 1]) * dims[2] + q[:, 2]
-    d2 = (((p / voxel) - q - 0.5) ** 2).sum(axis=1)
-    return _argmin_per_group(key, d2, p)
+    f = p / voxel
+    q = np.floor(f)
+    d2 = ((f - q - 0.5) ** 2).sum(axis=1)
+    return _argmin_per_group(_cell_keys(q, p), d2, p)
+
+
+def _cell_keys(q: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """One integer key >= 0 per distinct row of cell coordinates `q` (floats from np.floor).
+
+    Keys are row-major cell numbers in the cells' bounding box when that box has fewer
+    than 2**62 cells, else (cells far finer than the points' extent, e.g. a 1e-300 m
+    cell) the rank of each distinct cell, or of each distinct position in `p` when the
+    cell coordinates overflowed: no integer overflow, whatever the cell size.
+    """
+    lo = q.min(axis=0)
+    span = q.max(axis=0) - lo + 1.0
+    if np.isfinite(span).all() and float(np.prod(span)) < 2.0**62:
+        qi = (q - lo).astype(np.int64)
+        key = qi[:, 0].copy()
+        for d in range(1, q.shape[1]):
+            key = key * int(span[d]) + qi[:, d]
+        return key
+    rows = q if np.isfinite(q).all() else p[:, : q.shape[1]]
+    return np.unique(rows, axis=0, return_inverse=True)[1].reshape(-1).astype(np.int64)
 
 
 def _mask(m: Any, n: int, name: str) -> np.ndarray:
@@ -508,10 +526,7 @@ def _thin(xyz: np.ndarray, idx: np.ndarray, cell: float) -> np.ndarray:
     if cell <= 0 or idx.size == 0:
         return idx
     p = xyz[idx]
-    ij = np.floor(p[:, :2] / cell).astype(np.int64)
-    ij -= ij.min(axis=0)
-    key = ij[:, 0] * (int(ij[:, 1].max()) + 1) + ij[:, 1]
-    win, _ = _argmin_per_group(key, p[:, 2], p)
+    win, _ = _argmin_per_group(_cell_keys(np.floor(p[:, :2] / cell), p), p[:, 2], p)
     return np.sort(idx[win])
 
 
