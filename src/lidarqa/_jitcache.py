@@ -6,7 +6,12 @@ compiled code from numba's cache. The CLI uses :func:`kernels_cached` to say so
 before a run that will compile. It asks numba's own cache locator where each
 kernel's index lives (next to the source, in the user cache directory when the
 install is read-only, or under ``NUMBA_CACHE_DIR``) and whether that index holds
-entries for the current source (an upgrade invalidates them).
+entries for the current source (an upgrade invalidates them) and this CPU.
+
+The package ships the caches of the kernels that ``lidarqa demo`` runs, built with
+``scripts/jit_cache.py`` (numba keys them by source content, numba version, Python
+version and CPU): where all of these match, the first run loads compiled code instead
+of compiling it; anywhere else numba compiles on first use, as without them.
 """
 
 from __future__ import annotations
@@ -30,5 +35,12 @@ def kernels_cached(*dispatchers: Any) -> bool:
         except Exception:  # noqa: BLE001 - a corrupt index: numba will recompile
             return False
         if not index:
+            return False
+        try:
+            magic = disp.targetctx.codegen().magic_tuple()
+        except Exception:  # noqa: BLE001 - another numba layout: trust the index
+            continue
+        # shipped caches hold code for the CPU they were built on: another CPU compiles
+        if not any(isinstance(k, tuple) and len(k) > 1 and k[1] == magic for k in index):
             return False
     return True

@@ -90,6 +90,51 @@ def test_default_chunk_size_follows_density_and_tiles(scene_tiles):
     assert (size + 120.0) ** 2 * cat.density >= 0.2 * TARGET_POINTS or size >= tile
 
 
+def _grid_catalog(tile: float, density: float, n: int = 3) -> Catalog:
+    tiles = [
+        TileInfo(f"/t{i}{j}.laz", int(density * tile * tile),
+                 (i * tile, j * tile, (i + 1) * tile - 0.01, (j + 1) * tile - 0.01, 0.0, 1.0),
+                 None, 6, "1.4")
+        for i in range(n) for j in range(n)
+    ]
+    return Catalog(tuple(tiles))
+
+
+@pytest.mark.parametrize(
+    "tile,density,expected",
+    [
+        (1000.0, 25.0, 250.0),  # 1000 / 4: aligned with the tiles, 1 % more work than 254 m
+        (305.0, 25.0, 250.0),  # 305 / 2 would be 46 % more work: not snapped, 10 m steps
+        (50.0, 25.0, 250.0),  # 5 tiles of 50 m
+        (1000.0, 2.0, 1000.0),  # sparse: one tile per chunk (2 tiles would be over the target)
+    ],
+)
+def test_default_chunk_size_snaps_only_when_cheap(tile, density, expected):
+    from lidarqa.tiling.chunks import DEFAULT_BUFFER, SNAP_TOLERANCE, TARGET_POINTS, _work
+
+    cat = _grid_catalog(tile, density)
+    size = default_chunk_size(cat)
+    assert size == pytest.approx(expected)
+    raw = (TARGET_POINTS / cat.density) ** 0.5 - 2 * DEFAULT_BUFFER
+    assert size <= raw + 1e-9  # the buffered box never holds more than the target
+    assert _work(size, DEFAULT_BUFFER) <= SNAP_TOLERANCE * _work(raw, DEFAULT_BUFFER) or (
+        size == pytest.approx(raw // 10 * 10)
+    )
+
+
+def test_estimated_points_follow_the_overlap():
+    from lidarqa.tiling.chunks import estimated_points
+
+    cat = _grid_catalog(100.0, 10.0, n=2)  # 100 000 points per tile
+    chunks = make_chunks(cat, chunk_size=100.0, buffer=50.0)
+    est = {c.id: estimated_points(cat, c) for c in chunks}
+    # a corner chunk's buffered box covers its tile and half of each neighbour, a quarter
+    # of the diagonal one: 1 + 0.5 + 0.5 + 0.25 tiles
+    assert est["c0000_r0000"] == pytest.approx(225_000, rel=1e-3)
+    # symmetric block (tiles are 99.99 m: the 0.01 m gaps shift a few points)
+    assert max(est.values()) == pytest.approx(min(est.values()), rel=1e-3)
+
+
 def test_read_chunk_streams_core_and_buffer(scene_tiles):
     import lidarqa
 

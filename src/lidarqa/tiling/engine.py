@@ -304,6 +304,14 @@ def run_chunks(
         import random
 
         random.Random(order_seed).shuffle(order)
+    elif engine is not None and not engine.serial:
+        # biggest chunks first (their estimated point count; ties in chunk order): the
+        # small ones at the block's edges then fill the workers' last gaps instead of one
+        # big chunk running alone at the end. Results never depend on the order.
+        from .chunks import estimated_points
+
+        size = [estimated_points(catalog, c) for c in chunks]
+        order.sort(key=lambda i: -size[i])
     own = engine is None
     engine = engine or Engine("serial")
     outcomes: dict[int, ChunkOutcome] = {}
