@@ -6,7 +6,7 @@ Deletes every numba cache file (``*.nbi`` index, ``*.nbc`` code) under src/lidar
 runs ``lidarqa demo`` on the package of this checkout (its kernels are compiled with
 ``cache=True`` and write their caches next to their sources, in ``__pycache__``), then
 stages the new files with ``git add -f`` (``__pycache__`` is otherwise git-ignored; the
-wheel takes them through ``[tool.hatch.build.targets.wheel] artifacts``).
+wheel takes them through the build hook in hatch_build.py).
 
 numba keys a cache by the source file's content, the numba version, the Python version
 and the CPU: a user whose four match loads the compiled code on the first run; anyone
