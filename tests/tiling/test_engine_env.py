@@ -11,11 +11,7 @@ from lidarqa.tiling.engine import Engine
 pytest.importorskip("distributed")
 
 
-def _worker_env() -> dict:
-    import os
-
-    names = ("MALLOC_TRIM_THRESHOLD_", "NUMBA_NUM_THREADS", "RAYON_NUM_THREADS", "OMP_NUM_THREADS")
-    return {k: os.environ.get(k) for k in names}
+NAMES = ("MALLOC_TRIM_THRESHOLD_", "NUMBA_NUM_THREADS", "RAYON_NUM_THREADS", "OMP_NUM_THREADS")
 
 
 def test_workers_keep_glibc_malloc_thresholds_and_one_thread():
@@ -23,9 +19,12 @@ def test_workers_keep_glibc_malloc_thresholds_and_one_thread():
     if "MALLOC_TRIM_THRESHOLD_" in os.environ:
         pytest.skip("this process sets MALLOC_TRIM_THRESHOLD_ itself: workers inherit it")
     with Engine(workers=1) as eng:
-        envs = list(eng.client.run(_worker_env).values())
-    assert len(envs) == 1
-    env = envs[0]
+        # os.getenv pickles by reference (a function of this test module would need the
+        # workers to import the tests)
+        env = {}
+        for name in NAMES:
+            (value,) = eng.client.run(os.getenv, name).values()
+            env[name] = value
     assert env["MALLOC_TRIM_THRESHOLD_"] is None
     assert env["NUMBA_NUM_THREADS"] == env["RAYON_NUM_THREADS"] == env["OMP_NUM_THREADS"] == "1"
     assert "MALLOC_TRIM_THRESHOLD_" not in os.environ  # nor leaked into this process
