@@ -26,8 +26,12 @@ ROOT = Path(__file__).resolve().parents[1]
 PKG = ROOT / "src" / "lidarqa"
 
 
+def _cache_files() -> list[Path]:
+    return sorted([*PKG.rglob("__pycache__/*.nbi"), *PKG.rglob("__pycache__/*.nbc")])
+
+
 def main() -> None:
-    old = [*PKG.rglob("__pycache__/*.nbi"), *PKG.rglob("__pycache__/*.nbc")]
+    old = _cache_files()
     for p in old:
         p.unlink()
     env = dict(os.environ)
@@ -38,12 +42,11 @@ def main() -> None:
             [sys.executable, "-m", "lidarqa.cli.main", "-q", "demo", "--out", str(Path(tmp) / "d")],
             env=env, check=True,
         )
-    new = sorted([*PKG.rglob("__pycache__/*.nbi"), *PKG.rglob("__pycache__/*.nbc")])
-    rel = [str(p.relative_to(ROOT)) for p in new]
+    new = _cache_files()
     subprocess.run(["git", "add", "-A", "-f", "--", "src/lidarqa/*.nbi", "src/lidarqa/*.nbc"],
                    cwd=ROOT, check=True)
     size = sum(p.stat().st_size for p in new)
-    print(f"{len(old)} old cache files removed; {len(rel)} staged ({size / 2**20:.1f} MB)")
+    print(f"{len(old)} old cache files removed; {len(new)} staged ({size / 2**20:.1f} MB)")
 
 
 if __name__ == "__main__":
