@@ -91,6 +91,14 @@ from ._common import (
     help="segment-ptd: surface-growing radius (m) [default: 2.5 x point spacing].",
 )
 @click.option(
+    "--filter-density",
+    type=float,
+    default=None,
+    help="segment-ptd: filter the lowest point per cell of 1/sqrt(D) m and join the other "
+    "points by a plane test, pts/m2; 0 = filter every point [default: 4 on airborne "
+    "clouds of 6 pts/m2 or more, else 0].",
+)
+@click.option(
     "--all-returns",
     is_flag=True,
     help="Let every return be ground (default: only last/single returns when recorded).",
@@ -160,6 +168,7 @@ def ground(
     orientation_thr,
     scatter_thr,
     grow_radius,
+    filter_density,
     all_returns,
     exclude_classes,
     evaluate,
@@ -216,6 +225,7 @@ def ground(
         "orientation_thr": orientation_thr,
         "scatter_thr": scatter_thr,
         "grow_radius": grow_radius,
+        "filter_density": filter_density,
     }
     given = {k: v for k, v in seg_only.items() if v is not None}
     if given and method != "segment-ptd":

@@ -11,6 +11,8 @@ import math
 import numpy as np
 from numba import get_num_threads, njit, prange
 
+from .._arrays import colmin
+
 # ----------------------------------------------------------------- eigen / fits
 
 
@@ -200,7 +202,7 @@ def build_grid(pts: np.ndarray, cell: float):
     Returns (cx, cy, cz, nyz, nz, cell_keys, cell_start, order, max_count).
     Cells are keyed (ix+1)*nyz + (iy+1)*nz + iz so the +-1 neighbours never wrap.
     """
-    lo = pts.min(axis=0)
+    lo = colmin(pts)
     ijk = np.floor((pts - lo) / cell).astype(np.int64)
     cx = ijk[:, 0] + 1
     cy = ijk[:, 1] + 1

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from .._arrays import colmax, colmin
 from .._validate import as_points, check_choice, check_positive, check_range
 from ..errors import DataQualityWarning, DegenerateGeometryError, EstimationError, OptionError
 
@@ -225,7 +226,7 @@ def _fit_explicit_z(p: np.ndarray, origin: np.ndarray) -> PlaneFit:
 
 
 def _origin(p: np.ndarray) -> np.ndarray:
-    return (p.min(axis=0) + p.max(axis=0)) / 2.0
+    return (colmin(p) + colmax(p)) / 2.0
 
 
 def fit_plane(points: Any, *, method: str = "svd") -> PlaneFit:

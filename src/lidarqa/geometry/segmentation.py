@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
+from .._arrays import colmax, colmin
 from .._progress import ProgressCallback, report, stage
 from .._validate import as_points, check_choice, check_positive, check_range
 from ..errors import OptionError
@@ -45,11 +46,11 @@ def canonical_points(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """
     if len(points) == 0:
         return np.zeros(0, dtype=np.int64), points.copy()
-    lo = points.min(axis=0)
-    hi = points.max(axis=0)
+    lo = colmin(points)
+    hi = colmax(points)
     cell = K.cell_size(hi - lo, len(points), 20)
     ijk = np.floor((points - lo) / cell).astype(np.int64)
-    dims = ijk.max(axis=0) + 1
+    dims = colmax(ijk) + 1
     key = (ijk[:, 0] * dims[1] + ijk[:, 1]) * dims[2] + ijk[:, 2]
     perm = np.argsort(key, kind="stable")
     # within a cell: lexicographic x, y, z (exact duplicates keep their input order)
@@ -486,7 +487,7 @@ def segment_planes(
     if labels.max(initial=-1) < 0:
         report(progress, 1.0)
         return _empty_segmentation(n, params)
-    offset = (pts_in.min(axis=0) + pts_in.max(axis=0)) / 2.0
+    offset = (colmin(pts_in) + colmax(pts_in)) / 2.0
     n_labels = int(labels.max()) + 1
     cnt, mean, normal, rmse, c4, w = _plane_stats(pts, labels, n_labels)
     inl = labels >= 0

@@ -25,7 +25,15 @@ import numpy as np
 
 from .._validate import check_choice
 from ..errors import DataQualityWarning, OptionError
-from .auto import DENSE_ALS, PERCHED_STEP, SENSORS, CloudMeasures, auto_parameters, measure_cloud
+from .auto import (
+    DENSE_ALS,
+    FILTER_DENSITY,
+    PERCHED_STEP,
+    SENSORS,
+    CloudMeasures,
+    auto_parameters,
+    measure_cloud,
+)
 from .features import SegmentFeatures, detect_object_segments, point_scatterness, segment_features
 from .metrics import FilterErrors, filter_errors, filter_errors_from_counts, filter_errors_from_file
 from .ptd import PTD, PTDResult, mirror_point, ptd_filter
@@ -64,6 +72,7 @@ __all__ = [
     "auto_parameters",
     "SENSORS",
     "DENSE_ALS",
+    "FILTER_DENSITY",
 ]
 
 METHODS = ("segment-ptd", "ptd")

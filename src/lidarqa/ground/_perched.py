@@ -30,6 +30,8 @@ import math
 
 import numpy as np
 
+from .._arrays import colmax, colmin
+
 __all__ = ["perched_mask", "CELL", "SPREAD", "TOP_BAND"]
 
 #: raster cell (m)
@@ -79,9 +81,9 @@ def perched_mask(
     out = np.zeros(n, dtype=bool)
     if n == 0 or not ground.any():
         return out
-    base = np.floor(points[:, :2].min(axis=0) / CELL)
+    base = np.floor(colmin(points[:, :2]) / CELL)
     ij = np.floor(points[:, :2] / CELL) - base
-    span = ij.max(axis=0) + 1.0
+    span = colmax(ij) + 1.0
     if span[0] * span[1] >= 2.0**62:  # no real cloud: the cell keys would overflow
         return out
     ij = ij.astype(np.int64)

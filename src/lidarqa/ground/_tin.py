@@ -13,6 +13,8 @@ import numpy as np
 from numba import get_num_threads, njit, prange
 from scipy.spatial import Delaunay, QhullError
 
+from .._arrays import colmax, colmin
+
 EPS = 1e-9
 
 __all__ = [
@@ -59,7 +61,7 @@ def lowest_per_cell(
         return idx
     p = xyz[idx]
     ij = np.floor((p[:, :2] - origin[:2]) / cell_size).astype(np.int64)
-    ij -= ij.min(axis=0)
+    ij -= colmin(ij)
     key = ij[:, 0] * (int(ij[:, 1].max()) + 1) + ij[:, 1]
     order = np.lexsort((idx, p[:, 1], p[:, 0], p[:, 2], key))
     k = key[order]
@@ -380,8 +382,8 @@ def spatial_order(xy: np.ndarray) -> np.ndarray:
     n = xy.shape[0]
     if n < 2:
         return np.arange(n)
-    lo = xy.min(axis=0)
-    span = max(float((xy.max(axis=0) - lo).max()), 1e-12)
+    lo = colmin(xy)
+    span = max(float((colmax(xy) - lo).max()), 1e-12)
     q = np.minimum(((xy - lo) / span * 65535.0).astype(np.int64), 65535)
     code = _interleave(q[:, 0]) | (_interleave(q[:, 1]) << 1)
     return np.lexsort((xy[:, 1], xy[:, 0], code))
@@ -718,7 +720,7 @@ def supported_lowest_per_cell(
 
     p = xyz[idx]
     ij = np.floor((p[:, :2] - origin[:2]) / cell_size).astype(np.int64)
-    ij -= ij.min(axis=0)
+    ij -= colmin(ij)
     key = ij[:, 0] * (int(ij[:, 1].max()) + 1) + ij[:, 1]
     # rank by (cell, z in mm) with one integer sort; every point tying with the
     # n_lowest-th z of its cell is examined too, so the set does not depend on order
@@ -736,7 +738,7 @@ def supported_lowest_per_cell(
     look = np.flatnonzero(zq <= thr[cell_of])  # positions into idx
     # only points in the grid cells (size `radius`) around the examined ones matter
     q = np.floor(p[:, :2] / radius).astype(np.int64)
-    q -= q.min(axis=0) - 1
+    q -= colmin(q) - 1
     w = int(q[:, 1].max()) + 2
     ckey = q[:, 0] * w + q[:, 1]
     lk = ckey[look]

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from .._arrays import colmax, colmin
 from .._progress import ProgressCallback, geometric_fraction, report, stage
 from .._validate import as_points, check_choice, check_positive, check_range
 from ..errors import InvalidPointsError
@@ -248,7 +249,7 @@ def prepare(
     points: np.ndarray, cand: np.ndarray, low_d: float, low_r: float
 ) -> tuple[np.ndarray, np.ndarray, int]:
     """Shift to a local origin and drop low outliers from the candidates."""
-    xyz = points - points.min(axis=0) if points.shape[0] else points.copy()
+    xyz = points - colmin(points) if points.shape[0] else points.copy()
     n_out = 0
     if low_d > 0 and cand.sum() > 3:
         ci = np.flatnonzero(cand)
@@ -264,8 +265,8 @@ def initial_seeds(
     xyz: np.ndarray, ci: np.ndarray, par: Any, crit: Criteria
 ) -> tuple[np.ndarray, np.ndarray]:
     """Seed points (supported lowest per cell, terrain-angle screened) and the virtual hull."""
-    lo = xyz[ci].min(axis=0)
-    hi = xyz[ci].max(axis=0)
+    lo = colmin(xyz[ci])
+    hi = colmax(xyz[ci])
     seeds = supported_lowest_per_cell(
         xyz,
         ci,

@@ -13,12 +13,13 @@ from __future__ import annotations
 
 import math
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
+from .._arrays import colmax, colmin
 from .._progress import ProgressCallback, report, stage
 from .._validate import as_points, check_choice, check_positive, check_range
 from ..errors import DegenerateGeometryWarning, InvalidPointsError, OptionError
@@ -27,7 +28,16 @@ from ._tin import TIN, tree_workers
 from .features import detect_object_segments, segment_features
 from .ptd import DensifyState, TINParameters, densify, final_pass, initial_seeds, prepare
 
-__all__ = ["SegmentPTD", "SegmentPTDResult", "segment_ptd", "default_grow_radius"]
+__all__ = [
+    "SegmentPTD",
+    "SegmentPTDResult",
+    "segment_ptd",
+    "default_grow_radius",
+    "thin_lowest",
+]
+
+#: largest `filter_density` (points/m²): a 1 mm cell
+MAX_FILTER_DENSITY = 1e6
 
 
 @dataclass(frozen=True)
@@ -89,8 +99,8 @@ def default_grow_radius(points: np.ndarray, *, factor: float = 2.5, floor: float
     n = points.shape[0]
     if n < 2:
         return floor
-    lo = points[:, :2].min(axis=0)
-    span = points[:, :2].max(axis=0) - lo
+    lo = colmin(points[:, :2])
+    span = colmax(points[:, :2]) - lo
     area = float(max(span[0], 1e-9) * max(span[1], 1e-9))
     if area <= 1e-12:
         return floor
@@ -196,6 +206,19 @@ class SegmentPTD(TINParameters):
         (embankments), and stays ground.
     perched_angle : float, default 45.0
     perched_radius : float, default 8.0
+    filter_density : float, default 0.0
+        Dense clouds (points/m²; 0 = off, the automatic parameters set it for dense
+        airborne clouds): the filter runs on the lowest candidate of each XY cell of
+        1/sqrt(`filter_density`) m (cells on absolute coordinates, so tiles and chunks
+        see the same cells), and every other candidate joins the ground when the
+        lowest point of its cell is ground and it lies within `join_distance` m
+        (vertically) of the least-squares plane through the lowest ground points of
+        its cell and the eight cells around it. Terrain is the lower envelope of the
+        cloud, so the lowest points carry the decision; the plane test then takes the
+        ground points the thinning set aside, and leaves low vegetation, cars and the
+        feet of walls that stand higher.
+    join_distance : float, default 0.15
+        See `filter_density` (m).
     """
 
     cell_size: float = 60.0
@@ -242,6 +265,8 @@ class SegmentPTD(TINParameters):
     perched_step: float = 0.0
     perched_angle: float = 45.0
     perched_radius: float = 8.0
+    filter_density: float = 0.0
+    join_distance: float = 0.15
 
     def __post_init__(self) -> None:
         self._check_tin_parameters()
@@ -271,6 +296,8 @@ class SegmentPTD(TINParameters):
         check_positive(self.perched_step, "perched_step", allow_zero=True)
         check_range(self.perched_angle, "perched_angle", 0.0, 90.0, hi_open=True)
         check_positive(self.perched_radius, "perched_radius")
+        check_range(self.filter_density, "filter_density", 0.0, MAX_FILTER_DENSITY)
+        check_positive(self.join_distance, "join_distance", allow_zero=True)
         if int(self.connect_min_size) != self.connect_min_size or self.connect_min_size < 0:
             raise OptionError(
                 f"connect_min_size must be an integer >= 0, got {self.connect_min_size!r}"
@@ -299,7 +326,7 @@ class SegmentPTD(TINParameters):
         ci = np.flatnonzero(cand)
         if ci.size < 3:
             return labels, math.nan, None
-        sub = pts[ci] - pts[ci].min(axis=0)
+        sub = pts[ci] - colmin(pts[ci])
         r0 = default_grow_radius(sub, factor=self.grow_radius_factor, floor=0.0)
         density = (self.grow_radius_factor / r0) ** 2 if r0 > 0 else 0.0
         sample = np.arange(ci.size)
@@ -354,6 +381,8 @@ class SegmentPTD(TINParameters):
         pts = as_points(points)
         n = pts.shape[0]
         cand = np.ones(n, dtype=bool) if candidates is None else _mask(candidates, n, "candidates")
+        if self.filter_density > 0 and labels is None and object_segments is None:
+            return self._run_thinned(pts, cand, progress)
         radius = math.nan
         feature_idx = None
         if labels is None:
@@ -371,6 +400,39 @@ class SegmentPTD(TINParameters):
         )
         report(progress, 1.0)
         return result
+
+    def _run_thinned(
+        self, pts: np.ndarray, cand: np.ndarray, progress: ProgressCallback | None
+    ) -> SegmentPTDResult:
+        """`filter_density`: filter the lowest point per cell, then join the others."""
+        n = pts.shape[0]
+        ci = np.flatnonzero(cand)
+        inner = replace(self, filter_density=0.0)
+        if ci.size == 0:
+            return inner.run(pts, candidates=cand, progress=progress)
+        p = pts[ci]
+        win, inv, cells = thin_lowest(p, 1.0 / math.sqrt(self.filter_density))
+        wp = np.ascontiguousarray(p[win])
+        res = inner.run(wp, progress=stage(progress, 0.0, 0.97))
+        wg = np.ascontiguousarray(res.ground_mask)
+        planes = _cell_planes(cells, wp, wg)
+        ok = _join(p, inv, wp, wg, planes, float(self.join_distance))
+        ok[win[wg]] = True  # a ground lowest point stays ground whatever its plane says
+        ground = np.zeros(n, dtype=bool)
+        ground[ci[ok]] = True
+        lab = np.full(n, -1, dtype=np.int64)
+        lab[ci] = res.labels[inv]
+        report(progress, 1.0)
+        return SegmentPTDResult(
+            ground,
+            lab,
+            res.object_segments,
+            res.ground_segments,
+            res.n_seed_points,
+            res.accepted_per_iter,
+            res.n_point_ptd,
+            res.grow_radius,
+        )
 
     def ground_mask(self, points: Any, *, labels: Any = None, candidates: Any = None) -> np.ndarray:
         """Boolean ground mask ``(N,)`` of `points` (see :meth:`run`)."""
@@ -502,8 +564,8 @@ def _cell_keys(q: np.ndarray, p: np.ndarray) -> np.ndarray:
     cell) the rank of each distinct cell, or of each distinct position in `p` when the
     cell coordinates overflowed: no integer overflow, whatever the cell size.
     """
-    lo = q.min(axis=0)
-    span = q.max(axis=0) - lo + 1.0
+    lo = colmin(q)
+    span = colmax(q) - lo + 1.0
     if np.isfinite(span).all() and float(np.prod(span)) < 2.0**62:
         qi = (q - lo).astype(np.int64)
         key = qi[:, 0].copy()
@@ -512,6 +574,122 @@ def _cell_keys(q: np.ndarray, p: np.ndarray) -> np.ndarray:
         return key
     rows = q if np.isfinite(q).all() else p[:, : q.shape[1]]
     return np.unique(rows, axis=0, return_inverse=True)[1].reshape(-1).astype(np.int64)
+
+
+def thin_lowest(points: Any, cell: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The lowest point of each occupied XY cell of `cell` m (cells on absolute coordinates).
+
+    Returns ``(winners, inverse, cells)``: the index of each cell's lowest point (ties
+    by x, y, z), cells in lexicographic (column, row) order; the cell number of every
+    point; and the ``(column, row)`` of each cell as floats. Independent of the
+    input order.
+    """
+    p = np.asarray(points, dtype=np.float64)
+    if p.shape[0] == 0:
+        e = np.zeros(0, dtype=np.int64)
+        return e, e.copy(), np.zeros((0, 2))
+    # floor(min / cell) = min(floor(x / cell)): division and floor are monotonic
+    lo = np.floor(colmin(p[:, :2]) / cell)
+    span = np.floor(colmax(p[:, :2]) / cell) - lo + 1.0
+    if np.isfinite(span).all() and float(np.prod(span)) < 2.0**62:
+        key = _grid_keys(p, float(cell), lo[0], lo[1], int(span[1]))
+    else:
+        key = _cell_keys(np.floor(p[:, :2] / cell), p)
+    win, inv = _argmin_per_group(key, np.ascontiguousarray(p[:, 2]), p)
+    return win, inv, np.ascontiguousarray(np.floor(p[win, :2] / cell))
+
+
+@njit(cache=True, parallel=True)
+def _grid_keys(p, cell, lo_x, lo_y, span_y):  # pragma: no cover - numba
+    """Row-major cell numbers (the keys of :func:`_cell_keys`) in one pass."""
+    n = p.shape[0]
+    key = np.empty(n, np.int64)
+    for i in prange(n):
+        key[i] = np.int64(np.floor(p[i, 0] / cell) - lo_x) * span_y + np.int64(
+            np.floor(p[i, 1] / cell) - lo_y
+        )
+    return key
+
+
+@njit(cache=True)
+def _find_cell(cells, cx, cy):  # pragma: no cover - numba
+    """Row of (cx, cy) in `cells` sorted lexicographically, -1 if absent."""
+    lo, hi = 0, cells.shape[0]
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if cells[mid, 0] < cx or (cells[mid, 0] == cx and cells[mid, 1] < cy):
+            lo = mid + 1
+        else:
+            hi = mid
+    if lo < cells.shape[0] and cells[lo, 0] == cx and cells[lo, 1] == cy:
+        return lo
+    return -1
+
+
+@njit(cache=True, parallel=True)
+def _cell_planes(cells, wp, wg):  # pragma: no cover - numba
+    """Per ground cell: (a, b, c) of z = a + b·dx + c·dy about its lowest point.
+
+    Least squares through the lowest ground points of the 3 × 3 cells around it; a
+    level plane through their mean when they do not span a plane.
+    """
+    m = cells.shape[0]
+    out = np.zeros((m, 3))
+    for i in prange(m):
+        if not wg[i]:
+            continue
+        nb = np.empty(9, np.int64)
+        cnt = 0
+        for dx in range(-1, 2):
+            for dy in range(-1, 2):
+                j = _find_cell(cells, cells[i, 0] + dx, cells[i, 1] + dy)
+                if j >= 0 and wg[j]:
+                    nb[cnt] = j
+                    cnt += 1
+        sx = sy = sz = 0.0
+        for t in range(cnt):
+            j = nb[t]
+            sx += wp[j, 0] - wp[i, 0]
+            sy += wp[j, 1] - wp[i, 1]
+            sz += wp[j, 2]
+        mx, my, mz = sx / cnt, sy / cnt, sz / cnt
+        sxx = sxy = syy = sxz = syz = 0.0
+        for t in range(cnt):
+            j = nb[t]
+            x = wp[j, 0] - wp[i, 0] - mx
+            y = wp[j, 1] - wp[i, 1] - my
+            z = wp[j, 2] - mz
+            sxx += x * x
+            sxy += x * y
+            syy += y * y
+            sxz += x * z
+            syz += y * z
+        det = sxx * syy - sxy * sxy
+        b = c = 0.0
+        if cnt >= 3 and det > 1e-9 * (sxx * syy + 1e-300):
+            b = (sxz * syy - syz * sxy) / det
+            c = (syz * sxx - sxz * sxy) / det
+        out[i, 0] = mz - b * mx - c * my
+        out[i, 1] = b
+        out[i, 2] = c
+    return out
+
+
+@njit(cache=True, parallel=True)
+def _join(p, inv, wp, wg, planes, tol):  # pragma: no cover - numba
+    """Points within `tol` (vertically) of their ground cell's plane."""
+    n = p.shape[0]
+    ok = np.zeros(n, dtype=np.bool_)
+    for k in prange(n):
+        g = inv[k]
+        if wg[g]:
+            h = p[k, 2] - (
+                planes[g, 0]
+                + planes[g, 1] * (p[k, 0] - wp[g, 0])
+                + planes[g, 2] * (p[k, 1] - wp[g, 1])
+            )
+            ok[k] = abs(h) <= tol
+    return ok
 
 
 def _mask(m: Any, n: int, name: str) -> np.ndarray:

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from .._arrays import colmin
 from ..errors import InvalidPointsError, LasReadError, WriteError
 from ._atomic import atomic_path, check_input, check_output
 from ._lasheader import check_las_header
@@ -250,7 +251,7 @@ def _new_las(cloud: PointCloud) -> Any:
     laspy = _laspy()
     has_rgb = all(c in cloud.fields for c in ("red", "green", "blue"))
     header = laspy.LasHeader(point_format=7 if has_rgb else 6, version="1.4")
-    mins = cloud.xyz.min(axis=0) if len(cloud) else np.zeros(3)
+    mins = colmin(cloud.xyz) if len(cloud) else np.zeros(3)
     header.offsets = np.floor(mins)
     header.scales = np.array([0.001, 0.001, 0.001])
     std = set(header.point_format.dimension_names)

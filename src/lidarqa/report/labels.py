@@ -146,6 +146,8 @@ LABELS: dict[str, Label] = {
     "perched_step": _l("perched-surface test: drop on opposite sides (0 = off)", M),
     "perched_angle": _l("perched-surface test: steepest grade of terrain", DEG),
     "perched_radius": _l("perched-surface test: search radius", M),
+    "filter_density": _l("dense cloud filtered on its lowest points, at (0 = all)", "pts/m²"),
+    "join_distance": _l("other points of a ground cell join within", M),
     # plane segmentation and edges
     "near_dist": _l("edge support: distance to the line", M),
     "min_angle": _l("minimum angle between planes", DEG),

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import os
 import shutil
 import warnings
@@ -41,6 +42,7 @@ from typing import Any
 
 import numpy as np
 
+from .._arrays import colmin
 from ..errors import OptionError, OutputExistsError, TilingError
 
 __all__ = [
@@ -347,6 +349,7 @@ def catalog_grow_radius(
     factor: float = 2.5,
     max_points: int = 4_000_000,
     sample: np.ndarray | None = None,
+    filter_density: float = 0.0,
 ) -> float:
     """The segment-PTD surface-growing radius of a catalog, estimated once for all chunks.
 
@@ -356,9 +359,11 @@ def catalog_grow_radius(
     Per-chunk estimates differ by a few per cent from chunk to chunk and from a whole
     run, and the radius changes segments far from chunk borders; one value for the
     catalog keeps chunks consistent (on a catalog small enough to be sampled entirely
-    it is exactly the whole-area value).
+    it is exactly the whole-area value). With segment-PTD's `filter_density` the
+    radius is that of the lowest point per cell, which the filter segments.
     """
     from ..ground import default_grow_radius
+    from ..ground.segment_ptd import thin_lowest
 
     xyz = sample
     if xyz is None:
@@ -368,9 +373,11 @@ def catalog_grow_radius(
             exclude_classes=exclude_classes,
             max_points=max_points,
         )
+    if filter_density > 0 and len(xyz):
+        xyz = xyz[thin_lowest(xyz, 1.0 / math.sqrt(filter_density))[0]]
     if len(xyz) < 3:
         return 0.3
-    r0 = default_grow_radius(xyz - xyz.min(axis=0), factor=factor, floor=0.0)
+    r0 = default_grow_radius(xyz - colmin(xyz), factor=factor, floor=0.0)
     return float(max(0.3, r0))
 
 
@@ -517,6 +524,7 @@ def ground_catalog(
             exclude_classes=tuple(exclude_classes or ()),
             factor=float(filt.grow_radius_factor),
             sample=None if sample is None else sample[0],
+            filter_density=float(filt.filter_density),
         )
     # Seed cells are laid from the south-west corner of the filter's input: snap every
     # buffered box to the seed grid of the whole catalog (see make_chunks).

@@ -1,0 +1,154 @@
+"""Dense clouds filtered on their lowest point per cell (segment-PTD ``filter_density``).
+
+Scenes with known truth: the thinned filter must be at least as right as filtering
+every point, keep steep ground and curbs, leave low vegetation out, and be
+independent of input order; the automatic parameters switch it on for dense
+airborne clouds only; catalogs estimate the surface-growing radius the same way.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from lidarqa.errors import OptionError
+from lidarqa.ground import (
+    FILTER_DENSITY,
+    SegmentPTD,
+    auto_parameters,
+    classify_ground,
+    filter_errors,
+    measure_cloud,
+)
+from lidarqa.ground.segment_ptd import thin_lowest
+from lidarqa.testing import make_scene
+
+
+def _reference_thin(p: np.ndarray, cell: float):
+    """Lowest point per cell by a lexicographic sort (ties by x, y, z, then index)."""
+    q = np.floor(p[:, :2] / cell)
+    order = np.lexsort((np.arange(len(p)), p[:, 1], p[:, 0], p[:, 2], q[:, 1], q[:, 0]))
+    qs = q[order]
+    first = np.ones(len(p), dtype=bool)
+    first[1:] = (qs[1:] != qs[:-1]).any(axis=1)
+    return order[first]
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    n=st.integers(1, 400),
+    cell=st.sampled_from([0.05, 0.5, 1.0, 7.3]),
+    dup=st.booleans(),
+    seed=st.integers(0, 2**16),
+)
+def test_thin_lowest_matches_a_sort_and_ignores_order(n, cell, dup, seed):
+    rng = np.random.default_rng(seed)
+    p = np.round(rng.uniform(-20, 20, (n, 3)), 1) + [600000.0, 6800000.0, 0.0]
+    if dup:
+        p = np.vstack([p, p[: n // 2]])
+    win, inv, cells = thin_lowest(p, cell)
+    ref = _reference_thin(p, cell)
+    assert sorted(map(tuple, p[win])) == sorted(map(tuple, p[ref]))
+    # every point maps to its own cell's winner
+    np.testing.assert_array_equal(np.floor(p[win[inv], :2] / cell), np.floor(p[:, :2] / cell))
+    np.testing.assert_array_equal(cells, np.floor(p[win, :2] / cell))
+    assert (p[win[inv], 2] <= p[:, 2]).all()
+    perm = rng.permutation(len(p))
+    w2, _, _ = thin_lowest(p[perm], cell)
+    assert sorted(map(tuple, p[perm][w2])) == sorted(map(tuple, p[win]))
+
+
+@pytest.fixture(scope="module")
+def dense_scene():
+    return make_scene(seed=3, size=(120.0, 120.0), density=20.0, origin=(600000.0, 6800000.0, 50.0))
+
+
+def test_auto_switches_it_on_for_dense_airborne_clouds_only(dense_scene):
+    m = measure_cloud(dense_scene.points)
+    p, src, regime = auto_parameters(m, "segment-ptd")
+    assert regime == "als-dense"
+    assert p["filter_density"] == FILTER_DENSITY and src["filter_density"] == "measured"
+    rng = np.random.default_rng(0)
+    for density in (1.0, 1.4 * FILTER_DENSITY):  # sparse, or too close to the target
+        n = int(density * 100 * 100)
+        pts = np.column_stack([rng.uniform(0, 100, (n, 2)), rng.normal(0, 0.02, n)])
+        assert "filter_density" not in auto_parameters(measure_cloud(pts), "segment-ptd")[0]
+    assert "filter_density" not in auto_parameters(m, "segment-ptd", sensor="mls")[0]
+    assert "filter_density" not in auto_parameters(m, "ptd")[0]
+
+
+def test_as_right_as_filtering_every_point(dense_scene):
+    truth = dense_scene.classification == 2
+    auto = classify_ground(dense_scene.points)
+    assert auto.parameters["filter_density"] == FILTER_DENSITY
+    full = classify_ground(dense_scene.points, filter_density=0.0)
+    e_auto = filter_errors(truth, auto.ground_mask)
+    e_full = filter_errors(truth, full.ground_mask)
+    assert e_auto.total <= e_full.total + 0.002, (e_auto.total, e_full.total)
+    assert e_auto.kappa >= 0.95
+    # the labels cover every candidate: each point carries its cell's segment
+    assert auto.details.labels.shape == (len(truth),)
+
+
+def _slope_with_vegetation(slope_deg: float, seed: int = 0):
+    rng = np.random.default_rng(seed)
+    n = int(20 * 60 * 60)
+    xy = rng.uniform(0, 60, (n, 2))
+    z = xy[:, 0] * math.tan(math.radians(slope_deg)) + rng.normal(0, 0.03, n)
+    veg = rng.random(n) < 0.2  # a shrub layer 0.4-1.5 m above the ground
+    z[veg] += rng.uniform(0.4, 1.5, veg.sum())
+    return np.column_stack([xy + [700000.0, 6500000.0], z + 100.0]), ~veg
+
+
+@pytest.mark.parametrize("slope", [0.0, 20.0, 40.0])
+def test_joined_points_follow_the_slope_and_leave_vegetation_out(slope):
+    p, truth = _slope_with_vegetation(slope)
+    g = SegmentPTD(filter_density=4.0, perched_step=2.0).run(p).ground_mask
+    kept = g[truth].mean()
+    veg_as_ground = g[~truth].mean()
+    assert kept >= 0.97, f"{100 * kept:.1f} % of the ground kept on {slope} deg"
+    assert veg_as_ground <= 0.01, f"{100 * veg_as_ground:.2f} % of the shrubs as ground"
+
+
+def test_independent_of_input_order(dense_scene):
+    p = dense_scene.points
+    perm = np.random.default_rng(1).permutation(len(p))
+    par = SegmentPTD(filter_density=4.0)
+    a = par.run(p).ground_mask
+    b = par.run(p[perm]).ground_mask
+    np.testing.assert_array_equal(a[perm], b)
+
+
+def test_a_sparse_cloud_is_left_as_it_is():
+    # one point per cell: thinning changes nothing, so the result is the full filter's
+    rng = np.random.default_rng(2)
+    ij = np.stack(np.meshgrid(np.arange(60), np.arange(60)), -1).reshape(-1, 2)
+    xy = (ij + rng.uniform(0.1, 0.9, ij.shape)) * 1.0  # one point per 1 m cell
+    p = np.column_stack([xy, rng.normal(0, 0.02, len(xy))])
+    thin = SegmentPTD(filter_density=1.0).run(p).ground_mask
+    full = SegmentPTD().run(p).ground_mask
+    np.testing.assert_array_equal(thin, full)
+
+
+@pytest.mark.parametrize("bad", [-1.0, float("nan"), float("inf"), 1e7])
+def test_bad_filter_density_is_refused(bad):
+    with pytest.raises(OptionError, match="filter_density"):
+        SegmentPTD(filter_density=bad)
+    with pytest.raises(OptionError, match="join_distance"):
+        SegmentPTD(join_distance=-0.1)
+
+
+def test_catalog_radius_is_the_thinned_clouds(dense_scene):
+    from lidarqa.ground import default_grow_radius
+    from lidarqa.tiling.ground import catalog_grow_radius
+
+    p = dense_scene.points
+    r_cat = catalog_grow_radius(None, sample=p, filter_density=4.0)
+    run = SegmentPTD(filter_density=4.0).run(p)
+    assert r_cat == pytest.approx(run.grow_radius, rel=1e-12)
+    r_dense = max(0.3, default_grow_radius(p - p.min(axis=0), floor=0.0))
+    assert r_cat > 1.5 * r_dense  # 4 pts/m2 instead of 20: a wider radius
