@@ -219,8 +219,8 @@ def ground_candidates(
         if rn is None or nr is None or n == 0:
             handling = "absent"
         else:
-            rn = np.asarray(rn).astype(np.int64)
-            nr = np.asarray(nr).astype(np.int64)
+            rn = np.asarray(rn)  # compared in their own (unsigned) type: no copies
+            nr = np.asarray(nr)
             zero = (rn == 0) | (nr == 0)
             if zero.all():
                 handling = "absent"

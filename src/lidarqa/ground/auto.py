@@ -46,6 +46,7 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
+from numba import njit, prange
 
 from .._validate import check_choice
 
@@ -135,22 +136,38 @@ def _grid_density(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
     cell = math.sqrt(50.0 * span / n)
     if not cell > 0:
         return math.nan, 0.0
-    i = (x / cell).astype(np.int64)
-    j = (y / cell).astype(np.int64)
-    counts = np.bincount(i * (int(j.max()) + 1) + j)
+    counts = np.bincount(_flat_cells(x, y, cell, int(float(y.max()) / cell) + 1))
     counts = counts[counts > 0]
     return float(np.median(counts)) / (cell * cell), float(counts.size * cell * cell)
 
 
 def _min_raster(x: np.ndarray, y: np.ndarray, z: np.ndarray, cell: float) -> np.ndarray:
     """Lowest z per XY cell (nan where empty); `x`, `y` start at 0."""
-    i = (x / cell).astype(np.int64)
-    j = (y / cell).astype(np.int64)
-    shape = (int(i.max()) + 1, int(j.max()) + 1)
-    flat = np.full(shape[0] * shape[1], np.inf)
-    np.minimum.at(flat, i * shape[1] + j, z)
-    flat[~np.isfinite(flat)] = np.nan
+    shape = (int(float(x.max()) / cell) + 1, int(float(y.max()) / cell) + 1)
+    flat = _min_per_cell(_flat_cells(x, y, cell, shape[1]), z, shape[0] * shape[1])
     return flat.reshape(shape)
+
+
+@njit(cache=True, parallel=True)
+def _flat_cells(x, y, cell, nj):  # pragma: no cover - numba
+    """Row-major cell number of each point (`x`, `y` >= 0), int64, one pass."""
+    out = np.empty(x.size, np.int64)
+    for k in prange(x.size):
+        out[k] = np.int64(x[k] / cell) * nj + np.int64(y[k] / cell)
+    return out
+
+
+@njit(cache=True)
+def _min_per_cell(flat, z, size):  # pragma: no cover - numba
+    """Lowest `z` per cell number (nan where empty)."""
+    out = np.full(size, np.inf)
+    for k in range(flat.size):
+        if z[k] < out[flat[k]]:
+            out[flat[k]] = z[k]
+    for c in range(size):
+        if not np.isfinite(out[c]):
+            out[c] = np.nan
+    return out
 
 
 def _open(z: np.ndarray, size: int) -> np.ndarray:
