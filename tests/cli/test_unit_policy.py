@@ -26,7 +26,7 @@ CONFIG_COMMANDS = {"assess", "demo"}
 SELECTING = {"planes", "edges", "corners", "heights", "checkpoints", "repeatability", "lines"}
 COMMON = {"--json", "--overwrite", "--quiet", "--verbose"}
 UNIT_WORDS = re.compile(
-    r"\((m|m²|degrees|1/m|dimensionless|0\.\.1|in --angle-unit)[),;]"
+    r"\((m|m²|degrees|1/m²?|dimensionless|0\.\.1|in --angle-unit)[),;]"
     r"|, (m|degrees|m²)\b|\b(metres|degrees)\b"
 )
 

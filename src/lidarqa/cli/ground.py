@@ -94,9 +94,9 @@ from ._common import (
     "--filter-density",
     type=float,
     default=None,
-    help="segment-ptd: filter the lowest point per cell of 1/sqrt(D) m and join the other "
-    "points by a plane test, pts/m2; 0 = filter every point [default: 4 on airborne "
-    "clouds of 6 pts/m2 or more, else 0].",
+    help="segment-ptd: points per m2 (1/m²; 0 = every point) a dense cloud is filtered at: the "
+    "lowest point per cell of 1/sqrt(D) m, the other points joined by a plane test "
+    "[default: 4 on airborne clouds of 6 per m2 or more, else 0].",
 )
 @click.option(
     "--all-returns",
