@@ -49,34 +49,42 @@ def eigvals_sym3(a00, a01, a02, a11, a12, a22):
 
 
 @njit(cache=True)
+def centred_moments(pts, rows, cnt):  # pragma: no cover - numba
+    """Mean (x, y, z) and centred second-moment sums (xx, xy, xz, yy, yz, zz) of
+    ``pts[rows[:cnt]]``, two passes (no cancellation at large coordinates)."""
+    mx = 0.0
+    my = 0.0
+    mz = 0.0
+    for a in range(cnt):
+        j = rows[a]
+        mx += pts[j, 0]
+        my += pts[j, 1]
+        mz += pts[j, 2]
+    mx /= cnt
+    my /= cnt
+    mz /= cnt
+    c00 = c01 = c02 = c11 = c12 = c22 = 0.0
+    for a in range(cnt):
+        j = rows[a]
+        dx = pts[j, 0] - mx
+        dy = pts[j, 1] - my
+        dz = pts[j, 2] - mz
+        c00 += dx * dx
+        c01 += dx * dy
+        c02 += dx * dz
+        c11 += dy * dy
+        c12 += dy * dz
+        c22 += dz * dz
+    return mx, my, mz, c00, c01, c02, c11, c12, c22
+
+
+@njit(cache=True)
 def planarity_knn(pts, knn):
     """lambda3 / (lambda1+lambda2+lambda3) of each point's k-neighbourhood (N,)."""
     n, k = knn.shape
     out = np.empty(n)
     for i in range(n):
-        mx = 0.0
-        my = 0.0
-        mz = 0.0
-        for a in range(k):
-            j = knn[i, a]
-            mx += pts[j, 0]
-            my += pts[j, 1]
-            mz += pts[j, 2]
-        mx /= k
-        my /= k
-        mz /= k
-        c00 = c01 = c02 = c11 = c12 = c22 = 0.0
-        for a in range(k):
-            j = knn[i, a]
-            dx = pts[j, 0] - mx
-            dy = pts[j, 1] - my
-            dz = pts[j, 2] - mz
-            c00 += dx * dx
-            c01 += dx * dy
-            c02 += dx * dz
-            c11 += dy * dy
-            c12 += dy * dz
-            c22 += dz * dz
+        _, _, _, c00, c01, c02, c11, c12, c22 = centred_moments(pts, knn[i], k)
         tr = c00 + c11 + c22
         if tr <= 0.0:
             out[i] = 1.0  # all points equal: worst possible planarity

@@ -23,6 +23,7 @@ from .._arrays import colmax, colmin
 from .._progress import ProgressCallback, report, stage
 from .._validate import as_points, check_choice, check_positive, check_range
 from ..errors import DegenerateGeometryWarning, InvalidPointsError, OptionError
+from ..geometry._kernels import centred_moments
 from ._perched import perched_mask
 from ._tin import TIN, tree_workers
 from .features import detect_object_segments, segment_features
@@ -646,24 +647,9 @@ def _cell_planes(cells, wp, wg):  # pragma: no cover - numba
                 if j >= 0 and wg[j]:
                     nb[cnt] = j
                     cnt += 1
-        sx = sy = sz = 0.0
-        for t in range(cnt):
-            j = nb[t]
-            sx += wp[j, 0] - wp[i, 0]
-            sy += wp[j, 1] - wp[i, 1]
-            sz += wp[j, 2]
-        mx, my, mz = sx / cnt, sy / cnt, sz / cnt
-        sxx = sxy = syy = sxz = syz = 0.0
-        for t in range(cnt):
-            j = nb[t]
-            x = wp[j, 0] - wp[i, 0] - mx
-            y = wp[j, 1] - wp[i, 1] - my
-            z = wp[j, 2] - mz
-            sxx += x * x
-            sxy += x * y
-            syy += y * y
-            sxz += x * z
-            syz += y * z
+        mx, my, mz, sxx, sxy, sxz, syy, syz, _ = centred_moments(wp, nb, cnt)
+        mx -= wp[i, 0]  # the plane is written about the cell's lowest point
+        my -= wp[i, 1]
         det = sxx * syy - sxy * sxy
         b = c = 0.0
         if cnt >= 3 and det > 1e-9 * (sxx * syy + 1e-300):
