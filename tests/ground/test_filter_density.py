@@ -24,6 +24,7 @@ from lidarqa.ground import (
     filter_errors,
     measure_cloud,
 )
+from lidarqa.ground.auto import FILTER_MIN_EDGE
 from lidarqa.ground.segment_ptd import thin_lowest
 from lidarqa.testing import make_scene
 
@@ -72,11 +73,13 @@ def test_auto_switches_it_on_for_dense_airborne_clouds_only(dense_scene):
     p, src, regime = auto_parameters(m, "segment-ptd")
     assert regime == "als-dense"
     assert p["filter_density"] == FILTER_DENSITY and src["filter_density"] == "measured"
+    assert p["min_edge_length"] == FILTER_MIN_EDGE and src["min_edge_length"] == "measured"
     rng = np.random.default_rng(0)
     for density in (1.0, 1.4 * FILTER_DENSITY):  # sparse, or too close to the target
         n = int(density * 100 * 100)
         pts = np.column_stack([rng.uniform(0, 100, (n, 2)), rng.normal(0, 0.02, n)])
-        assert "filter_density" not in auto_parameters(measure_cloud(pts), "segment-ptd")[0]
+        chosen = auto_parameters(measure_cloud(pts), "segment-ptd")[0]
+        assert "filter_density" not in chosen and "min_edge_length" not in chosen
     assert "filter_density" not in auto_parameters(m, "segment-ptd", sensor="mls")[0]
     assert "filter_density" not in auto_parameters(m, "ptd")[0]
 
@@ -152,3 +155,18 @@ def test_catalog_radius_is_the_thinned_clouds(dense_scene):
     assert r_cat == pytest.approx(run.grow_radius, rel=1e-12)
     r_dense = max(0.3, default_grow_radius(p - p.min(axis=0), floor=0.0))
     assert r_cat > 1.5 * r_dense  # 4 pts/m2 instead of 20: a wider radius
+
+
+def test_switching_the_thinning_off_restores_the_tin_edge(dense_scene):
+    p = dense_scene.points
+    sub = p[(p[:, 0] < p[:, 0].min() + 40) & (p[:, 1] < p[:, 1].min() + 40)]  # a 40 m corner
+    on = classify_ground(sub)
+    assert on.parameters["filter_density"] == FILTER_DENSITY
+    assert on.parameters["min_edge_length"] == FILTER_MIN_EDGE
+    off = classify_ground(sub, filter_density=0.0)
+    assert off.parameters["filter_density"] == 0.0
+    assert off.parameters["min_edge_length"] == SegmentPTD().min_edge_length
+    assert off.parameter_sources["min_edge_length"] == "default"
+    mine = classify_ground(sub, filter_density=0.0, min_edge_length=3.0)
+    assert mine.parameters["min_edge_length"] == 3.0
+    assert mine.parameter_sources["min_edge_length"] == "given"

@@ -33,6 +33,7 @@ from .auto import (
     CloudMeasures,
     auto_parameters,
     measure_cloud,
+    with_given,
 )
 from .features import SegmentFeatures, detect_object_segments, point_scatterness, segment_features
 from .metrics import FilterErrors, filter_errors, filter_errors_from_counts, filter_errors_from_file
@@ -342,7 +343,8 @@ def classify_ground(
     elif preset is not None:
         chosen = dict(PRESETS[preset][method])
         sources = dict.fromkeys(chosen, "preset")
-    params = {**chosen, **given}
+    params = with_given(chosen, given)
+    sources = {k: v for k, v in sources.items() if k in params}
     cls_type = SegmentPTD if method == "segment-ptd" else PTD
     try:
         filt = cls_type(**params)

@@ -24,7 +24,8 @@ The rules, in short:
   neighbour regardless of what it is.
 - **Dense airborne clouds** (from 1.5 × :data:`FILTER_DENSITY` points/m²) are
   filtered on their lowest point per cell of 1/sqrt(:data:`FILTER_DENSITY`) m; the
-  other points join the ground by a plane test (segment-PTD's `filter_density`).
+  other points join the ground by a plane test (segment-PTD's `filter_density`),
+  and the TIN of the filter keeps a 2 m minimum edge (:data:`FILTER_MIN_EDGE`).
   At 20 points/m² this is 4 times less work, and the decision is taken where
   terrain shows: on the lower envelope.
 - **Seed cell.** The largest object footprint (the diameter of the largest disc
@@ -58,6 +59,8 @@ __all__ = [
     "DENSE_ALS",
     "MLS_DENSITY",
     "FILTER_DENSITY",
+    "FILTER_MIN_EDGE",
+    "with_given",
 ]
 
 SENSORS = ("auto", "als", "mls")
@@ -68,6 +71,9 @@ PERCHED_STEP = 2.0
 #: points/m² dense airborne clouds are filtered at (lowest point per cell, the rest
 #: joined by a plane test; segment-PTD's `filter_density`), above 1.5 times it
 FILTER_DENSITY = 4.0
+#: minimum TIN edge (m) of the filter on the thinned cloud (TIN vertices on 1.4 m cells
+#: over its 0.5 m cells): the same decisions, 30 % less work than Table 1's 1 m
+FILTER_MIN_EDGE = 2.0
 #: points/m² above which a cloud without a scan angle is taken for a mobile scan
 MLS_DENSITY = 100.0
 #: height (m) above the opened lowest-point surface from which a cell is "raised"
@@ -320,4 +326,23 @@ def auto_parameters(
         if measures.density >= 1.5 * FILTER_DENSITY:
             params["filter_density"] = FILTER_DENSITY
             sources["filter_density"] = "measured"
+            params["min_edge_length"] = FILTER_MIN_EDGE
+            sources["min_edge_length"] = "measured"
     return params, sources, regime
+
+
+def with_given(chosen: dict[str, Any], given: dict[str, Any]) -> dict[str, Any]:
+    """The `chosen` parameters overridden by the explicit options in `given`.
+
+    The 2 m minimum TIN edge (:data:`FILTER_MIN_EDGE`) is chosen for the thinned
+    filter only: when `given` switches the thinning off (``filter_density=0``) and
+    says nothing of ``min_edge_length``, that goes back to its default.
+    """
+    out = {**chosen, **given}
+    if (
+        "filter_density" in chosen
+        and given.get("filter_density") == 0
+        and "min_edge_length" not in given
+    ):
+        out.pop("min_edge_length", None)
+    return out

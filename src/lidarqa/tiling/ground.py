@@ -476,7 +476,7 @@ def ground_catalog(
     """
     from .._validate import check_choice
     from ..ground import METHODS, PRESETS, filter_errors_from_counts
-    from ..ground.auto import SENSORS
+    from ..ground.auto import SENSORS, with_given
     from .catalog import Catalog, open_catalog
     from .chunks import DEFAULT_BUFFER, make_chunks
     from .engine import Engine, run_chunks, run_tasks
@@ -503,7 +503,7 @@ def ground_catalog(
             catalog, method, sensor=sensor, sample=sample
         )
         auto = {"regime": regime, "measured": measures.to_dict(), "chosen": dict(chosen)}
-        full_params = {**chosen, **full_params}
+        full_params = with_given(chosen, full_params)
         preset = None
     # validate the parameters once, here, before any work
     from ..ground import PTD, SegmentPTD
