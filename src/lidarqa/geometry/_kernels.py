@@ -78,6 +78,22 @@ def centred_moments(pts, rows, cnt):  # pragma: no cover - numba
     return mx, my, mz, c00, c01, c02, c11, c12, c22
 
 
+@njit(cache=True, parallel=True)
+def grid_keys(x, y, cell, lo_x, lo_y, span_y):  # pragma: no cover - numba
+    """Row-major number of the `cell`-sized XY grid cell of each point, one pass.
+
+    ``(floor(x / cell) - lo_x) * span_y + floor(y / cell) - lo_y`` as int64, with
+    `lo_x`, `lo_y` the smallest cell indices and `span_y` the number of rows.
+    """
+    n = x.shape[0]
+    key = np.empty(n, np.int64)
+    for i in prange(n):
+        key[i] = np.int64(np.floor(x[i] / cell) - lo_x) * span_y + np.int64(
+            np.floor(y[i] / cell) - lo_y
+        )
+    return key
+
+
 @njit(cache=True)
 def planarity_knn(pts, knn):
     """lambda3 / (lambda1+lambda2+lambda3) of each point's k-neighbourhood (N,)."""

@@ -47,9 +47,10 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from .._validate import check_choice
+from ..geometry._kernels import grid_keys
 
 __all__ = [
     "CloudMeasures",
@@ -142,7 +143,7 @@ def _grid_density(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
     cell = math.sqrt(50.0 * span / n)
     if not cell > 0:
         return math.nan, 0.0
-    counts = np.bincount(_flat_cells(x, y, cell, int(float(y.max()) / cell) + 1))
+    counts = np.bincount(grid_keys(x, y, cell, 0.0, 0.0, int(float(y.max()) / cell) + 1))
     counts = counts[counts > 0]
     return float(np.median(counts)) / (cell * cell), float(counts.size * cell * cell)
 
@@ -150,17 +151,8 @@ def _grid_density(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
 def _min_raster(x: np.ndarray, y: np.ndarray, z: np.ndarray, cell: float) -> np.ndarray:
     """Lowest z per XY cell (nan where empty); `x`, `y` start at 0."""
     shape = (int(float(x.max()) / cell) + 1, int(float(y.max()) / cell) + 1)
-    flat = _min_per_cell(_flat_cells(x, y, cell, shape[1]), z, shape[0] * shape[1])
+    flat = _min_per_cell(grid_keys(x, y, cell, 0.0, 0.0, shape[1]), z, shape[0] * shape[1])
     return flat.reshape(shape)
-
-
-@njit(cache=True, parallel=True)
-def _flat_cells(x, y, cell, nj):  # pragma: no cover - numba
-    """Row-major cell number of each point (`x`, `y` >= 0), int64, one pass."""
-    out = np.empty(x.size, np.int64)
-    for k in prange(x.size):
-        out[k] = np.int64(x[k] / cell) * nj + np.int64(y[k] / cell)
-    return out
 
 
 @njit(cache=True)

@@ -23,7 +23,7 @@ from .._arrays import colmax, colmin
 from .._progress import ProgressCallback, report, stage
 from .._validate import as_points, check_choice, check_positive, check_range
 from ..errors import DegenerateGeometryWarning, InvalidPointsError, OptionError
-from ..geometry._kernels import centred_moments
+from ..geometry._kernels import centred_moments, grid_keys
 from ._perched import perched_mask
 from ._tin import TIN, tree_workers
 from .features import detect_object_segments, segment_features
@@ -593,23 +593,11 @@ def thin_lowest(points: Any, cell: float) -> tuple[np.ndarray, np.ndarray, np.nd
     lo = np.floor(colmin(p[:, :2]) / cell)
     span = np.floor(colmax(p[:, :2]) / cell) - lo + 1.0
     if np.isfinite(span).all() and float(np.prod(span)) < 2.0**62:
-        key = _grid_keys(p, float(cell), lo[0], lo[1], int(span[1]))
+        key = grid_keys(p[:, 0], p[:, 1], float(cell), lo[0], lo[1], int(span[1]))
     else:
         key = _cell_keys(np.floor(p[:, :2] / cell), p)
     win, inv = _argmin_per_group(key, np.ascontiguousarray(p[:, 2]), p)
     return win, inv, np.ascontiguousarray(np.floor(p[win, :2] / cell))
-
-
-@njit(cache=True, parallel=True)
-def _grid_keys(p, cell, lo_x, lo_y, span_y):  # pragma: no cover - numba
-    """Row-major cell numbers (the keys of :func:`_cell_keys`) in one pass."""
-    n = p.shape[0]
-    key = np.empty(n, np.int64)
-    for i in prange(n):
-        key[i] = np.int64(np.floor(p[i, 0] / cell) - lo_x) * span_y + np.int64(
-            np.floor(p[i, 1] / cell) - lo_y
-        )
-    return key
 
 
 @njit(cache=True)
@@ -689,9 +677,7 @@ def _thin(xyz: np.ndarray, idx: np.ndarray, cell: float) -> np.ndarray:
     """Lowest point per `cell` × `cell` XY cell (ties by coordinates), sorted indices."""
     if cell <= 0 or idx.size == 0:
         return idx
-    p = xyz[idx]
-    win, _ = _argmin_per_group(_cell_keys(np.floor(p[:, :2] / cell), p), p[:, 2], p)
-    return np.sort(idx[win])
+    return np.sort(idx[thin_lowest(xyz[idx], cell)[0]])
 
 
 _BORDER_K = 10
