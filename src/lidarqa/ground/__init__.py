@@ -106,6 +106,7 @@ ALS_SEGMENT_PARAMS: dict[str, Any] = {
     "connect_ratio": 0.6,
     "below_pass": True,
     "perched_step": PERCHED_STEP,
+    "facade_distance": 0.7,  # = iter_distance: steep banks grown into façade segments
 }
 PRESETS: dict[str, dict[str, dict[str, Any]]] = {
     "mls": {"ptd": {}, "segment-ptd": {}},

@@ -24,6 +24,7 @@ __all__ = [
     "segment_features",
     "point_scatterness",
     "detect_object_segments",
+    "vegetation_segments",
 ]
 
 
@@ -205,6 +206,11 @@ def segment_features(
     return SegmentFeatures(orientation, scatter, size, ratio)
 
 
+def vegetation_segments(features: SegmentFeatures, *, scatter_thr: float = 0.2) -> np.ndarray:
+    """Vegetation flag per segment: mean scatterness above `scatter_thr` (:ref:`alg-features`)."""
+    return np.asarray(features.scatterness > scatter_thr, dtype=bool)
+
+
 def detect_object_segments(
     features: SegmentFeatures,
     *,
@@ -237,8 +243,7 @@ def detect_object_segments(
     check_range(orientation_thr, "orientation_thr", 0.0, 90.0)
     check_positive(scatter_thr, "scatter_thr")
     facade = (features.orientation > orientation_thr) & (features.size >= min_facade_points)
-    veg = features.scatterness > scatter_thr
-    obj = facade | veg
+    obj = facade | vegetation_segments(features, scatter_thr=scatter_thr)
     if echo_ratio_thr is not None and features.non_single_ratio is not None:
         obj |= features.non_single_ratio > echo_ratio_thr
     return np.asarray(obj, dtype=bool)

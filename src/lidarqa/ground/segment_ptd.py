@@ -26,7 +26,7 @@ from ..errors import DegenerateGeometryWarning, InvalidPointsError, OptionError
 from ..geometry._kernels import centred_moments, grid_keys
 from ._perched import perched_mask
 from ._tin import TIN, tree_workers
-from .features import detect_object_segments, segment_features
+from .features import detect_object_segments, segment_features, vegetation_segments
 from .ptd import DensifyState, TINParameters, densify, final_pass, initial_seeds, prepare
 
 __all__ = [
@@ -220,6 +220,16 @@ class SegmentPTD(TINParameters):
         feet of walls that stand higher.
     join_distance : float, default 0.15
         See `filter_density` (m).
+    facade_distance : float, default 0.0
+        Façade segments on trial (m; 0 = off, Lin & Zhang's rule: every point of a
+        façade segment is an object). Points of segments flagged as façades by
+        `orientation_thr` alone (not scattered) stay out of the densification, and at
+        the end, after the below pass, those within `facade_distance` m (vertically)
+        of the final ground surface become ground. At airborne spacings surface
+        growing also links the two levels of a steep bank or retaining wall into one
+        near-vertical segment; this keeps its terrain without letting a wall's points
+        steer the TIN. The ALS preset, and so the automatic parameters of sparse
+        airborne clouds, set it to their iteration distance (0.7 m).
     """
 
     cell_size: float = 60.0
@@ -268,6 +278,7 @@ class SegmentPTD(TINParameters):
     perched_radius: float = 8.0
     filter_density: float = 0.0
     join_distance: float = 0.15
+    facade_distance: float = 0.0
 
     def __post_init__(self) -> None:
         self._check_tin_parameters()
@@ -299,6 +310,7 @@ class SegmentPTD(TINParameters):
         check_positive(self.perched_radius, "perched_radius")
         check_range(self.filter_density, "filter_density", 0.0, MAX_FILTER_DENSITY)
         check_positive(self.join_distance, "join_distance", allow_zero=True)
+        check_positive(self.facade_distance, "facade_distance", allow_zero=True)
         if int(self.connect_min_size) != self.connect_min_size or self.connect_min_size < 0:
             raise OptionError(
                 f"connect_min_size must be an integer >= 0, got {self.connect_min_size!r}"
@@ -780,15 +792,19 @@ def _segment_ptd(
             scatter_thr=par.scatter_thr,
             min_facade_points=int(par.min_facade_points),
         )
+        # façades by orientation alone (not vegetation) may hold steep terrain
+        facade = obj & ~vegetation_segments(feats, scatter_thr=par.scatter_thr)
     else:
         obj = np.asarray(object_segments, dtype=bool)
         if obj.shape != (n_seg,):
             raise InvalidPointsError(f"object_segments must have shape ({n_seg},), got {obj.shape}")
+        facade = np.zeros(n_seg, dtype=bool)  # object flags given: all are final
     crit = par.criteria()
     n_user = n_seg
     if n_seg == 0:  # no segment at all: one dummy label keeps the indexing simple
         n_seg = 1
         obj = np.zeros(1, dtype=bool)
+        facade = np.zeros(1, dtype=bool)
     lab_c = np.maximum(lab, 0)
     obj_pt = (lab >= 0) & obj[lab_c]
     usable = cand & ~obj_pt  # candidates outside object segments
@@ -898,6 +914,13 @@ def _segment_ptd(
             tin = TIN(xyz, _thin(xyz, np.flatnonzero(ground), thin_cell), virtual)
             h = _height_above_tin(tin, xyz[oi])
             ground[oi[h < -par.below_distance]] = True
+    # 8b. façade points on trial: within facade_distance of the final ground surface
+    if par.facade_distance > 0 and facade.any() and ground.any():
+        fi = np.flatnonzero(cand & (lab >= 0) & facade[lab_c] & ~ground)
+        if fi.size:
+            tin = TIN(xyz, _thin(xyz, np.flatnonzero(ground), thin_cell), virtual)
+            h = _height_above_tin(tin, xyz[fi])
+            ground[fi[np.abs(h) <= par.facade_distance]] = True
     # 9. perched-surface test: accepted ground that drops steeply on opposite sides
     if par.perched_step > 0 and ground.any():
         ground &= ~perched_mask(

@@ -148,6 +148,7 @@ LABELS: dict[str, Label] = {
     "perched_radius": _l("perched-surface test: search radius", M),
     "filter_density": _l("dense cloud filtered on its lowest points, at (0 = all)", "pts/m²"),
     "join_distance": _l("other points of a ground cell join within", M),
+    "facade_distance": _l("façade points join the final ground within (0 = never)", M),
     # plane segmentation and edges
     "near_dist": _l("edge support: distance to the line", M),
     "min_angle": _l("minimum angle between planes", DEG),
