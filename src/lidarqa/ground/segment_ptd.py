@@ -709,6 +709,14 @@ def _height_above_tin(tin: TIN, p: np.ndarray) -> np.ndarray:
     return out
 
 
+def _height_above_ground(
+    xyz: np.ndarray, ground: np.ndarray, idx: np.ndarray, thin_cell: float, virtual: Any
+) -> np.ndarray:
+    """Height of points `idx` above the TIN of `ground` (thinned like the densification TIN)."""
+    tin = TIN(xyz, _thin(xyz, np.flatnonzero(ground), thin_cell), virtual)
+    return _height_above_tin(tin, xyz[idx])
+
+
 def _border_tests(
     xyz: np.ndarray,
     lab: np.ndarray,
@@ -911,15 +919,13 @@ def _segment_ptd(
             open_ &= lab >= 0
         oi = np.flatnonzero(open_)
         if oi.size:
-            tin = TIN(xyz, _thin(xyz, np.flatnonzero(ground), thin_cell), virtual)
-            h = _height_above_tin(tin, xyz[oi])
+            h = _height_above_ground(xyz, ground, oi, thin_cell, virtual)
             ground[oi[h < -par.below_distance]] = True
     # 8b. façade points on trial: within facade_distance of the final ground surface
     if par.facade_distance > 0 and facade.any() and ground.any():
         fi = np.flatnonzero(cand & (lab >= 0) & facade[lab_c] & ~ground)
         if fi.size:
-            tin = TIN(xyz, _thin(xyz, np.flatnonzero(ground), thin_cell), virtual)
-            h = _height_above_tin(tin, xyz[fi])
+            h = _height_above_ground(xyz, ground, fi, thin_cell, virtual)
             ground[fi[np.abs(h) <= par.facade_distance]] = True
     # 9. perched-surface test: accepted ground that drops steeply on opposite sides
     if par.perched_step > 0 and ground.any():
