@@ -107,6 +107,7 @@ ALS_SEGMENT_PARAMS: dict[str, Any] = {
     "below_pass": True,
     "perched_step": PERCHED_STEP,
     "facade_distance": 0.7,  # = iter_distance: steep banks grown into façade segments
+    "roof_ratio": 0.15,  # final roof check: gable pairs with a raised border
 }
 PRESETS: dict[str, dict[str, dict[str, Any]]] = {
     "mls": {"ptd": {}, "segment-ptd": {}},

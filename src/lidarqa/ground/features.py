@@ -168,22 +168,8 @@ def segment_features(
         return SegmentFeatures(e, e, np.zeros(0, dtype=np.int64), None)
     m = lab >= 0
     sl = lab[m]
-    sp = pts[m] - pts[m].mean(axis=0)
-    size = np.bincount(sl, minlength=n_seg).astype(np.int64)
+    _, normal, size = _segment_planes(pts[m], sl, n_seg)
     cnt = np.maximum(size, 1).astype(float)
-    s1 = np.zeros((n_seg, 3))
-    for j in range(3):
-        s1[:, j] = np.bincount(sl, weights=sp[:, j], minlength=n_seg)
-    s2 = np.zeros((n_seg, 3, 3))
-    for i in range(3):
-        for j in range(i, 3):
-            v = np.bincount(sl, weights=sp[:, i] * sp[:, j], minlength=n_seg)
-            s2[:, i, j] = v
-            s2[:, j, i] = v
-    mean = s1 / cnt[:, None]
-    cov = s2 / cnt[:, None, None] - mean[:, :, None] * mean[:, None, :]
-    w, v = _eig_sym3(cov)
-    normal = v[:, :, 0]
     orientation = np.degrees(np.arccos(np.clip(np.abs(normal[:, 2]), 0.0, 1.0)))
     orientation[size < 3] = np.nan
     seg_idx = np.flatnonzero(m)
@@ -204,6 +190,35 @@ def segment_features(
         nr = np.asarray(number_of_returns)[m]
         ratio = np.bincount(sl, weights=(nr > 1).astype(float), minlength=n_seg) / cnt
     return SegmentFeatures(orientation, scatter, size, ratio)
+
+
+def _segment_planes(
+    points: np.ndarray, labels: np.ndarray, n_seg: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Least-squares plane of every segment: centroid (S, 3), unit normal (S, 3), size (S,).
+
+    `labels` are 0 .. n_seg-1 (no -1). Normals point up (n_z >= 0); segments with
+    fewer than 3 points get an arbitrary normal. One batched eigen-decomposition of
+    the per-segment covariances, accumulated about the global mean.
+    """
+    size = np.bincount(labels, minlength=n_seg).astype(np.int64)
+    cnt = np.maximum(size, 1).astype(float)
+    origin = points.mean(axis=0) if points.shape[0] else np.zeros(3)
+    sp = points - origin
+    s1 = np.zeros((n_seg, 3))
+    for j in range(3):
+        s1[:, j] = np.bincount(labels, weights=sp[:, j], minlength=n_seg)
+    s2 = np.zeros((n_seg, 3, 3))
+    for i in range(3):
+        for j in range(i, 3):
+            v = np.bincount(labels, weights=sp[:, i] * sp[:, j], minlength=n_seg)
+            s2[:, i, j] = v
+            s2[:, j, i] = v
+    mean = s1 / cnt[:, None]
+    cov = s2 / cnt[:, None, None] - mean[:, :, None] * mean[:, None, :]
+    _, v = _eig_sym3(cov)
+    normal = v[:, :, 0] * np.where(v[:, 2, 0] < 0, -1.0, 1.0)[:, None]
+    return mean + origin, normal, size
 
 
 def vegetation_segments(features: SegmentFeatures, *, scatter_thr: float = 0.2) -> np.ndarray:

@@ -26,7 +26,12 @@ from ..errors import DegenerateGeometryWarning, InvalidPointsError, OptionError
 from ..geometry._kernels import centred_moments, grid_keys
 from ._perched import perched_mask
 from ._tin import TIN, tree_workers
-from .features import detect_object_segments, segment_features, vegetation_segments
+from .features import (
+    _segment_planes,
+    detect_object_segments,
+    segment_features,
+    vegetation_segments,
+)
 from .ptd import DensifyState, TINParameters, densify, final_pass, initial_seeds, prepare
 
 __all__ = [
@@ -230,6 +235,19 @@ class SegmentPTD(TINParameters):
         near-vertical segment; this keeps its terrain without letting a wall's points
         steer the TIN. The ALS preset, and so the automatic parameters of sparse
         airborne clouds, set it to their iteration distance (0.7 m).
+    roof_ratio : float, default 0.0
+        Final roof check (0 = off; needs `raised_step`), run against the final
+        ground surface after the below and façade passes, when the ground around
+        every segment is known. (1) The raised test again, for accepted segments
+        with at least 10 border points. (2) Gable pairs: two adjacent segments
+        sloping 10–60° whose aspects differ by more than 135° and that meet in a
+        convex ridge (each centroid more than 0.3 m below the other's plane) are
+        rejected together when at least `roof_ratio` of their pooled border
+        points are raised. Houses built into a slope touch the terrain on the
+        uphill side, so their border is raised on one side only; a ridge between
+        two opposite roof planes is what tells them from a terrace. Natural
+        ridges (dykes, hill crests) meet the terrain at grade and have no raised
+        border. The ALS preset sets 0.15.
     """
 
     cell_size: float = 60.0
@@ -279,6 +297,7 @@ class SegmentPTD(TINParameters):
     filter_density: float = 0.0
     join_distance: float = 0.15
     facade_distance: float = 0.0
+    roof_ratio: float = 0.0
 
     def __post_init__(self) -> None:
         self._check_tin_parameters()
@@ -311,6 +330,7 @@ class SegmentPTD(TINParameters):
         check_range(self.filter_density, "filter_density", 0.0, MAX_FILTER_DENSITY)
         check_positive(self.join_distance, "join_distance", allow_zero=True)
         check_positive(self.facade_distance, "facade_distance", allow_zero=True)
+        check_range(self.roof_ratio, "roof_ratio", 0.0, 1.0)
         if int(self.connect_min_size) != self.connect_min_size or self.connect_min_size < 0:
             raise OptionError(
                 f"connect_min_size must be an integer >= 0, got {self.connect_min_size!r}"
@@ -717,32 +737,30 @@ def _height_above_ground(
     return _height_above_tin(tin, xyz[idx])
 
 
-def _border_tests(
+def _border_counts(
     xyz: np.ndarray,
     lab: np.ndarray,
     src_mask: np.ndarray,
     ground: np.ndarray,
     n_seg: int,
     par: SegmentPTD,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Per segment: (connected, raised) flags from its border points against `ground`.
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per segment: border points, raised ones and connected ones, against `ground`.
 
     A border point of segment S is a point of S (in `src_mask`) that has a ground
     point of another segment (or unsegmented) among its `_BORDER_K` nearest
     neighbours of ``ground | src_mask`` within ``par.raised_radius`` m in XY; the
-    nearest such point is its partner. With dz the height
-    above that point and dxy the XY distance: raised when dz > raised_step and
-    dz > dxy·tan(raised_angle); connected when |dz| <= connect_distance +
-    dxy·tan(connect_angle). Segments with fewer than 3 border points are neither.
+    nearest such point is its partner. With dz the height above that point and dxy
+    the XY distance: raised when dz > raised_step and dz > dxy·tan(raised_angle);
+    connected when |dz| <= connect_distance + dxy·tan(connect_angle).
     """
     from scipy.spatial import cKDTree
 
-    conn = np.zeros(n_seg, dtype=bool)
-    raised = np.zeros(n_seg, dtype=bool)
+    zero = np.zeros(n_seg, dtype=np.int64)
     src = np.flatnonzero(src_mask)
     pool = np.flatnonzero(ground | src_mask)
     if src.size == 0 or not ground.any():
-        return conn, raised
+        return zero, zero.copy(), zero.copy()
     tree = cKDTree(xyz[pool, :2])
     k = min(_BORDER_K, pool.size)
     d, j = tree.query(
@@ -759,18 +777,99 @@ def _border_tests(
     d = d[np.flatnonzero(has), first[has]]
     q = nb[np.flatnonzero(has), first[has]]
     if src.size == 0:
-        return conn, raised
+        return zero, zero.copy(), zero.copy()
     dz = xyz[src, 2] - xyz[q, 2]
     ls = lab[src]
-    n_b = np.bincount(ls, minlength=n_seg)
-    if par.raised_step > 0:
-        up = (dz > par.raised_step) & (dz > d * math.tan(math.radians(par.raised_angle)))
-        n_up = np.bincount(ls[up], minlength=n_seg)
-        raised = (n_b >= 3) & (n_up >= par.raised_ratio * n_b - 1e-9)
+    up = (dz > par.raised_step) & (dz > d * math.tan(math.radians(par.raised_angle)))
     ok = np.abs(dz) <= par.connect_distance + d * math.tan(math.radians(par.connect_angle))
-    n_ok = np.bincount(ls[ok], minlength=n_seg)
+    return (
+        np.bincount(ls, minlength=n_seg),
+        np.bincount(ls[up], minlength=n_seg),
+        np.bincount(ls[ok], minlength=n_seg),
+    )
+
+
+def _border_tests(
+    xyz: np.ndarray,
+    lab: np.ndarray,
+    src_mask: np.ndarray,
+    ground: np.ndarray,
+    n_seg: int,
+    par: SegmentPTD,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per segment: (connected, raised) flags from its border points (`_border_counts`).
+
+    Raised when at least `raised_ratio` of the border points are raised (and
+    raised_step > 0); connected when at least `connect_ratio` are connected.
+    Segments with fewer than 3 border points are neither.
+    """
+    n_b, n_up, n_ok = _border_counts(xyz, lab, src_mask, ground, n_seg, par)
+    raised = (n_b >= 3) & (n_up >= par.raised_ratio * n_b - 1e-9) & (par.raised_step > 0)
     conn = (n_b >= 3) & (n_ok >= par.connect_ratio * n_b - 1e-9)
     return conn, raised
+
+
+#: final roof check (`roof_ratio`): border points a segment needs for the raised test
+#: to be re-run on it; the slope range (degrees) of gable roof planes; the least
+#: angle (degrees) between the aspects of a pair; the least drop (m) of each
+#: centroid under the other's plane (a convex ridge)
+_ROOF_MIN_BORDER = 10
+_ROOF_SLOPE = (10.0, 60.0)
+_ROOF_ASPECT = 135.0
+_ROOF_RIDGE_DROP = 0.3
+
+
+def _roof_check(
+    xyz: np.ndarray,
+    lab: np.ndarray,
+    seg_pt: np.ndarray,
+    ground: np.ndarray,
+    is_ground_seg: np.ndarray,
+    n_seg: int,
+    par: SegmentPTD,
+) -> np.ndarray:
+    """Accepted segments that the final roof check rejects (see `roof_ratio`)."""
+    from scipy.spatial import cKDTree
+
+    lab_c = np.maximum(lab, 0)
+    # (1) the raised test again, against the final ground
+    n_b, n_up, _ = _border_counts(xyz, lab, seg_pt & is_ground_seg[lab_c], ground, n_seg, par)
+    out = is_ground_seg & (n_b >= _ROOF_MIN_BORDER) & (n_up >= par.raised_ratio * n_b - 1e-9)
+    # (2) gable pairs: planes of all non-object segments (a facet may be unaccepted)
+    idx = np.flatnonzero(seg_pt)
+    cen, nrm, size = _segment_planes(xyz[idx], lab[idx], n_seg)
+    slope = np.degrees(np.arccos(np.clip(nrm[:, 2], 0.0, 1.0)))
+    sloped = (size >= 10) & (slope >= _ROOF_SLOPE[0]) & (slope <= _ROOF_SLOPE[1])
+    pi = idx[sloped[lab[idx]]]
+    if pi.size < 2:
+        return out
+    # adjacent: a point of one among the nearest neighbours of the other (XY)
+    k = min(_BORDER_K, pi.size)
+    d, j = cKDTree(xyz[pi, :2]).query(
+        xyz[pi, :2], k=k, distance_upper_bound=float(par.raised_radius), workers=tree_workers()
+    )
+    ok = np.isfinite(d.reshape(pi.size, k))
+    a = np.broadcast_to(lab[pi][:, None], ok.shape)[ok]
+    b = lab[pi[np.where(ok, j.reshape(pi.size, k), 0)]][ok]
+    pairs = np.unique(np.sort(np.column_stack([a, b])[a != b], axis=1), axis=0)
+    if pairs.size == 0:
+        return out
+    s, t = pairs[:, 0], pairs[:, 1]
+    hs = nrm[s, :2] / np.linalg.norm(nrm[s, :2], axis=1, keepdims=True)
+    ht = nrm[t, :2] / np.linalg.norm(nrm[t, :2], axis=1, keepdims=True)
+    opposite = (hs * ht).sum(axis=1) <= math.cos(math.radians(_ROOF_ASPECT))
+    below_t = ((cen[s] - cen[t]) * nrm[t]).sum(axis=1) < -_ROOF_RIDGE_DROP
+    below_s = ((cen[t] - cen[s]) * nrm[s]).sum(axis=1) < -_ROOF_RIDGE_DROP
+    pairs = pairs[opposite & below_t & below_s]
+    if pairs.size == 0:
+        return out
+    in_pair = np.zeros(n_seg, dtype=bool)
+    in_pair[pairs.ravel()] = True
+    n_b, n_up, _ = _border_counts(xyz, lab, seg_pt & in_pair[lab_c], ground, n_seg, par)
+    nb, nu = n_b[pairs].sum(axis=1), n_up[pairs].sum(axis=1)
+    roof = pairs[(nb >= 3) & (nu >= par.roof_ratio * nb - 1e-9)]
+    out[roof.ravel()] = True
+    return out & is_ground_seg
 
 
 def _segment_ptd(
@@ -927,6 +1026,12 @@ def _segment_ptd(
         if fi.size:
             h = _height_above_ground(xyz, ground, fi, thin_cell, virtual)
             ground[fi[np.abs(h) <= par.facade_distance]] = True
+    # 8c. final roof check against the final ground: raised segments, gable pairs
+    if par.roof_ratio > 0 and par.raised_step > 0 and is_ground_seg.any():
+        roof = _roof_check(xyz, lab, seg_pt, ground, is_ground_seg, n_seg, par)
+        if roof.any():
+            is_ground_seg &= ~roof
+            ground &= ~((lab >= 0) & roof[lab_c])
     # 9. perched-surface test: accepted ground that drops steeply on opposite sides
     if par.perched_step > 0 and ground.any():
         ground &= ~perched_mask(

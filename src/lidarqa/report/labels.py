@@ -149,6 +149,7 @@ LABELS: dict[str, Label] = {
     "filter_density": _l("dense cloud filtered on its lowest points, at (0 = all)", "pts/m²"),
     "join_distance": _l("other points of a ground cell join within", M),
     "facade_distance": _l("façade points join the final ground within (0 = never)", M),
+    "roof_ratio": _l("final roof check: raised share of a gable pair (0 = off)", PCT, 100.0),
     # plane segmentation and edges
     "near_dist": _l("edge support: distance to the line", M),
     "min_angle": _l("minimum angle between planes", DEG),
