@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from handmade import assemble, grid
 
 from lidarqa.errors import OptionError
 from lidarqa.ground import ALS_SEGMENT_PARAMS, SegmentPTD, classify_ground
@@ -18,14 +19,6 @@ from lidarqa.ground.features import detect_object_segments, segment_features
 from lidarqa.io import PointCloud
 
 STEP = 1.5  # height of the bank between the two terraces (m)
-
-
-def _grid(x0, x1, y0, y1, spacing, rng):
-    xs = np.arange(x0 + spacing / 2, x1, spacing)
-    ys = np.arange(y0 + spacing / 2, y1, spacing)
-    x, y = (a.ravel() for a in np.meshgrid(xs, ys))
-    j = rng.uniform(-0.2, 0.2, (2, x.size)) * spacing
-    return x + j[0], y + j[1]
 
 
 def _scene(seed: int = 0):
@@ -36,17 +29,17 @@ def _scene(seed: int = 0):
     rng = np.random.default_rng(seed)
     parts = []
     # terraces, 1 point/m² (airborne): z = 0 for x < 40, z = STEP for x > 40.3
-    x, y = _grid(0, 40, 0, 60, 1.0, rng)
+    x, y = grid(0, 40, 0, 60, 1.0, rng)
     inside = (x > 10) & (x < 20) & (y > 20) & (y < 30)  # no ground under the building
     parts.append((x[~inside], y[~inside], np.zeros((~inside).sum()), 0, 0))
-    x, y = _grid(40.3, 80, 0, 60, 1.0, rng)
+    x, y = grid(40.3, 80, 0, 60, 1.0, rng)
     parts.append((x, y, np.full(x.size, STEP), 1, 0))
     # the bank: x from 40 to 40.26 while z rises by STEP (80°), sampled every 0.25 m
-    t, y = _grid(0, 1, 0, 60, 0.25, rng)
+    t, y = grid(0, 1, 0, 60, 0.25, rng)
     t = np.clip(t, 0.0, 1.0)
     parts.append((40.0 + 0.265 * t, y, STEP * t, 2, 1))
     # a building: four 6 m walls (one segment each) and a flat roof
-    u, h = _grid(0, 10, 0, 6, 0.5, rng)
+    u, h = grid(0, 10, 0, 6, 0.5, rng)
     u, h = np.clip(u, 0, 10), np.clip(h, 0.05, 6)
     for lab, (wx, wy) in enumerate(
         [
@@ -58,18 +51,9 @@ def _scene(seed: int = 0):
         start=3,
     ):
         parts.append((wx, wy, h, lab, 2))
-    x, y = _grid(10, 20, 20, 30, 1.0, rng)
+    x, y = grid(10, 20, 20, 30, 1.0, rng)
     parts.append((x, y, np.full(x.size, 6.0), 7, 3))
-    pts = np.column_stack(
-        [
-            np.concatenate([p[0] for p in parts]),
-            np.concatenate([p[1] for p in parts]),
-            np.concatenate([p[2] for p in parts]),
-        ]
-    ) + np.array([500000.0, 5400000.0, 200.0])
-    labels = np.concatenate([np.full(p[0].size, p[3]) for p in parts]).astype(np.int64)
-    kind = np.concatenate([np.full(p[0].size, p[4]) for p in parts])
-    return pts, labels, kind
+    return assemble(parts, 200.0)
 
 
 def _filter(**kw):

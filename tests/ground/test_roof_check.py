@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from handmade import OFFSET, assemble, grid
 
 from lidarqa.errors import OptionError
 from lidarqa.ground import ALS_SEGMENT_PARAMS, SegmentPTD, classify_ground
@@ -21,14 +22,6 @@ from lidarqa.io import PointCloud
 GRADE = 0.3  # the hillside falls by 0.3 m per m in +x (17°)
 PITCH = 20.0  # roof pitch (degrees)
 TERRAIN, ROOF, WALL, DYKE = range(4)
-
-
-def _grid(x0, x1, y0, y1, spacing, rng):
-    xs = np.arange(x0 + spacing / 2, x1, spacing)
-    ys = np.arange(y0 + spacing / 2, y1, spacing)
-    x, y = (a.ravel() for a in np.meshgrid(xs, ys))
-    j = rng.uniform(-0.2, 0.2, (2, x.size)) * spacing
-    return x + j[0], y + j[1]
 
 
 def _terrain(x):
@@ -45,26 +38,22 @@ def _scene(seed: int = 0, *, dyke_height: float = 3.0):
     """
     rng = np.random.default_rng(seed)
     parts = []
-    x, y = _grid(0, 100, 0, 60, 1.0, rng)
+    x, y = grid(0, 100, 0, 60, 1.0, rng)
     keep = ~((x > 30) & (x < 40) & (y > 20) & (y < 32)) & ~((x > 60) & (x < 70))
     parts.append((x[keep], y[keep], _terrain(x[keep]), 0, TERRAIN))
     eave = _terrain(30.0) + 0.2
     rise = np.tan(np.radians(PITCH))
     for lab, (a, b) in ((1, (30, 35)), (2, (35, 40))):
-        x, y = _grid(a, b, 20, 32, 1.0, rng)
+        x, y = grid(a, b, 20, 32, 1.0, rng)
         parts.append((x, y, eave + rise * (5 - np.abs(x - 35)), lab, ROOF))
-    h, y = _grid(0, 1, 20, 32, 0.5, rng)
+    h, y = grid(0, 1, 20, 32, 0.5, rng)
     h = np.clip(h, 0.0, 1.0)
     wall_z = _terrain(40.0) + h * (eave - _terrain(40.0))
     parts.append((np.full(y.size, 40.0), y, wall_z, 3, WALL))
     for lab, (a, b) in ((4, (60, 65)), (5, (65, 70))):
-        x, y = _grid(a, b, 0, 60, 1.0, rng)
+        x, y = grid(a, b, 0, 60, 1.0, rng)
         parts.append((x, y, _terrain(x) + dyke_height * (1 - np.abs(x - 65) / 5), lab, DYKE))
-    pts = np.column_stack([np.concatenate([p[i] for p in parts]) for i in range(3)])
-    pts += np.array([500000.0, 5400000.0, 300.0])
-    labels = np.concatenate([np.full(p[0].size, p[3]) for p in parts]).astype(np.int64)
-    kind = np.concatenate([np.full(p[0].size, p[4]) for p in parts])
-    return pts, labels, kind
+    return assemble(parts, 300.0)
 
 
 def _filter(**kw):
@@ -100,7 +89,7 @@ def test_a_ridge_needs_a_raised_border():
     keep = kind != WALL
     pts, labels, kind = pts[keep], labels[keep], kind[keep]
     labels[labels > 3] -= 1
-    x = pts[:, 0] - 500000.0
+    x = pts[:, 0] - OFFSET[0]
     downhill = labels == 2
     # the downhill plane ends at the terrain of x = 40 instead of 3 m above it
     pts[downhill, 2] += (_terrain(40.0) - (_terrain(30.0))) * (x[downhill] - 35) / 5
