@@ -27,3 +27,20 @@ def assemble(parts, z0: float):
     labels = np.concatenate([np.full(p[0].size, p[3]) for p in parts]).astype(np.int64)
     kind = np.concatenate([np.full(p[0].size, p[4]) for p in parts])
     return pts, labels, kind
+
+
+def als_filter(**kw):
+    """The ALS preset with 20 m seed cells, so each part of a small scene has seeds of its own."""
+    from lidarqa.ground import ALS_SEGMENT_PARAMS, SegmentPTD
+
+    return SegmentPTD(**{**ALS_SEGMENT_PARAMS, "cell_size": 20.0, **kw})
+
+
+def ground_in_both_orders(pts, labels, *, seed: int = 1):
+    """Ground masks of `als_filter()` on the scene as given and permuted, in the given order."""
+    perm = np.random.default_rng(seed).permutation(len(pts))
+    a = als_filter().run(pts, labels=labels).ground_mask
+    b = als_filter().run(pts[perm], labels=labels[perm]).ground_mask
+    back = np.empty_like(b)
+    back[perm] = b
+    return a, back

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from handmade import OFFSET, assemble, grid
+from handmade import OFFSET, als_filter, assemble, grid, ground_in_both_orders
 
 from lidarqa.errors import OptionError
 from lidarqa.ground import ALS_SEGMENT_PARAMS, SegmentPTD, classify_ground
@@ -56,15 +56,10 @@ def _scene(seed: int = 0, *, dyke_height: float = 3.0):
     return assemble(parts, 300.0)
 
 
-def _filter(**kw):
-    # 20 m seed cells: the hillside holds seed cells of its own, as a larger site would
-    return SegmentPTD(**{**ALS_SEGMENT_PARAMS, "cell_size": 20.0, **kw})
-
-
 def test_without_the_check_the_uphill_roof_plane_is_ground():
     # the scene is a real test: the raised test alone lets half of the roof in
     pts, labels, kind = _scene()
-    g = _filter(roof_ratio=0.0).run(pts, labels=labels).ground_mask
+    g = als_filter(roof_ratio=0.0).run(pts, labels=labels).ground_mask
     assert g[labels == 1].all()
     assert not g[labels == 2].any()
 
@@ -72,8 +67,8 @@ def test_without_the_check_the_uphill_roof_plane_is_ground():
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_the_roof_is_rejected_and_the_dyke_and_terrain_stay(seed):
     pts, labels, kind = _scene(seed)
-    off = _filter(roof_ratio=0.0).run(pts, labels=labels).ground_mask
-    on = _filter(roof_ratio=ALS_SEGMENT_PARAMS["roof_ratio"]).run(pts, labels=labels).ground_mask
+    off = als_filter(roof_ratio=0.0).run(pts, labels=labels).ground_mask
+    on = als_filter(roof_ratio=ALS_SEGMENT_PARAMS["roof_ratio"]).run(pts, labels=labels).ground_mask
     assert not on[kind == ROOF].any()
     assert on[kind == DYKE].all() and on[kind == TERRAIN].mean() > 0.99
     # only roof points change
@@ -93,18 +88,16 @@ def test_a_ridge_needs_a_raised_border():
     downhill = labels == 2
     # the downhill plane ends at the terrain of x = 40 instead of 3 m above it
     pts[downhill, 2] += (_terrain(40.0) - (_terrain(30.0))) * (x[downhill] - 35) / 5
-    on = _filter().run(pts, labels=labels).ground_mask
-    off = _filter(roof_ratio=0.0).run(pts, labels=labels).ground_mask
+    on = als_filter().run(pts, labels=labels).ground_mask
+    off = als_filter(roof_ratio=0.0).run(pts, labels=labels).ground_mask
     assert on[kind == ROOF].all()
     assert np.array_equal(on, off)
 
 
 def test_independent_of_input_order():
     pts, labels, kind = _scene(seed=3)
-    perm = np.random.default_rng(1).permutation(len(pts))
-    a = _filter().run(pts, labels=labels).ground_mask
-    b = _filter().run(pts[perm], labels=labels[perm]).ground_mask
-    assert np.array_equal(a[perm], b)
+    a, b = ground_in_both_orders(pts, labels)
+    assert np.array_equal(a, b)
     assert not a[kind == ROOF].any()
 
 
