@@ -106,6 +106,9 @@ def _baseline(world: dict, out: Path) -> dict[str, list]:
         "assess": ["assess", d / "config.toml", "-o", out / "report"],
         "swaths": ["swaths", d / "scene.las", "--by-source-id", "-o", out / "swaths"],
         "roads": ["roads", d / "scene.las", d / "roads.gpkg", "-o", out / "roads.gpkg"],
+        # no input; runs the demo (seconds when warm): its --json output is fuzzed in
+        # test_fuzz_outputs.py::test_demo_hostile_outputs, refused before any work
+        "warmup": ["warmup", "--json", out / "warmup.json"],
     }
 
 

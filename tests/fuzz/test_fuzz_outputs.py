@@ -136,7 +136,8 @@ def test_read_only_folder(baseline, tmp_path):
 
 
 def test_demo_hostile_outputs(tmp_path):
-    """`demo` has no input to corrupt: only its outputs can be hostile (refused before any work)."""
+    """`demo` and `warmup` have no input to corrupt: only their outputs can be hostile
+    (refused before any work)."""
     out = tmp_path / "out"
     out.mkdir()
     (out / "afile").write_text("x")
@@ -148,7 +149,14 @@ def test_demo_hostile_outputs(tmp_path):
         ["-o", out / "rep", "--json", out / "afile" / "r.json"],
         ["-o", out / "rep", "--json", out / "fifo"],
     ]
+    cases += [
+        ["warmup", "--json", out / "afile" / "w.json"],
+        ["warmup", "--json", out / "fifo"],
+        ["warmup", "--json", out / "afile"],
+        ["warmup", "--json", ""],
+    ]
     for args in cases:
-        r = run_cli(["-q", "demo", *args], out_dir=out)
+        argv = args if args[0] == "warmup" else ["demo", *args]
+        r = run_cli(["-q", *argv], out_dir=out)
         assert r.exit_code in (1, 2), (args, r.output)
         assert listing(out) == {"afile", "fifo"}, (args, listing(out))

@@ -54,6 +54,7 @@ COMMANDS: dict[str, str] = {
     "roads": "lidarqa.cli.roads:roads",
     "assess": "lidarqa.cli.assess:assess",
     "demo": "lidarqa.cli.assess:demo",
+    "warmup": "lidarqa.cli.warmup:warmup",
 }
 
 
