@@ -38,9 +38,19 @@ def site(tmp_path_factory: pytest.TempPathFactory) -> Path:
     _need_sphinx()
     out = tmp_path_factory.mktemp("docs-html")
     env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join([str(ROOT / "src"), env.get("PYTHONPATH", "")])
+    # the package under test (installed in CI, so its numba caches never land in src/), not
+    # the checkout's src/; and no bytecode of docs/_ext in the checkout
+    env["LIDARQA_DOCS_INSTALLED"] = "1"
+    env["PYTHONDONTWRITEBYTECODE"] = "1"
     env.setdefault("NUMBA_NUM_THREADS", "1")
     env["MPLBACKEND"] = "Agg"
+    import lidarqa
+
+    where = subprocess.run(
+        [sys.executable, "-c", "import lidarqa; print(lidarqa.__file__)"],
+        capture_output=True, text=True, env=env, check=True,
+    ).stdout.strip()  # fmt: skip
+    assert Path(where).resolve() == Path(lidarqa.__file__).resolve(), "not the package under test"
     proc = subprocess.run(
         [sys.executable, "-m", "sphinx", "-W", "--keep-going", "-q", "-E", "-b", "html",
          "-d", str(out / ".doctrees"), str(DOCS), str(out)],

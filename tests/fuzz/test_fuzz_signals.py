@@ -17,12 +17,15 @@ from hypothesis import strategies as st
 
 pytestmark = pytest.mark.fuzz
 
-SRC = str(Path(__file__).resolve().parents[2] / "src")
-
 
 def _env() -> dict:
+    """The environment of a child `lidarqa`: the package under test (installed in CI; never
+    the checkout's src/ behind its back, where numba would write its caches)."""
+    import lidarqa
+
     env = dict(os.environ)
-    env["PYTHONPATH"] = SRC + os.pathsep + env.get("PYTHONPATH", "")
+    pkg = str(Path(lidarqa.__file__).resolve().parents[1])
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (pkg, env.get("PYTHONPATH")) if p)
     env.setdefault("NUMBA_NUM_THREADS", "1")
     return env
 
