@@ -1,4 +1,4 @@
-"""lidarqa: how accurate is this LiDAR point cloud?
+"""lidarqa: how accurate is this LiDAR point cloud.
 
 Ground filtering (progressive TIN densification, segment-based PTD), geometry
 (planes, edges, corners) and accuracy assessment (line-segment Hausdorff
@@ -13,12 +13,12 @@ from .io import PointCloud, open, read, write  # noqa: A004
 __all__ = ["__version__", "LidarQAError", "PointCloud", "read", "write", "open", "show_versions"]
 
 
-def show_versions() -> dict[str, str]:
+def show_versions() -> dict[str, str | None]:
     """Versions of lidarqa, Python and the libraries it uses (missing ones as None)."""
     import importlib.metadata as md
     import platform
 
-    out = {
+    out: dict[str, str | None] = {
         "lidarqa": __version__,
         "python": platform.python_version(),
         "platform": platform.platform(),

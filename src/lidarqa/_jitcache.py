@@ -105,7 +105,7 @@ def kernel_stats() -> KernelStats:
 
 
 def _dispatcher_stats(obj: Any) -> Any:
-    """numba's compile statistics of a dispatcher compiled with ``cache=True``, else None."""
+    """The compile statistics (numba's) of a dispatcher compiled with ``cache=True``, else None."""
     from numba.core.dispatcher import Dispatcher
 
     if not isinstance(obj, Dispatcher):

@@ -91,8 +91,10 @@ class TargetNotMetError(LidarQAError):
 
 
 class NothingToMeasureError(LidarQAError, ValueError):
-    """Nothing to measure: no check point inside the cloud, no matched pair, no
-    sample left after filtering. Never reported as a NaN result."""
+    """Nothing to measure (never reported as a NaN result).
+
+    No check point inside the cloud, no matched pair, no sample left after filtering.
+    """
 
 
 class TilingError(LidarQAError):

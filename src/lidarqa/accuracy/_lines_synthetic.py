@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -74,7 +75,9 @@ def make_segment_sets(
 
     # test: pieces of kept model segments
     keep = rng.random(n_model) >= drop_rate
-    starts, ends, src = [], [], []
+    starts: Any = []  # lists, then arrays
+    ends: Any = []
+    src: Any = []
     for j in np.flatnonzero(keep):
         if rng.random() < fragment_rate and length[j] >= 4.0:
             k = int(rng.integers(2, 4))

@@ -125,6 +125,7 @@ class ResidualStats:
     rmse_3d: float
 
     def to_dict(self) -> dict[str, Any]:
+        """The result as a dict of plain JSON types (units: ``lidarqa.units``)."""
         out: dict[str, Any] = {"n": self.n}
         for i, ax in enumerate("xyz"):
             out[f"rmse_{ax}"] = float(self.rmse[i])
@@ -230,6 +231,7 @@ class NSSDAAccuracy:
     warnings: tuple[str, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
+        """The result as a dict of plain JSON types (units: ``lidarqa.units``)."""
         return {
             "accuracy_r": self.accuracy_r,
             "accuracy_z": self.accuracy_z,
@@ -366,6 +368,7 @@ class ASPRSAccuracy:
     warnings: tuple[str, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
+        """The result as a dict of plain JSON types (units: ``lidarqa.units``)."""
         return {
             "rmse_h": self.rmse_h,
             "rmse_v": self.rmse_v,
@@ -993,8 +996,8 @@ def _locate(
     if len(pxy):
         pick(np.concatenate(cand_p), np.concatenate(cand_t))
     rest = np.flatnonzero(simp < 0)
-    for i in rest:  # rare: huge triangles; brute force over all triangles
-        pick(np.full(n_tri, i), np.arange(n_tri))
+    for i_rest in rest:  # rare: huge triangles; brute force over all triangles
+        pick(np.full(n_tri, i_rest), np.arange(n_tri))
     return simp, weights
 
 

@@ -247,6 +247,7 @@ class PlaneHeight:
         _freeze(self)
 
     def to_dict(self) -> dict[str, Any]:
+        """The result as a dict of plain JSON types (units: ``lidarqa.units``)."""
         return {
             "height": self.height,
             "sigma_plane": self.sigma_plane,
@@ -699,6 +700,7 @@ class WTestResult:
 
     @property
     def n_outliers(self) -> int:
+        """Number of points flagged as outliers by the w-test."""
         return int(self.outlier.sum())
 
     def to_dict(self) -> dict[str, Any]:
@@ -902,26 +904,32 @@ class HeightReport:
     # per-reference-point conveniences
     @property
     def dh(self) -> np.ndarray:
+        """Height differences, model (map) minus reference, in metres."""
         return self.comparison.dh
 
     @property
     def sigma_dh(self) -> np.ndarray:
+        """Predicted standard deviation of each height difference, in metres."""
         return self.comparison.sigma_dh
 
     @property
     def w_values(self) -> np.ndarray:
+        """The w-test statistic of each height difference (dimensionless)."""
         return self.w.w
 
     @property
     def outlier(self) -> np.ndarray:
+        """True where the w-test rejects the height difference."""
         return self.w.outlier
 
     @property
     def inside(self) -> np.ndarray:
+        """True where the reference point lies inside the TIN."""
         return self.tin.inside
 
     @property
     def n_outside(self) -> int:
+        """Number of reference points outside the TIN."""
         return int((~self.tin.inside).sum())
 
     def to_dict(self) -> dict[str, Any]:

@@ -214,6 +214,7 @@ class Threshold:
     reason: str
 
     def to_dict(self) -> dict:
+        """The result as a dict of plain JSON types (units: ``lidarqa.units``)."""
         return {
             "threshold": self.threshold,
             "found": self.found,
@@ -486,7 +487,7 @@ class LineMatch:
 
     @property
     def pair_d_tm(self) -> np.ndarray:
-        """d of each evaluated pair, test→model (metres)."""
+        """Distance d of each evaluated pair, test→model (metres)."""
         return self.pair_components[:, 3]
 
     def pairs_tm(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -788,6 +789,8 @@ def match_segments(
 
     match_tm = comp[:, 3] <= d_tm
     match_mt = dmt <= d_mt
+    tot_tm: float | None
+    tot_mt: float | None
     if denominator == "all":
         tot_tm, tot_mt = float(lm.sum()), float(lt.sum())
     else:

@@ -265,6 +265,7 @@ class RoadReconstruction:
 
     @property
     def n_roads(self) -> int:
+        """Number of distinct roads the polygons were grouped into."""
         r = self.polygon_road[self.polygon_road >= 0]
         return int(len(np.unique(r)))
 
@@ -839,10 +840,10 @@ def reconstruct_roads(
         cores = shapely.buffer(geoms, -ms)
         lv0, _ = levels_of(cores, cores)
         ch0, _ = _grow(lv0, neigh, node_xyz, node_count, tol)
-        s = _estimate_shift(pts, geoms, ch0, lv0, lab_seg, node_xyz, node_count, index, ms, tol)
+        est = _estimate_shift(pts, geoms, ch0, lv0, lab_seg, node_xyz, node_count, index, ms, tol)
         estimated = True
-        if s is None:  # the data show no significant shift
-            s = np.zeros(2)
+        s = np.zeros(2) if est is None else est
+        if est is None:  # the data show no significant shift
             shift_flag = "shift_not_significant"
     else:
         s = np.zeros(2)
@@ -909,7 +910,7 @@ def reconstruct_roads(
         rp = np.unique(np.concatenate([own[i] for i in members]))
         if rows.size == 0 or rp.size < 3:
             continue
-        fit = dict(
+        fit: dict[str, Any] = dict(
             radius=radius,
             max_radius=max_radius,
             min_points=min(min_points, len(rp)) if len(rp) >= 3 else 3,
@@ -1052,6 +1053,7 @@ class RoadComparison:
         _freeze(self)
 
     def to_dict(self) -> dict[str, Any]:
+        """The result as a dict of plain JSON types (units: ``lidarqa.units``)."""
         return {
             "comparison": self.comparison.to_dict(),
             "w": self.w.to_dict(),

@@ -95,11 +95,6 @@ MIN_OFFSET_OBS = 10
 CLUSTER_SIZE = 10.0  # m: blocks of cells for the cluster-robust σ of pair offsets
 
 
-def _f(v: Any) -> float | None:
-    v = float(v)
-    return v if np.isfinite(v) else None
-
-
 @dataclass(frozen=True)
 class PairDifference:
     """Swath-overlap differences of strip B minus strip A on smooth cells (m, m²)."""
@@ -120,9 +115,11 @@ class PairDifference:
 
     @property
     def passed(self) -> bool:
+        """True when both the RMSDz and the maximum |dz| meet the quality level."""
         return bool(self.passes_rmsdz and self.passes_max)
 
     def to_dict(self) -> dict[str, Any]:
+        """The result as a dict of plain JSON types (units: ``lidarqa.units``)."""
         d = {k: getattr(self, k) for k in self.__dataclass_fields__}
         d["passed"] = self.passed
         return d
@@ -145,6 +142,7 @@ class StripRepeatability:
     n_range_cells: int = 0
 
     def to_dict(self) -> dict[str, Any]:
+        """The result as a dict of plain JSON types (units: ``lidarqa.units``)."""
         return {k: getattr(self, k) for k in self.__dataclass_fields__}
 
 
@@ -171,6 +169,7 @@ class StripOffset:
     sigma_robust: tuple[float, float, float] | None = None
 
     def to_dict(self) -> dict[str, Any]:
+        """The result as a dict of plain JSON types (units: ``lidarqa.units``)."""
         return {k: getattr(self, k) for k in self.__dataclass_fields__}
 
 
@@ -206,11 +205,13 @@ class SwathReport:
 
     @property
     def passed(self) -> bool:
+        """True when every pair and every assessed repeatability surface passes."""
         return all(p.passed for p in self.pairs) and all(
             r.passed for r in self.repeatability if r.assessed
         )
 
     def to_dict(self) -> dict[str, Any]:
+        """The result as a dict of plain JSON types (units: ``lidarqa.units``)."""
         return {
             "quality_level": self.quality_level,
             "thresholds": dict(self.thresholds),
@@ -914,8 +915,12 @@ def _offset(
     a: int, b: int, x: np.ndarray, cov: np.ndarray, n: int, s0: float, rot: bool, method: str
 ) -> StripOffset:
     sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    r = tuple(float(np.degrees(v)) for v in x[3:6]) if rot else None
-    sr = tuple(float(np.degrees(v)) for v in sd[3:6]) if rot else None
+    def deg3(v: np.ndarray) -> tuple[float, float, float]:
+        d = np.degrees(v[3:6])
+        return float(d[0]), float(d[1]), float(d[2])
+
+    r = deg3(x) if rot else None
+    sr = deg3(sd) if rot else None
     return StripOffset(
         a,
         b,
@@ -949,9 +954,9 @@ def _network(
     graph = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(s, s))
     _, label = connected_components(graph, directed=False)
     conn = label == label[ref_i]
-    for k in np.flatnonzero(~conn):
+    for k_off in np.flatnonzero(~conn):
         flags.append(
-            f"strip {strips[k].id} is not connected to reference strip "
+            f"strip {strips[k_off].id} is not connected to reference strip "
             f"{strips[ref_i].id}: no network offset"
         )
     unknown = [k for k in range(s) if conn[k] and k != ref_i]
@@ -982,9 +987,11 @@ def _network(
         return out, np.nan, flags
     inv = np.linalg.inv(n_mat)
     x = inv @ rhs
-    s0 = float(np.sqrt(max(ll - x @ rhs, 0.0) / (m - dim)))
+    s0 = float(np.sqrt(max(float(ll - x @ rhs), 0.0) / (m - dim)))
     cov = inv * s0**2
     tz = [0.0]
+    xk: np.ndarray
+    ck: np.ndarray
     for k in range(s):
         if not conn[k]:
             continue

@@ -29,8 +29,11 @@ def is_catalog(paths: Sequence[str]) -> bool:
 
 @contextlib.contextmanager
 def sigterm_as_interrupt() -> Iterator[None]:
-    """Turn SIGTERM into KeyboardInterrupt while a catalog job runs, so the same cleanup
-    (atomic outputs removed, cluster shut down, work folder kept for --resume) happens."""
+    """Turn SIGTERM into KeyboardInterrupt while a catalog job runs.
+
+    So the same cleanup happens (atomic outputs removed, cluster shut down, work folder
+    kept for --resume).
+    """
 
     def handler(signum: int, frame: Any) -> None:
         raise KeyboardInterrupt

@@ -91,7 +91,7 @@ def _engine(scheduler: str | None, workers: int | None) -> Iterator[Any]:
         yield eng
 
 
-def _open(paths: Sequence[str], skip_bad: bool, steps: Steps) -> Any:
+def _open(paths: Sequence[str], skip_bad: bool | None, steps: Steps) -> Any:
     from ..tiling import open_catalog
     from ._catalog import _bad_lines
 

@@ -206,7 +206,7 @@ def check_targets(results: Mapping[str, Any]) -> list[dict[str, Any]]:
 
     out = []
     for metric, (key, limit) in (settings().targets or {}).items():
-        value = results.get(key)
+        value: Any = results.get(key)
         try:
             v = abs(float(value))
         except (TypeError, ValueError):

@@ -234,8 +234,8 @@ def checkpoints(
                             checkpoint_rmse_v=checkpoint_rmse_v, cat_opts=cat_opts,
                             summary=_summary)
         return
-    measured = measured[0]
-    prepare_outputs(output, inputs=(measured, check, control_file))
+    measured_path = measured[0]
+    prepare_outputs(output, inputs=(measured_path, check, control_file))
     steps = Steps()
     notes: list[str] = []
     ctrl = _parse_ids(control_ids)
@@ -249,12 +249,12 @@ def checkpoints(
         from .. import read
         from ..accuracy.checkpoints import vertical_check
 
-        with steps("Reading " + measured):
-            cloud = read(measured, crs=given)
+        with steps("Reading " + measured_path):
+            cloud = read(measured_path, crs=given)
         if source_id is not None:
             cloud = cloud.select(source_id=source_id)
             if len(cloud) == 0:
-                raise OptionError(f"{measured} has no points with --source-id {source_id}")
+                raise OptionError(f"{measured_path} has no points with --source-id {source_id}")
         ensure_same_crs(cloud.crs, chk.crs, what=("MEASURED", "CHECK"))
         crs_used = cloud.crs if cloud.crs is not None else chk.crs
         fh, fv, hname, vname = _unit_factors(
@@ -270,7 +270,7 @@ def checkpoints(
         cls = cloud.classification
         if cls is None and classes is not None:
             raise OptionError(
-                f"{measured} has no classification, so --classes cannot select ground points"
+                f"{measured_path} has no classification, so --classes cannot select ground points"
             )
         if cls is None:
             notes.append("the cloud has no classification: all its points form the TIN")
@@ -287,14 +287,14 @@ def checkpoints(
         from ..accuracy.checkpoints import assess_checkpoints
         from ..io import CLOUD_SUFFIXES
 
-        suffix = Path(measured).suffix.lower()
+        suffix = Path(measured_path).suffix.lower()
         if suffix in CLOUD_SUFFIXES and suffix not in VECTOR_SUFFIXES:
             raise OptionError(
-                f"{measured} looks like a point cloud; add --vertical to check its heights, or "
-                "give a point list (id,x,y,z) such as the output of `lidarqa corners`"
+                f"{measured_path} looks like a point cloud; add --vertical to check its heights, "
+                "or give a point list (id,x,y,z) such as the output of `lidarqa corners`"
             )
         with steps("Reading measured points"):
-            mea = read_points(measured, crs=given)
+            mea = read_points(measured_path, crs=given)
         ensure_same_crs(mea.crs, chk.crs, what=("MEASURED", "CHECK"))
         crs_used = mea.crs if mea.crs is not None else chk.crs
         fh, fv, hname, vname = _unit_factors(
@@ -334,7 +334,7 @@ def checkpoints(
     _summary(results, vertical)
     finish(
         "checkpoints",
-        inputs={"measured": measured, "check": check, "control_file": control_file},
+        inputs={"measured": measured_path, "check": check, "control_file": control_file},
         parameters={
             "transform": transform,
             "control_ids": ctrl,

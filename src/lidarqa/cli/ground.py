@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import click
 
 from ._catalog import is_catalog
@@ -15,6 +17,9 @@ from ._common import (
     input_crs,
     prepare_outputs,
 )
+
+if TYPE_CHECKING:
+    from ..ground.metrics import FilterErrors
 
 
 @click.command()
@@ -340,7 +345,7 @@ def ground(
     )
 
 
-def echo_ground_counts(res: dict, evaluation: object, how: str = "") -> None:
+def echo_ground_counts(res: dict, evaluation: FilterErrors | None, how: str = "") -> None:
     """The ground count and, with --evaluate, the ISPRS filter errors (one file or a catalog)."""
     frac = res["ground_fraction"]
     share = f" ({100 * frac:.1f} %)" if frac is not None else ""

@@ -141,8 +141,10 @@ def _measured_e4(pc: Any) -> float:
 
 
 def laser_noise_options(func: Any) -> Any:
-    """``--sigma-point``, ``--sigma-gps``, ``--sigma-ins``: the laser block's error budget
-    (E1–E3 of Oude Elberink & Vosselman), shared by ``heights`` and ``roads``."""
+    """Add ``--sigma-point``, ``--sigma-gps``, ``--sigma-ins``: the laser block's error budget.
+
+    E1–E3 of Oude Elberink & Vosselman, shared by ``heights`` and ``roads``.
+    """
     for opt in reversed(
         [
             click.option(
@@ -369,7 +371,7 @@ def heights(
             xyz = pc.xyz.copy()
             xyz[:, 2] *= z_to_metres_factor(pc.crs)
     # options shared by the point-map and the road-level (polygon) paths
-    common = dict(
+    common: dict[str, Any] = dict(
         radius=radius,
         max_radius=max_radius,
         min_points=min_points,
@@ -399,7 +401,7 @@ def heights(
         _check_crs(mp.crs, ref.crs, ("map", "reference"))
         ref_xyz = ref.xyz.copy()
         ref_xyz[:, 2] *= z_to_metres_factor(ref.crs if ref.crs is not None else pc.crs)
-    options = dict(
+    options: dict[str, Any] = dict(
         common, correlation=correlation, eq8_diagonal=eq8_diagonal, posterior=posterior
     )
     catalog_run = None

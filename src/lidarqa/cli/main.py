@@ -70,15 +70,18 @@ class LazyGroup(click.Group):
     """A click group that imports each command on first use and owns error reporting."""
 
     def list_commands(self, ctx: click.Context) -> list[str]:
+        """Names of the commands whose module is importable, sorted."""
         return sorted(n for n in COMMANDS if _available(n))
 
     def get_command(self, ctx: click.Context, name: str) -> click.Command | None:
+        """Import command `name` on first use (None when unknown or unavailable)."""
         if name not in COMMANDS or not _available(name):
             return None
         module, func = COMMANDS[name].split(":")
         return _bound_options(getattr(importlib.import_module(module), func))
 
     def invoke(self, ctx: click.Context) -> Any:
+        """Run the command; turn every error into one line and its exit status."""
         from ..io._atomic import Terminated, install_signal_handlers, output_session
 
         saved = None if _STANDALONE else _save_signals()  # in-process callers get theirs back

@@ -41,7 +41,8 @@ def load_strips(
     from ..io import read
     from ..io.crs import ensure_same_crs, z_to_metres_factor
 
-    xyz, ids, crs, labels = [], [], None, {}
+    xyz, ids, crs = [], [], None
+    labels: dict[Any, Any] = {}
     for k, path in enumerate(files):
         pc = read(path)
         if k == 0:
@@ -231,7 +232,7 @@ def swaths(
 
     require("rasterio", "raster")
     steps = Steps()
-    options = dict(
+    options: dict[str, Any] = dict(
         cell_size=cell_size,
         min_points=min_points,
         range_cell=range_cell,

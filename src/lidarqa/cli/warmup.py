@@ -57,8 +57,7 @@ def warmup() -> None:
         raise LidarQAError("numba reported no cache folder for lidarqa's kernels")
     where = os.path.commonpath(dirs)
     echo(
-        f"{compiled} kernel signature(s) compiled, {loaded} loaded from the cache "
-        f"({seconds:.1f} s)"
+        f"{compiled} kernel signature(s) compiled, {loaded} loaded from the cache ({seconds:.1f} s)"
     )
     echo(f"Cache: {where}" + (f" ({len(dirs)} folders)" if len(dirs) > 1 else ""))
     finish(

@@ -50,8 +50,10 @@ def eigvals_sym3(a00, a01, a02, a11, a12, a22):
 
 @njit(cache=True)
 def centred_moments(pts, rows, cnt):  # pragma: no cover - numba
-    """Mean (x, y, z) and centred second-moment sums (xx, xy, xz, yy, yz, zz) of
-    ``pts[rows[:cnt]]``, two passes (no cancellation at large coordinates)."""
+    """Mean (x, y, z) and centred second-moment sums (xx, xy, xz, yy, yz, zz).
+
+    Of ``pts[rows[:cnt]]``, in two passes (no cancellation at large coordinates).
+    """
     mx = 0.0
     my = 0.0
     mz = 0.0
@@ -585,7 +587,7 @@ def _knn_one(pts, i, k, rmax, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, 
 @njit(cache=True, parallel=True)
 def knn_grid(pts, k, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, order, rmax, max_cand,
              n_chunks):
-    """k nearest neighbours of every point (N, k); rows that failed are all -1.
+    """The k nearest neighbours of every point (N, k); rows that failed are all -1.
 
     Works cell by cell: the points of the 27 cells around a cell are gathered once
     into a contiguous buffer, and each point of the cell keeps its k nearest among
@@ -747,35 +749,6 @@ def segment_planes_tls(pts: np.ndarray, labels: np.ndarray, n_labels: int):
     flip = (normal[:, 2] < 0) | ((normal[:, 2] == 0) & ((normal[:, 0] < 0) | zero_x))
     normal[flip] *= -1.0
     return cnt, mean, normal, w, v
-
-
-@njit(cache=True)
-def reassign_kernel(pts, labels, normal, mean, check, r2, max_dist,
-                    cx, cy, cz, nyz, nz, cell_keys, cell_start, order, max_cell):
-    """Move a checked point to a touching segment whose plane is nearer (one Jacobi pass)."""
-    n = pts.shape[0]
-    out = labels.copy()
-    nbr = np.empty(27 * max_cell + 1, dtype=np.int64)
-    for i in range(n):
-        if not check[i]:
-            continue
-        a = labels[i]
-        best = abs(normal[a, 0] * (pts[i, 0] - mean[a, 0]) + normal[a, 1] * (pts[i, 1] - mean[a, 1])
-                   + normal[a, 2] * (pts[i, 2] - mean[a, 2]))
-        best_lab = a
-        k = grid_neighbours(pts, i, r2, cx, cy, cz, nyz, nz, cell_keys, cell_start, order, nbr)
-        for t in range(k):
-            b = labels[nbr[t]]
-            if b < 0 or b == best_lab:
-                continue
-            d = abs(normal[b, 0] * (pts[i, 0] - mean[b, 0])
-                    + normal[b, 1] * (pts[i, 1] - mean[b, 1])
-                    + normal[b, 2] * (pts[i, 2] - mean[b, 2]))
-            if d <= max_dist and (d < best or (d == best and b < best_lab)):
-                best = d
-                best_lab = b
-        out[i] = best_lab
-    return out
 
 
 # ------------------------------------------------------------------ adjacency

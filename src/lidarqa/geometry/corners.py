@@ -44,6 +44,7 @@ class Corner:
         return np.sqrt(np.maximum(np.diag(self.covariance), 0.0))
 
     def to_dict(self) -> dict:
+        """The result as a dict of plain JSON types (units: ``lidarqa.units``)."""
         return {"xyz": self.xyz.tolist(), "det": self.det, "min_angle_deg": self.min_angle_deg,
                 "sigma": self.sigma.tolist()}
 
@@ -150,7 +151,7 @@ def corner_from_planes(
         s = np.asarray(sigma_rho, dtype=np.float64).reshape(3)
         var = s**2
     elif all(f is not None for f in fits):
-        for k, f in enumerate(fits):
+        for k, f in enumerate(f for f in fits if f is not None):
             var[k] = f.covariance[3, 3]
             if normal_uncertainty:
                 d = x - f.centroid

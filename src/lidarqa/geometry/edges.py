@@ -49,9 +49,11 @@ class PlanePairSegment:
 
     @property
     def length(self) -> float:
+        """Length of the edge segment, in metres."""
         return float(np.linalg.norm(self.end - self.start))
 
     def to_dict(self) -> dict:
+        """The result as a dict of plain JSON types (units: ``lidarqa.units``)."""
         return {"start": self.start.tolist(), "end": self.end.tolist(),
                 "direction": self.direction.tolist(), "angle_deg": self.angle_deg,
                 "support_a": self.support_a, "support_b": self.support_b, "length": self.length}

@@ -105,6 +105,7 @@ class PlaneFit:
         return (p - self.centroid) @ self.normal + (self.normal @ self.centroid - self.rho)
 
     def to_dict(self) -> dict:
+        """The result as a dict of plain JSON types (units: ``lidarqa.units``)."""
         d = {
             "normal": self.normal.tolist(),
             "rho": self.rho,
@@ -294,17 +295,21 @@ class IterativePlaneFit:
 
     @property
     def normal(self) -> np.ndarray:
+        """Unit normal of the segment's plane."""
         return self.plane.normal
 
     @property
     def rho(self) -> float:
+        """Offset of the segment's plane (``normal · p = rho``), in metres."""
         return self.plane.rho
 
     @property
     def rmse(self) -> float:
+        """RMS distance of the segment's points to its plane, in metres."""
         return self.plane.rmse
 
     def to_dict(self) -> dict:
+        """The result as a dict of plain JSON types (units: ``lidarqa.units``)."""
         return {**self.plane.to_dict(), "n_iter": self.n_iter, "converged": self.converged,
                 "reason": self.reason, "n_inliers": int(self.inliers.sum())}
 
@@ -415,6 +420,7 @@ class RansacPlane:
     n_trials: int
 
     def to_dict(self) -> dict:
+        """The result as a dict of plain JSON types (units: ``lidarqa.units``)."""
         return {**self.plane.to_dict(), "n_inliers": int(self.inliers.sum()),
                 "n_trials": self.n_trials}
 

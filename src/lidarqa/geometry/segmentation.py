@@ -228,8 +228,10 @@ def _check_neighbourhood(pts: np.ndarray, radius: float, name: str) -> None:
         )
 
 
-def _check_growing_options(k_seed, seed_dist, min_seed_points, hough_angle_step, grow_radius,
-                           grow_dist, refit_growth, min_segment_size, seed_method, seed):
+def _check_growing_options(
+    k_seed, seed_dist, min_seed_points, hough_angle_step, grow_radius, grow_dist, refit_growth,
+    min_segment_size, seed_method, seed,
+) -> tuple[int, float, int, float, float, float, float, int, str, int]:
     return (_check_int(k_seed, "k_seed", 3),
             check_positive(seed_dist, "seed_dist"),
             _check_int(min_seed_points, "min_seed_points", 3),
@@ -340,6 +342,7 @@ class PlaneSegmentation:
 
     @property
     def n_segments(self) -> int:
+        """Number of segments found."""
         return len(self.rho)
 
     @property
@@ -572,14 +575,6 @@ def _spacing_from_knn(pts: np.ndarray, knn: np.ndarray, k: int = 10,
     d = np.linalg.norm(pts[knn[idx]] - pts[idx, None, :], axis=2)
     d.sort(axis=1)
     return float(np.median(d[:, k]))
-
-
-def auto_grow_radius(points: np.ndarray) -> float:
-    """Default growing radius (m): 2 x :func:`point_spacing`, clipped to [0.5, 3]."""
-    s = point_spacing(points)
-    if not np.isfinite(s):
-        return 0.5
-    return float(np.clip(2.0 * s, 0.5, 3.0))
 
 
 def _empty_segmentation(n: int, params: dict) -> PlaneSegmentation:

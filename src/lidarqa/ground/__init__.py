@@ -154,9 +154,11 @@ class GroundResult:
 
     @property
     def n_ground(self) -> int:
+        """Number of points classified as ground."""
         return int(self.ground_mask.sum())
 
     def to_dict(self) -> dict[str, Any]:
+        """The result as a dict of plain JSON types (units: ``lidarqa.units``)."""
         d = {
             "method": self.method,
             "n_points": int(self.ground_mask.size),

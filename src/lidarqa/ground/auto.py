@@ -127,6 +127,7 @@ class CloudMeasures:
     largest_object_area: float
 
     def to_dict(self) -> dict[str, Any]:
+        """The result as a dict of plain JSON types (units: ``lidarqa.units``)."""
         return {
             k: (None if isinstance(v, float) and not math.isfinite(v) else v)
             for k, v in asdict(self).items()

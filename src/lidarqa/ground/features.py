@@ -50,6 +50,7 @@ class SegmentFeatures:
     non_single_ratio: np.ndarray | None = None
 
     def to_dict(self) -> dict[str, Any]:
+        """The result as a dict of plain JSON types (units: ``lidarqa.units``)."""
         return {
             "n_segments": int(self.size.size),
             "orientation": self.orientation.tolist(),

@@ -62,14 +62,17 @@ class FilterErrors:
 
     @property
     def type_i_pct(self) -> float:
+        """Type I error (ground rejected) in percent."""
         return 100.0 * self.type_i
 
     @property
     def type_ii_pct(self) -> float:
+        """Type II error (non-ground accepted) in percent."""
         return 100.0 * self.type_ii
 
     @property
     def total_pct(self) -> float:
+        """Total error in percent."""
         return 100.0 * self.total
 
     def to_dict(self) -> dict[str, Any]:

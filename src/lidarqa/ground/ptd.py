@@ -68,6 +68,7 @@ class PTDResult:
     n_low_outliers: int = 0
 
     def to_dict(self) -> dict[str, Any]:
+        """The result as a dict of plain JSON types (units: ``lidarqa.units``)."""
         return {
             "n_points": int(self.ground_mask.size),
             "n_ground": int(self.ground_mask.sum()),
@@ -88,6 +89,16 @@ class TINParameters:
     ``max_terrain_angle``, ``iter_angle``, ``iter_distance``, ``min_edge_length``,
     ``mirror``, ``edge_mode`` and ``mirror_max_distance``.
     """
+
+    # the fields the dataclasses define (annotations only: not fields of this mixin)
+    cell_size: float
+    max_terrain_angle: float
+    iter_angle: float
+    iter_distance: float
+    min_edge_length: float
+    mirror: bool
+    edge_mode: str
+    mirror_max_distance: float
 
     def _check_tin_parameters(self) -> None:
         check_positive(self.cell_size, "cell_size")

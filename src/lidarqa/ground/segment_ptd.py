@@ -79,6 +79,7 @@ class SegmentPTDResult:
     grow_radius: float = math.nan
 
     def to_dict(self) -> dict[str, Any]:
+        """The result as a dict of plain JSON types (units: ``lidarqa.units``)."""
         return {
             "n_points": int(self.ground_mask.size),
             "n_ground": int(self.ground_mask.sum()),

@@ -75,6 +75,7 @@ def crs_epsg(crs: Any) -> int | None:
 
 
 def crs_name(crs: Any) -> str | None:
+    """The CRS's name, or None without a CRS."""
     return None if crs is None else str(crs.name)
 
 
@@ -183,7 +184,7 @@ def require_metric_xy(crs: Any, what: str, needs: str) -> None:
     A missing CRS is accepted: the user vouches for metres.
     """
     unit, factor = horizontal_unit(crs)
-    if unit is not None and (crs.is_geographic or abs(factor - 1.0) > 1e-12):
+    if unit is not None and (crs.is_geographic or factor is None or abs(factor - 1.0) > 1e-12):
         raise CRSMismatchError(
             f"{what} is in {crs_label(crs)} (x, y unit: {unit}); {needs} a projected CRS in "
             "metres: reproject it first"

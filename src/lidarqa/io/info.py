@@ -20,7 +20,7 @@ class CloudInfo:
     """Summary of a point cloud; ``to_dict()`` is the ``results`` of ``lidarqa info``."""
 
     n_points: int
-    bounds: dict[str, float]
+    bounds: dict[str, float | None]
     crs_epsg: int | None
     crs_name: str | None
     vertical_unit: str | None
@@ -32,6 +32,7 @@ class CloudInfo:
     header: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
+        """The result as a dict of plain JSON types (units: ``lidarqa.units``)."""
         from dataclasses import asdict
 
         return asdict(self)
@@ -52,7 +53,7 @@ class _Accumulator:
         self.maxs = np.full(3, -np.inf)
         self.classes: Counter = Counter()
         self.psids: Counter = Counter()
-        self.cells: set[tuple[int, int]] | None = set()
+        self.cells: set[tuple[int, ...]] = set()
         self.rn_present = False
         self.rn_zero = 0
         self.rn_invalid = 0

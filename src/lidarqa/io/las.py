@@ -46,6 +46,7 @@ class LasSource:
     is_subset: bool = False
 
     def subset(self, idx: Any) -> LasSource:
+        """The records selected by `idx`, with the same header."""
         return LasSource(
             self.header,
             self.records[idx],
@@ -58,10 +59,12 @@ class LasSource:
 
     @property
     def scales(self) -> np.ndarray:
+        """The x, y, z scale factors of the header."""
         return np.asarray(self.header.scales, dtype=float)
 
     @property
     def offsets(self) -> np.ndarray:
+        """The x, y, z offsets of the header."""
         return np.asarray(self.header.offsets, dtype=float)
 
 
@@ -201,15 +204,18 @@ class LasReader:
 
     @property
     def n_points(self) -> int:
+        """Number of points in the file."""
         return int(self.header.point_count)
 
     @property
     def bounds(self) -> tuple[float, float, float, float, float, float]:
+        """Bounding box ``(min_x, min_y, min_z, max_x, max_y, max_z)`` from the header."""
         mn, mx = self.header.mins, self.header.maxs
         return (float(mn[0]), float(mn[1]), float(mn[2]), float(mx[0]), float(mx[1]), float(mx[2]))
 
     @property
     def dimension_names(self) -> list[str]:
+        """Names of the point dimensions in the file."""
         return list(self.header.point_format.dimension_names)
 
     def chunks(self, chunk_size: int = 5_000_000) -> Iterator[PointCloud]:
@@ -232,6 +238,7 @@ class LasReader:
             )
 
     def close(self) -> None:
+        """Close the file."""
         self._reader.close()
 
     def __enter__(self) -> LasReader:

@@ -58,14 +58,17 @@ class PointCloud:
 
     @property
     def x(self) -> np.ndarray:
+        """The x coordinates (a view of ``xyz``)."""
         return self.xyz[:, 0]
 
     @property
     def y(self) -> np.ndarray:
+        """The y coordinates (a view of ``xyz``)."""
         return self.xyz[:, 1]
 
     @property
     def z(self) -> np.ndarray:
+        """The z coordinates (a view of ``xyz``)."""
         return self.xyz[:, 2]
 
     def has(self, name: str) -> bool:
@@ -78,10 +81,12 @@ class PointCloud:
 
     @property
     def classification(self) -> np.ndarray | None:
+        """The classification codes, or None when the cloud has none."""
         return self.fields.get("classification")
 
     @property
     def point_source_id(self) -> np.ndarray | None:
+        """The point source IDs (flight strips), or None when the cloud has none."""
         return self.fields.get("point_source_id")
 
     def subset(self, index: Any) -> PointCloud:

@@ -132,6 +132,7 @@ def read_polar_csv(
         )
     cols = []
     for name in (d, az, el or zen):
+        assert name is not None  # checked above
         col = table[name]
         if col.dtype == object:
             raise ReadError(f"input {p}: column {name!r} is not numeric")

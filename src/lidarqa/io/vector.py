@@ -82,6 +82,7 @@ class Segments:
 
     @property
     def lengths(self) -> np.ndarray:
+        """Length of each segment, in metres."""
         return np.linalg.norm(self.end - self.start, axis=1)
 
     @property
@@ -90,6 +91,7 @@ class Segments:
         return np.stack([self.start, self.end], axis=1)
 
     def subset(self, index: Any) -> Segments:
+        """The segments selected by `index` (a mask, indices or a slice)."""
         return Segments(
             self.ids[index],
             self.start[index],
@@ -124,6 +126,7 @@ class PointSet:
         return len(self.xyz)
 
     def subset(self, index: Any) -> PointSet:
+        """The points selected by `index` (a mask, indices or a slice)."""
         return PointSet(
             self.ids[index],
             self.xyz[index],
@@ -483,7 +486,7 @@ def _fmt(v: Any, coordinate: bool = False) -> str:
     if isinstance(v, float | np.floating):
         if not np.isfinite(v):
             return ""
-        return format_coordinate(v) if coordinate else format_decimal(v)
+        return format_coordinate(float(v)) if coordinate else format_decimal(float(v))
     if isinstance(v, bool | np.bool_):
         return "true" if v else "false"
     return str(v)

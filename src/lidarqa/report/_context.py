@@ -294,8 +294,10 @@ def selection_label(cloud: str, classes: Any, source_id: Any) -> str:
 def write_vector(
     ctx: RunContext, item: AnalysisItem, obj: Any, base: str, fmt: str, notes: list[str]
 ) -> None:
-    """Write a PointSet or Segments in the requested format (CSV when the GIS libraries
-    are missing)."""
+    """Write a PointSet or Segments in the requested format.
+
+    CSV when the GIS libraries are missing.
+    """
     from ..errors import MissingDependencyError
     from ..io.vector import PointSet, write_points, write_segments
 

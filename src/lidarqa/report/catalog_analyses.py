@@ -165,8 +165,10 @@ def _edge_options(options: dict[str, Any]) -> tuple[dict[str, Any], dict[str, An
 
 
 def catalog_edges(path: Any, classes: Any, source_id: Any, options: dict[str, Any]) -> Any:
-    """The edges of a catalog selection, each edge once (what ``ctx.edges`` gives for a
-    catalog input, e.g. for the ``lines`` analysis)."""
+    """The edges of a catalog selection, each edge once.
+
+    What ``ctx.edges`` gives for a catalog input, e.g. for the ``lines`` analysis.
+    """
     from ..tiling.jobs_api import catalog_features
 
     seg_opts, params = _edge_options(options)

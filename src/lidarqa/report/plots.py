@@ -445,8 +445,10 @@ def plot_matched_segments(
     *,
     label: str = "distance d",
 ) -> bytes:
-    """Model segments in grey, test segments coloured by their distance to the matched model
-    segment (unmatched test segments dashed black)."""
+    """Model segments in grey, test segments coloured by their distance to the matched one.
+
+    Unmatched test segments are dashed black.
+    """
     plt = _plt()
     from matplotlib.collections import LineCollection
 

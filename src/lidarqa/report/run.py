@@ -63,6 +63,7 @@ class AssessmentRun:
 
     @property
     def results(self) -> dict[str, Any]:
+        """The ``results`` of the JSON document, by analysis."""
         return self.document["results"]
 
 
@@ -152,7 +153,7 @@ def _measured(value: float | None, unit: str) -> str:
 
 
 def _verdict(item: AnalysisItem, results: dict[str, Any]) -> tuple[str, str, list[dict[str, Any]]]:
-    """pass / fail / n/a against the configured targets, a text and the per-target records."""
+    """The verdict (pass / fail / n/a) against the targets, a text and the per-target records."""
     if not item.targets:
         return "n/a", "", []
     specs = {t.metric: t for t in _registry.specs()[item.kind].targets.values()}

@@ -284,7 +284,7 @@ class _Chunks:
     def concat(self) -> dict[str, np.ndarray]:
         keys = ("xyz", "cls", "ground", "oid", "pid", "ret", "nret")
         if not self.parts:
-            empty = {"xyz": np.zeros((0, 3)), "cls": np.zeros(0, np.uint8),
+            empty: dict[str, np.ndarray] = {"xyz": np.zeros((0, 3)), "cls": np.zeros(0, np.uint8),
                      "ground": np.zeros(0, bool), "oid": np.zeros(0, np.int64),
                      "pid": np.zeros(0, np.int64), "ret": np.zeros(0, np.uint8),
                      "nret": np.zeros(0, np.uint8)}
@@ -317,10 +317,10 @@ def _sample_strip(world: _World, rng: np.random.Generator, *, density: float, no
             sl = cols.window(center[0] - r, center[0] + r)
             keep[sl][in_rectangle(xy[sl], center, length, width, az)] = False
         for obj, p_drop in [(t, 0.4) for t in world.trees] + [(s, 0.5) for s in world.shrubs]:
-            r = obj.get("crown_radius", obj.get("radius"))
+            rad = obj.get("crown_radius", obj.get("radius"))
             c = obj["center"]
-            sl = cols.window(c[0] - r, c[0] + r)
-            under = np.hypot(xy[sl, 0] - c[0], xy[sl, 1] - c[1]) < r
+            sl = cols.window(c[0] - rad, c[0] + rad)
+            under = np.hypot(xy[sl, 0] - c[0], xy[sl, 1] - c[1]) < rad
             keep[sl][under & (rng.random(under.shape[0]) < p_drop)] = False
         xy = np.compress(keep, xy, axis=0)
         z = terrain.local_height(xy)
@@ -342,8 +342,8 @@ def _sample_strip(world: _World, rng: np.random.Generator, *, density: float, no
                 m = int(rng.poisson(wall_density * length * step))
                 if m == 0:
                     continue
-                t = rng.random(m)
-                cxy = a + t[:, None] * (b - a)
+                frac = rng.random(m)
+                cxy = a + frac[:, None] * (b - a)
                 base = terrain.local_height(cxy, skip_road=k)
                 cz = base + rng.random(m) * step
                 nrm = np.array([-uy, ux]) * side
@@ -376,13 +376,14 @@ def _sample_strip(world: _World, rng: np.random.Generator, *, density: float, no
         d /= np.linalg.norm(d, axis=1, keepdims=True)
         flip = rng.random(m) < 0.6
         d[flip, 2] = np.abs(d[flip, 2])
-        s = 1.0 - 0.4 * rng.random(m) ** 2
-        p = np.column_stack([t["center"][0] + r * s * d[:, 0], t["center"][1] + r * s * d[:, 1],
-                             t["crown_z"] + rz * s * d[:, 2]])
+        shrink = 1.0 - 0.4 * rng.random(m) ** 2
+        p = np.column_stack([t["center"][0] + r * shrink * d[:, 0],
+                             t["center"][1] + r * shrink * d[:, 1],
+                             t["crown_z"] + rz * shrink * d[:, 2]])
         gz = terrain.local_height(p[:, :2])
         p = p[p[:, 2] > gz + 0.05]
         gz = terrain.local_height(p[:, :2])
-        nret = 1
+        nret: Any = 1
         if returns and len(p):
             nret = np.where(rng.random(len(p)) < 0.6, 2, 1).astype(np.uint8)
         out.add(p, _veg_class(p[:, 2] - gz), False, t["object_id"], -1, 1, nret)
@@ -430,9 +431,12 @@ def _sample_strip(world: _World, rng: np.random.Generator, *, density: float, no
 # --------------------------------------------------------------------- placement helpers
 
 
-def _breaklines(terrain: TerrainModel) -> list[tuple[np.ndarray, np.ndarray, float]]:
-    """(point, unit normal, signed offset) of every break line, for keep-out tests."""
-    out = []
+def _breaklines(terrain: TerrainModel) -> list[tuple[Any, ...]]:
+    """(point, unit normal, signed offset[, half width]) of every break line, for keep-out tests.
+
+    An embankment adds its ramp's half width (objects stay off the whole ramp).
+    """
+    out: list[tuple[Any, ...]] = []
     for px, py, ux, uy, half, _h in terrain.roads:
         for s in (-half, half):
             out.append((np.array([px, py]), np.array([-uy, ux]), s))
@@ -489,16 +493,18 @@ def _random_terrain(rng: np.random.Generator, size: tuple[float, float], *, slop
         waves = np.column_stack([amp, kk * np.cos(ang), kk * np.sin(ang), phase])
     roads = []
     for _ in range(int(curbs)):
-        ang = rng.uniform(0, np.pi)
+        road_ang = rng.uniform(0, np.pi)
         p = np.array([rng.uniform(0.3, 0.7) * w, rng.uniform(0.3, 0.7) * h])
         step = float(curb_height) if curb_height is not None else float(rng.uniform(0.15, 0.3))
-        roads.append([p[0], p[1], np.cos(ang), np.sin(ang), rng.uniform(3.0, 5.0), step])
+        roads.append([p[0], p[1], np.cos(road_ang), np.sin(road_ang), rng.uniform(3.0, 5.0), step])
     embs = []
     if embankment:
-        ang = rng.uniform(0, np.pi)
+        emb_ang = rng.uniform(0, np.pi)
         p = np.array([rng.uniform(0.2, 0.8) * w, rng.uniform(0.2, 0.8) * h])
         height = float(embankment) if not isinstance(embankment, bool) else float(rng.uniform(2, 4))
-        embs.append([p[0], p[1], np.cos(ang), np.sin(ang), 0.0, rng.uniform(1.5, 3.0), height])
+        embs.append(
+            [p[0], p[1], np.cos(emb_ang), np.sin(emb_ang), 0.0, rng.uniform(1.5, 3.0), height]
+        )
     return TerrainModel(z0=0.0, gx=float(gx), gy=float(gy), waves=waves,
                         roads=np.asarray(roads, float).reshape(-1, 6),
                         embankments=np.asarray(embs, float).reshape(-1, 7))

@@ -271,7 +271,7 @@ def make_interchange(
     pts, cls = pts[order], cls[order]
     # map polygons, displaced by map_shift
     sx, sy = map_shift
-    boxes = [
+    boxes: list[tuple[str, int, Any]] = [  # a None box: a polygon added below
         ("A_west", 0, (-xlen, -half_a, -10.0, half_a)),
         ("A_mid", 0, (-10.0, -half_a, 10.0, half_a)),
         ("A_east", 0, (10.0, -half_a, xlen, half_a)),

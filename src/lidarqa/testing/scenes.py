@@ -104,6 +104,7 @@ class TruePlane:
         return np.asarray(points, dtype=np.float64) @ self.normal - self.rho
 
     def to_dict(self) -> dict[str, Any]:
+        """The result as a dict of plain JSON types (units: ``lidarqa.units``)."""
         return {"normal": [float(v) for v in self.normal], "rho": float(self.rho),
                 "kind": self.kind, "object_id": int(self.object_id), "n_points": int(self.n_points)}
 
@@ -325,8 +326,8 @@ def rigid_motion(
         return Segments(s.ids, _move_points(s.start, rot, t), _move_points(s.end, rot, t),
                         dict(s.attributes), s.crs)
     if isinstance(scene_or_points, PointSet):
-        s = scene_or_points
-        return PointSet(s.ids, _move_points(s.xyz, rot, t), dict(s.attributes), s.crs)
+        ps = scene_or_points
+        return PointSet(ps.ids, _move_points(ps.xyz, rot, t), dict(ps.attributes), ps.crs)
     pts = as_points(scene_or_points)
     return _move_points(pts, rot, t)
 

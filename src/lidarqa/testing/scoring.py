@@ -79,6 +79,7 @@ class EdgeScore(_Counts):
         return int((self.matched[kinds == kind] >= 0).sum()), int((kinds == kind).sum())
 
     def to_dict(self) -> dict[str, Any]:
+        """The result as a dict of plain JSON types (units: ``lidarqa.units``)."""
         ok = self.matched >= 0
         return {
             **self._counts(),
@@ -98,6 +99,7 @@ class CornerScore(_Counts):
     n_found: int
 
     def to_dict(self) -> dict[str, Any]:
+        """The result as a dict of plain JSON types (units: ``lidarqa.units``)."""
         ok = self.matched >= 0
         return {
             **self._counts(),

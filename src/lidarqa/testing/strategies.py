@@ -11,7 +11,7 @@ with NumPy from them, so examples are cheap and shrink well.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
@@ -116,7 +116,7 @@ def points_on_plane(draw: Any, *, min_points: int = 10, max_points: int = 200,
 def point_clouds(*, min_points: int = 0, max_points: int = 100, extent: float = 100.0,
                  dtype: Any = np.float64) -> st.SearchStrategy:
     """(N, 3) arrays of finite coordinates in ``[-extent, extent]`` (hypothesis-drawn elements)."""
-    width = 32 if np.dtype(dtype) == np.float32 else 64
+    width: Literal[32, 64] = 32 if np.dtype(dtype) == np.float32 else 64
     elements = st.floats(-extent, extent, allow_nan=False, allow_infinity=False, width=width)
     return st.integers(min_points, max_points).flatmap(
         lambda n: hnp.arrays(dtype, (n, 3), elements=elements))

@@ -166,8 +166,9 @@ class Catalog:
         return up if up > 0 and up - med <= 0.005 * up else med
 
     def overlaps(self, *, min_fraction: float = 0.5) -> list[dict[str, Any]]:
-        """Pairs of tiles whose bounding boxes overlap by at least `min_fraction` of the
-        smaller one (duplicate coverage, e.g. a tile delivered twice under two names).
+        """Pairs of tiles whose bounding boxes overlap by at least `min_fraction`.
+
+        Of the smaller one: duplicate coverage, e.g. a tile delivered twice under two names.
 
         Thin overlaps along tile borders (a few metres, normal in deliveries with a
         buffer) are not reported.

@@ -30,7 +30,6 @@ of one whole-area evaluation.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 import os
@@ -703,11 +702,3 @@ def ground_catalog(
         ),
         warnings=tuple(sorted(messages)),
     )
-
-
-def _digest(path: str | os.PathLike) -> str:  # used by tests and the benchmark
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
