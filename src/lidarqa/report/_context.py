@@ -125,8 +125,8 @@ def dataclass_defaults(cls: Any, *, exclude: tuple[str, ...] = ()) -> ParamDefau
         )
         if f.default is not dataclasses.MISSING:
             out[f.name] = f.default
-        elif f.default_factory is not dataclasses.MISSING:  # type: ignore[misc]
-            out[f.name] = f.default_factory()  # type: ignore[misc]
+        elif f.default_factory is not dataclasses.MISSING:
+            out[f.name] = f.default_factory()
         else:
             out[f.name] = None
     return out
@@ -162,7 +162,7 @@ class RunContext:
         self._step = step
         self._clouds: dict[str, Any] = {}
         self._segments: dict[str, Any] = {}
-        self._points: dict[str, Any] = {}
+        self._points: dict[Any, Any] = {}
         self._edges: dict[Any, Any] = {}
         self.outputs: dict[str, list[str]] = {}
         self.crs = config.crs

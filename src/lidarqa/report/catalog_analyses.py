@@ -190,7 +190,8 @@ def _edges(ctx: Any, item: Any) -> Any:
     name = opts["cloud"]
     seg_opts, params = _edge_options(item.params)
     per: dict[str, Any] = {}
-    groups, rows, notes, runs = [], [], [], []
+    groups, rows, runs = [], [], []
+    notes: list[str] = []
     for sid in opts["source_ids"] or [None]:
         with ctx.step(f"Edges of the catalog {name}" + (f", strip {sid}" if sid else "")):
             run = catalog_features(ctx.config.inputs[name].path, kind="edges",

@@ -353,7 +353,7 @@ def _parse_inputs(table: Any, base: Path) -> dict[str, InputSpec]:
                     f"[inputs.{kind}])"
                 )
             if isinstance(value, str):
-                entry = {"path": value, "crs": None}
+                entry: dict[str, Any] = {"path": value, "crs": None}
             elif isinstance(value, Mapping):
                 entry = check_table(value, INPUT_KEYS, where)
             else:

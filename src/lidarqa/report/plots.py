@@ -425,7 +425,10 @@ def plot_segments(groups: Sequence[tuple[np.ndarray, np.ndarray, str]], title: s
         segs = np.stack([s[:, :2] - off, e[:, :2] - off], axis=1)
         ax.add_collection(
             LineCollection(
-                segs, colors=_CYCLE[i % len(_CYCLE)], linewidths=1.2, label=f"{label} ({len(s)})"
+                list(segs),
+                colors=_CYCLE[i % len(_CYCLE)],
+                linewidths=1.2,
+                label=f"{label} ({len(s)})",
             )
         )
     ax.autoscale_view()
@@ -461,7 +464,7 @@ def plot_matched_segments(
     if len(ms):
         ax.add_collection(
             LineCollection(
-                np.stack([ms[:, :2] - off, me[:, :2] - off], axis=1),
+                list(np.stack([ms[:, :2] - off, me[:, :2] - off], axis=1)),
                 colors="#b0bec5",
                 linewidths=3.0,
                 label=f"model ({len(ms)})",
@@ -472,7 +475,7 @@ def plot_matched_segments(
     if (~matched).any():
         ax.add_collection(
             LineCollection(
-                np.stack([ts[~matched, :2] - off, te[~matched, :2] - off], axis=1),
+                list(np.stack([ts[~matched, :2] - off, te[~matched, :2] - off], axis=1)),
                 colors="k",
                 linewidths=0.8,
                 linestyles="dashed",
@@ -481,7 +484,7 @@ def plot_matched_segments(
         )
     if matched.any():
         lc = LineCollection(
-            np.stack([ts[matched, :2] - off, te[matched, :2] - off], axis=1),
+            list(np.stack([ts[matched, :2] - off, te[matched, :2] - off], axis=1)),
             cmap="plasma",
             linewidths=1.6,
             label=f"test, matched ({int(matched.sum())})",

@@ -174,7 +174,7 @@ class Catalog:
         buffer) are not reported.
         """
         b = np.array([t.bounds2d for t in self.tiles], dtype=float)
-        out = []
+        out: list[dict[str, Any]] = []
         if len(b) < 2:
             return out
         order = np.argsort(b[:, 0], kind="stable")
@@ -447,14 +447,14 @@ def open_catalog(
     by_key: dict[tuple, TileInfo] = {}
     kept: list[TileInfo] = []
     for t in tiles:
-        key = (t.n_points, t.bounds)
-        if t.n_points > 0 and key in by_key:
-            msg = f"duplicate of {by_key[key].path} (same bounds and point count)"
+        dup_key = (t.n_points, t.bounds)
+        if t.n_points > 0 and dup_key in by_key:
+            msg = f"duplicate of {by_key[dup_key].path} (same bounds and point count)"
             if not skip_bad:
                 raise CatalogError(f"{t.path}: {msg}")
             bad.append((t.path, msg))
             continue
-        by_key[key] = t
+        by_key[dup_key] = t
         kept.append(t)
     tiles = kept
     # CRS

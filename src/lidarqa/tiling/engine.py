@@ -409,8 +409,8 @@ def _run_dask(engine, catalog, chunks, order, task, retries, record, bar) -> Non
                     bar.advance()
                     continue
             else:
-                exc = fut.exception()
-                err = _error_text(exc) if exc is not None else fut.status
+                fexc = fut.exception()
+                err = _error_text(fexc) if fexc is not None else fut.status
             fut.release()
             if attempts[i] <= retries:
                 ac.add(submit(i))
@@ -471,10 +471,10 @@ def run_tasks(
                     for fut in distributed.as_completed(list(futs)):
                         i = futs[fut]
                         if fut.status != "finished":
-                            exc = fut.exception() if fut.status == "error" else None
-                            if isinstance(exc, TilingError):
-                                raise exc
-                            why = _error_text(exc) if exc is not None else fut.status
+                            fexc = fut.exception() if fut.status == "error" else None
+                            if isinstance(fexc, TilingError):
+                                raise fexc
+                            why = _error_text(fexc) if fexc is not None else fut.status
                             raise TilingError(f"{names[i]}: {why}")
                         results[i] = fut.result()
                         fut.release()

@@ -212,7 +212,7 @@ def _fingerprint(catalog: Any, chunks: Any, task: GroundTask) -> dict[str, Any]:
 def _save_chunk(work: Path, res: ChunkGround) -> None:
     from ..io import atomic_path
 
-    arrays: dict[str, np.ndarray] = {
+    arrays: dict[str, Any] = {
         "tiles": np.asarray(res.tiles, dtype=np.int64),
         "n_core": np.asarray(res.n_core, dtype=np.int64),
         "counts": np.asarray(res.counts if res.counts is not None else (-1, -1, -1, -1)),
@@ -236,7 +236,7 @@ def _load_chunk(work: Path, chunk_id: str) -> ChunkGround | None:
             counts_arr = z["counts"]
     except Exception:
         return None  # damaged: recompute
-    counts = None if counts_arr[0] < 0 else tuple(int(v) for v in counts_arr)
+    counts = _counts4(counts_arr)
     return ChunkGround(chunk_id, tiles, n_core, ground, counts=counts)
 
 
@@ -247,7 +247,12 @@ def _load_counts(work: Path, chunk_id: str) -> tuple[int, int, int, int] | None:
             c = z["counts"]
     except Exception as exc:
         raise TilingError(f"chunk {chunk_id}: its saved labels are missing or damaged") from exc
-    return None if c[0] < 0 else tuple(int(v) for v in c)
+    return _counts4(c)
+
+
+def _counts4(c: np.ndarray) -> tuple[int, int, int, int] | None:
+    """Saved ISPRS counts as a 4-tuple (None for the -1 marker of a run without them)."""
+    return None if c[0] < 0 else (int(c[0]), int(c[1]), int(c[2]), int(c[3]))
 
 
 def _assemble_tile(
@@ -331,9 +336,9 @@ def _catalog_sample(
                         exclude_classes=exclude_classes,
                     )
                 parts.append(piece.xyz[cand])
-                for k, v in piece.fields.items():
-                    if k in _AUTO_FIELDS:
-                        fields.setdefault(k, []).append(np.asarray(v)[cand])
+                for fname, v in piece.fields.items():
+                    if fname in _AUTO_FIELDS:
+                        fields.setdefault(fname, []).append(np.asarray(v)[cand])
         budget -= tile.n_points
     xyz = np.concatenate(parts) if parts else np.empty((0, 3))
     joined = {k: np.concatenate(v) for k, v in fields.items() if len(v) == len(parts)}
@@ -514,7 +519,7 @@ def ground_catalog(
         raise OptionError(f"invalid parameter for method {method!r}: {exc}") from None
     if buffer is None:
         buffer = max(DEFAULT_BUFFER, float(filt.cell_size))
-    if method == "segment-ptd" and filt.grow_radius is None:
+    if isinstance(filt, SegmentPTD) and filt.grow_radius is None:  # method segment-ptd
         # one surface-growing radius for the whole catalog, as one in-memory run would
         # estimate it, instead of one per chunk (see catalog_grow_radius)
         full_params["grow_radius"] = catalog_grow_radius(

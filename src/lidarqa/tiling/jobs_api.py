@@ -125,8 +125,8 @@ def _split(kw: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any], dict[str
     open_opts = {"skip_bad": kw.pop("skip_bad", False), "crs": kw.pop("crs", None)}
     chunk_opts = {"chunk_size": kw.pop("chunk_size", None), "buffer": kw.pop("buffer", None),
                   "origin": kw.pop("origin", (0.0, 0.0))}
-    run_opts = {k: kw.pop(k) for k in ("engine", "progress", "retries", "skip_failed",
-                                       "order_seed") if k in kw}
+    run_keys = ("engine", "progress", "retries", "skip_failed", "order_seed")
+    run_opts: dict[str, Any] = {k: kw.pop(k) for k in run_keys if k in kw}
     run_opts.setdefault("progress", False)
     if kw:
         raise OptionError(f"unknown option(s): {', '.join(sorted(kw))}")
@@ -192,7 +192,7 @@ def catalog_features(
     seg_opts, opts = fixed_auto_options(_sample_points(catalog, chunks, cls, sid), kind=kind,
                                         segment_options=segment_options, options=options)
     task = VectorTask(kind=kind, classes=cls, source_id=sid, segment_options=seg_opts,
-                      options=opts, bounds=tuple(float(v) for v in catalog.bounds[:4]))
+                      options=opts, bounds=_bounds2d(catalog))
     outcomes, parts = _run(catalog, chunks, task, run_opts, f"{kind.capitalize()}")
     value = merge_vector_parts(parts, tolerance=tolerance, crs=catalog.crs)
     return CatalogRun(value, catalog, tuple(chunks), tuple(outcomes),
@@ -276,7 +276,7 @@ def catalog_heights(
                    if owned(mxy, c).any() or owned(ref, c).any())
     cls = tuple(int(c) for c in classes) if classes else None
     task = HeightsTask(mxy, ref, options=dict(options or {}), classes=cls,
-                       bounds=tuple(float(v) for v in catalog.bounds[:4]))
+                       bounds=_bounds2d(catalog))
     outcomes, parts = _run(catalog, chunks, task, run_opts, "Heights")
     value = merge_heights(parts, mxy, ref, options=options)
     return CatalogRun(value, catalog, tuple(chunks), tuple(outcomes))
@@ -344,3 +344,9 @@ def catalog_repeatability(
     return CatalogRun(rows, catalog, tuple(chunks), tuple(outcomes),
                       {"strips": strips, "strip_chunks": where,
                        "segment_options": seg_opts, "edge_options": e_opts})
+
+
+def _bounds2d(catalog: Any) -> tuple[float, float, float, float]:
+    """The catalog's (min x, min y, max x, max y)."""
+    b = catalog.bounds
+    return float(b[0]), float(b[1]), float(b[2]), float(b[3])

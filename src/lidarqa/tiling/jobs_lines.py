@@ -22,7 +22,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from itertools import combinations
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -79,7 +79,7 @@ class StripEdgesTask:
             except LidarQAError:
                 continue  # no usable planes for this strip here: no edges
             if len(seg):
-                out[int(s)] = with_point_spacing(seg, xyz)
+                out[int(s)] = with_point_spacing(cast(Segments, seg), xyz)
         return chunk_data.chunk.id, out
 
 
@@ -94,7 +94,10 @@ def merge_strip_edges(
         cid, strips = p
         for s, seg in strips.items():
             by_strip.setdefault(int(s), []).append((cid, seg))
-    return {s: merge_vector_parts(v, tolerance=tolerance) for s, v in sorted(by_strip.items())}
+    return {
+        s: cast(Segments, merge_vector_parts(v, tolerance=tolerance))
+        for s, v in sorted(by_strip.items())
+    }
 
 
 def strip_pairs(strips: dict[int, Segments], **match_options: Any) -> list[dict[str, Any]]:

@@ -242,8 +242,10 @@ def catalog_swaths(
     labels = ({} if by_source_id
               else {k + 1: str(t.path) for k, t in enumerate(catalog.tiles)})
 
-    sel = {"by_source_id": bool(by_source_id), "classes": cls, "all_returns": bool(all_returns),
-           "source_ids": tuple(int(v) for v in source_ids) if source_ids else None}
+    sel: dict[str, Any] = {
+        "by_source_id": bool(by_source_id), "classes": cls, "all_returns": bool(all_returns),
+        "source_ids": tuple(int(v) for v in source_ids) if source_ids else None,
+    }
     b = catalog.bounds
     # reference height of the plane sums (numerics only): the middle of the catalog's z range
     z0 = float(np.round(0.5 * sum(catalog.zrange), 1))

@@ -199,7 +199,7 @@ def merge_vector_parts(
             v = f.attributes.get(k)
             cols[k].append(np.asarray(v) if v is not None else np.full(n, np.nan))
         chunk_col.append(np.full(n, cid, dtype=object))
-        if is_seg:
+        if isinstance(f, Segments):
             geo[0].append(f.start)
             geo[1].append(f.end)
         else:
@@ -207,14 +207,15 @@ def merge_vector_parts(
     attrs = {k: np.concatenate(v) for k, v in cols.items()}
     attrs["chunk"] = np.concatenate(chunk_col).astype(str)
     crs = crs if crs is not None else items[0][1].crs
+    merged: Segments | PointSet
     if is_seg:
         start, end = np.concatenate(geo[0]), np.concatenate(geo[1])
-        merged: Segments | PointSet = Segments(np.arange(len(start)), start, end, attrs, crs)
+        segs = Segments(np.arange(len(start)), start, end, attrs, crs)
+        merged = dedupe_segments(segs.subset(_canonical(segs)), tolerance=tolerance)
     else:
         xyz = np.concatenate(geo[0])
-        merged = PointSet(np.arange(len(xyz)), xyz, attrs, crs)
-    merged = merged.subset(_canonical(merged))
-    merged = (dedupe_segments if is_seg else dedupe_points)(merged, tolerance=tolerance)
+        pts = PointSet(np.arange(len(xyz)), xyz, attrs, crs)
+        merged = dedupe_points(pts.subset(_canonical(pts)), tolerance=tolerance)
     merged.ids = np.arange(len(merged), dtype=np.int64)
     return merged
 

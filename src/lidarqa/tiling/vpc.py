@@ -42,7 +42,7 @@ def vpc_document(catalog: Any, base: str | os.PathLike) -> dict[str, Any]:
     crs = catalog.crs
     epsg = crs_epsg(crs)
     horiz = crs.sub_crs_list[0] if crs is not None and crs.is_compound else crs
-    features = []
+    features: list[dict[str, Any]] = []
     for t in catalog.tiles:
         xmin, ymin, xmax, ymax, zmin, zmax = t.bounds
         if horiz is not None:
