@@ -25,3 +25,23 @@ def demo_tile() -> Path:
     from lidarqa.data import demo_tile
 
     return demo_tile()
+
+
+#: Session fixtures too costly to build once per xdist worker: the tests that use one run
+#: on one worker (``lidarqa demo`` once; one Dask LocalCluster).
+SHARED_SESSION_FIXTURES = ("demo_run", "small_runs")
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Group the tests for pytest-xdist (``--dist loadgroup`` in pyproject.toml).
+
+    Each test module runs on one worker, so its module fixtures are built once (as with
+    ``--dist loadscope``); the tests sharing an expensive session fixture run on one worker
+    too. A test with its own ``xdist_group`` mark keeps it.
+    """
+    for item in items:
+        if item.get_closest_marker("xdist_group"):
+            continue
+        shared = [f for f in SHARED_SESSION_FIXTURES if f in getattr(item, "fixturenames", ())]
+        group = shared[0] if shared else item.nodeid.split("::", 1)[0]
+        item.add_marker(pytest.mark.xdist_group(group))
