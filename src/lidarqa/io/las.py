@@ -277,10 +277,58 @@ def _new_las(cloud: PointCloud) -> Any:
     return las
 
 
+# --- headers every input can be written with ----------------------------------------------
+# COPC: its info VLR (copc/1) and hierarchy EVLR (copc/1000) describe the octree layout of the
+# point chunks; laspy cannot write them, and they would be false for a plain LAZ written in
+# record order. Other VLRs of user "copc" are kept like any VLR.
+_COPC_RECORDS = {1, 1000}
+# The oldest LAS version laspy writes; older sources are written as this (same point format).
+_MIN_WRITE_VERSION = "1.2"
+
+
+def _is_copc_record(vlr: Any) -> bool:
+    return str(vlr.user_id).strip("\x00") == "copc" and int(vlr.record_id) in _COPC_RECORDS
+
+
+def _without_copc(vlrs: Any) -> Any:
+    """Drop the COPC info and hierarchy records from `vlrs` (a laspy VLR list or None).
+
+    In place, keeping the order: assigning a new list to ``header.vlrs`` would make laspy
+    move the Extra Bytes VLR to the end, and the round trip would no longer be lossless.
+    """
+    if vlrs is not None:
+        for k in reversed(range(len(vlrs))):
+            if _is_copc_record(vlrs[k]):
+                del vlrs[k]
+    return vlrs
+
+
+def writable_header(header: Any) -> Any:
+    """A copy of laspy `header` that laspy can write as a plain LAS/LAZ.
+
+    - COPC in, plain LAZ out: the COPC info VLR is dropped (the hierarchy EVLR is
+      dropped with the EVLRs, see :func:`_without_copc`); every other VLR is kept.
+    - LAS 1.0 (which laspy reads but cannot write) becomes LAS 1.2 with the same point
+      format. The 1.0 header's reserved fields become the 1.2 file source ID and global
+      encoding, both 0: GPS time stays GPS week time (bit 0 clear), the only meaning 1.0
+      knows. LAS 1.1-1.4 keep their version.
+    """
+    laspy = _laspy()
+    out = copy.deepcopy(header)
+    _without_copc(out.vlrs)
+    if str(out.version) == "1.0":
+        out.set_version_and_point_format(
+            laspy.header.Version.from_str(_MIN_WRITE_VERSION), out.point_format
+        )
+        out.file_source_id = 0
+        out.global_encoding = laspy.header.GlobalEncoding()
+    return out
+
+
 def _las_from_source(cloud: PointCloud) -> Any:
     laspy = _laspy()
     src: LasSource = cloud.source
-    header = copy.deepcopy(src.header)
+    header = writable_header(src.header)
     if cloud.crs is not None and _crs_of(header) is None:
         # a CRS given by the user (--crs) for a file that had none: the output carries it
         try:
@@ -291,7 +339,7 @@ def _las_from_source(cloud: PointCloud) -> Any:
     points = laspy.PackedPointRecord(records, header.point_format)
     las = laspy.LasData(header=header, points=points)
     if src.evlrs is not None:
-        las.evlrs = copy.deepcopy(src.evlrs)
+        las.evlrs = _without_copc(copy.deepcopy(src.evlrs))
     # Only touch what changed, so unchanged values keep their exact raw integers.
     current = np.column_stack([np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)])
     if current.shape != cloud.xyz.shape or not np.array_equal(current, cloud.xyz):
@@ -484,7 +532,8 @@ def rewrite_las_classification(
     ``new_classes(start, classification) -> ndarray`` receives the record number of the
     first point of each piece and the piece's classification values, and returns the new
     values. Every other dimension, the header, its VLRs and the point order are kept;
-    COPC VLRs are dropped (the output is a plain LAS/LAZ). Written atomically.
+    the header is made writable as :func:`writable_header` does (a COPC input gives a
+    plain LAZ, LAS 1.0 gives LAS 1.2). Written atomically.
     """
     laspy = _laspy()
     p = _check_input(src)
@@ -494,10 +543,7 @@ def rewrite_las_classification(
     with atomic_path(target, overwrite=overwrite) as tmp:
         try:
             with laspy.open(str(p)) as reader:
-                header = copy.deepcopy(reader.header)
-                header.vlrs = type(header.vlrs)(
-                    [v for v in header.vlrs if str(v.user_id).strip("\x00") != "copc"]
-                )
+                header = writable_header(reader.header)
                 evlrs = list(getattr(reader, "evlrs", None) or [])
                 with (
                     tmp.open("wb") as fh,
@@ -513,7 +559,7 @@ def rewrite_las_classification(
                             points.classification = new.astype(cls.dtype, copy=False)
                         writer.write_points(points)
                         start += len(points)
-                    evlrs = [e for e in evlrs if str(e.user_id).strip("\x00") != "copc"]
+                    evlrs = [e for e in evlrs if not _is_copc_record(e)]
                     if evlrs:
                         writer.write_evlrs(type(header.vlrs)(evlrs))
                 if start != int(reader.header.point_count):

@@ -410,13 +410,26 @@ def catalog_auto_parameters(
     return chosen, measures, regime
 
 
+def _plain_name(name: str) -> str:
+    """Output name of input tile `name`: a COPC tile is written as a plain LAZ (``.laz``)."""
+    from ..io._atomic import COPC_SUFFIX
+
+    if name.lower().endswith(COPC_SUFFIX):
+        return name[: -len(COPC_SUFFIX)] + ".laz"
+    return name
+
+
 def _output_names(catalog: Any, output_dir: Path) -> list[Path]:
-    names = [Path(t.path).name for t in catalog.tiles]
+    names = [_plain_name(Path(t.path).name) for t in catalog.tiles]
     if len(set(names)) != len(names):
         # same file name in two folders: prefix with the parent folder name
-        names = [f"{Path(t.path).parent.name}_{Path(t.path).name}" for t in catalog.tiles]
+        names = [
+            f"{Path(t.path).parent.name}_{_plain_name(Path(t.path).name)}" for t in catalog.tiles
+        ]
         if len(set(names)) != len(names):
-            names = [f"{k:05d}_{Path(t.path).name}" for k, t in enumerate(catalog.tiles)]
+            names = [
+                f"{k:05d}_{_plain_name(Path(t.path).name)}" for k, t in enumerate(catalog.tiles)
+            ]
     return [output_dir / n for n in names]
 
 
