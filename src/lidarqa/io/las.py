@@ -26,6 +26,9 @@ __all__ = [
     "open_las",
     "las_header_summary",
     "rewrite_las_classification",
+    "read_copc_box",
+    "is_copc_header",
+    "writable_header",
 ]
 
 _XYZ = ("X", "Y", "Z", "x", "y", "z")
@@ -239,6 +242,131 @@ class LasReader:
 
     def __exit__(self, *exc: Any) -> None:
         self.close()
+
+
+# --- COPC spatial reads --------------------------------------------------------------------
+
+
+def is_copc_header(header: Any) -> bool:
+    """Whether a laspy header is that of a COPC file (its first VLR is the COPC info)."""
+    vlrs = list(header.vlrs)
+    return bool(vlrs) and str(vlrs[0].user_id).strip("\x00") == "copc" and vlrs[0].record_id == 1
+
+
+def read_copc_box(
+    path: str | os.PathLike, box: tuple[float, float, float, float], *, tol: float = 0.0
+) -> tuple[PointCloud, np.ndarray]:
+    """The points of COPC file `path` inside the closed 2D `box`, with their record numbers.
+
+    Only the octree nodes whose voxels meet the box are read and decompressed (a spatial
+    query, as :meth:`laspy.CopcReader.query` does); their points are then kept by the
+    exact test ``box[0] - tol <= x <= box[2] + tol`` (and the same for y), so callers can
+    apply their own ownership rules to the result. Unlike ``CopcReader.query`` this
+    returns the record number of every point (its position in the file, the order in
+    which :class:`LasReader` streams it), and the points come in record order.
+
+    Parameters
+    ----------
+    path : path-like
+        A COPC file (LAS 1.4 LAZ with the COPC info VLR first).
+    box : (xmin, ymin, xmax, ymax)
+        In the file's coordinates.
+    tol : float, default 0
+        Widening of the box, CRS units.
+
+    Returns
+    -------
+    cloud : PointCloud
+        The points, all dimensions, no LAS source (a part of a file).
+    record : ndarray of int64
+        Record number of each point, increasing.
+
+    Raises
+    ------
+    LasReadError
+        Not a COPC file, or the octree or a node cannot be read.
+    """
+    laspy = _laspy()
+    p = _check_input(path)
+    try:
+        import lazrs
+        from laspy.copc import load_octree_for_query
+
+        with laspy.CopcReader.open(str(p)) as reader:
+            header = reader.header
+            nodes = [
+                n
+                for n in load_octree_for_query(reader.source, reader.copc_info, reader.root_page)
+                if n.point_count > 0
+            ]
+            nodes.sort(key=lambda n: n.offset)
+            counts = np.array([n.point_count for n in nodes], dtype=np.int64)
+            starts = np.concatenate([[0], np.cumsum(counts)[:-1]]) if len(nodes) else counts
+            if int(counts.sum()) != int(header.point_count):
+                raise LasReadError(
+                    f"input {p}: the COPC octree holds {int(counts.sum())} points, the header "
+                    f"declares {header.point_count}"
+                )
+            # a point lies in its node's voxel; the margin covers voxel borders rounded
+            # to the coordinate grid
+            m = tol + 2.0 * float(max(header.scales))
+            pick = [
+                k
+                for k, n in enumerate(nodes)
+                if n.bounds.mins[0] <= box[2] + m
+                and n.bounds.maxs[0] >= box[0] - m
+                and n.bounds.mins[1] <= box[3] + m
+                and n.bounds.maxs[1] >= box[1] - m
+            ]
+            size = header.point_format.size
+            n_pts = int(counts[pick].sum()) if pick else 0
+            raw = np.zeros(n_pts * size, dtype=np.uint8)
+            if pick:
+                table = [(int(nodes[k].point_count), int(nodes[k].byte_size)) for k in pick]
+                data = bytearray(sum(b for _, b in table))
+                view, at = memoryview(data), 0
+                for k in pick:
+                    reader.source.seek(nodes[k].offset)
+                    nb = int(nodes[k].byte_size)
+                    got = reader.source.readinto(view[at : at + nb])
+                    if got != nb:
+                        raise LasReadError(
+                            f"input {p}: COPC node at {nodes[k].offset} is truncated"
+                        )
+                    at += nb
+                lazrs.decompress_points_with_chunk_table(
+                    data,
+                    reader.laszip_vlr.record_data,
+                    raw,
+                    table,
+                    laspy.DecompressionSelection.all().to_lazrs(),
+                )
+            record = (
+                np.concatenate([starts[k] + np.arange(counts[k], dtype=np.int64) for k in pick])
+                if pick
+                else np.empty(0, dtype=np.int64)
+            )
+            rec = laspy.PackedPointRecord.from_buffer(raw, header.point_format)
+            points = laspy.ScaleAwarePointRecord(
+                rec.array, rec.point_format, header.scales, header.offsets
+            )
+            x, y = np.asarray(points.x), np.asarray(points.y)
+            keep = (
+                (x >= box[0] - tol)
+                & (x <= box[2] + tol)
+                & (y >= box[1] - tol)
+                & (y <= box[3] + tol)
+            )
+            if not keep.all():
+                points = points[keep]
+                record = record[keep]
+    except LasReadError:
+        raise
+    except Exception as exc:  # laspy, lazrs and struct errors alike
+        raise LasReadError(f"cannot read {p} as COPC: {_reason(exc)}") from exc
+    cloud = _cloud_from_points(points, header, None, p, is_subset=True)
+    cloud.source = None
+    return cloud, record
 
 
 def open_las(path: str | os.PathLike) -> LasReader:
