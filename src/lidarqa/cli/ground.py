@@ -132,7 +132,7 @@ from ._common import (
     "--buffer",
     type=float,
     default=None,
-    help="Catalog: margin read around each chunk, m (default: max(60, cell size)).",
+    help="Catalog: margin read around each chunk, m (default: the seed cell, see docs/catalogs.md).",
 )
 @click.option(
     "--workers",
