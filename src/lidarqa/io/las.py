@@ -591,6 +591,8 @@ def write_las(
     A cloud read from LAS/LAZ keeps its header, VLRs, EVLRs, point format,
     scales, offsets and every dimension; unchanged values keep their exact raw
     integers, so a read-write cycle reproduces the point records bit for bit.
+    What laspy cannot write is mapped (:func:`writable_header`): COPC in gives a
+    plain LAZ, LAS 1.0 gives LAS 1.2.
 
     Parameters
     ----------
