@@ -11,7 +11,12 @@ from lidarqa.errors import LasReadError, OutputExistsError
 
 laspy = pytest.importorskip("laspy")
 
-_SHARED_LAS = sorted(SHARED.glob("*/*.la[sz]")) if HAS_SHARED else []
+# The PDAL corpus (odd versions, COPC, corrupt files) has its own test: test_writers_every_input.
+_SHARED_LAS = (
+    sorted(p for p in SHARED.glob("*/*.la[sz]") if p.parent.name != "pdal-corpus")
+    if HAS_SHARED
+    else []
+)
 # Header fields that describe the data (not the encoding layout, which depends on the LAZ backend).
 _HEADER_FIELDS = (
     "version",

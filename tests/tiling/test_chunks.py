@@ -92,27 +92,33 @@ def test_default_chunk_size_follows_density_and_tiles(scene_tiles):
 
 def _grid_catalog(tile: float, density: float, n: int = 3) -> Catalog:
     tiles = [
-        TileInfo(f"/t{i}{j}.laz", int(density * tile * tile),
-                 (i * tile, j * tile, (i + 1) * tile - 0.01, (j + 1) * tile - 0.01, 0.0, 1.0),
-                 None, 6, "1.4")
-        for i in range(n) for j in range(n)
+        TileInfo(
+            f"/t{i}{j}.laz",
+            int(density * tile * tile),
+            (i * tile, j * tile, (i + 1) * tile - 0.01, (j + 1) * tile - 0.01, 0.0, 1.0),
+            None,
+            6,
+            "1.4",
+        )
+        for i in range(n)
+        for j in range(n)
     ]
     return Catalog(tuple(tiles))
 
 
 @pytest.mark.parametrize(
-    "tile,density,expected",
+    "tile,density,expected,n",
     [
-        (1000.0, 25.0, 250.0),  # 1000 / 4: aligned with the tiles, 1 % more work than 254 m
-        (305.0, 25.0, 250.0),  # 305 / 2 would be 46 % more work: not snapped, 10 m steps
-        (50.0, 25.0, 250.0),  # 5 tiles of 50 m
-        (1000.0, 2.0, 1000.0),  # sparse: one tile per chunk (2 tiles would be over the target)
+        (1000.0, 25.0, 250.0, 3),  # 1000 / 4: aligned with the tiles, 1 % more work than 254 m
+        (305.0, 25.0, 250.0, 3),  # 305 / 2 would be 46 % more work: not snapped, 10 m steps
+        (50.0, 25.0, 250.0, 6),  # 5 tiles of 50 m
+        (1000.0, 2.0, 1000.0, 3),  # sparse: one tile per chunk (2 tiles would be over the target)
     ],
 )
-def test_default_chunk_size_snaps_only_when_cheap(tile, density, expected):
+def test_default_chunk_size_snaps_only_when_cheap(tile, density, expected, n):
     from lidarqa.tiling.chunks import DEFAULT_BUFFER, SNAP_TOLERANCE, TARGET_POINTS, _work
 
-    cat = _grid_catalog(tile, density)
+    cat = _grid_catalog(tile, density, n)
     size = default_chunk_size(cat)
     assert size == pytest.approx(expected)
     raw = (TARGET_POINTS / cat.density) ** 0.5 - 2 * DEFAULT_BUFFER
@@ -173,3 +179,42 @@ def test_points_on_the_catalogs_east_and_north_edge_open_no_extra_chunks():
     # x = 50 is a border between two tiles: those points stay in the east chunk
     west = chunks[0].core_mask(p + [50.0, 0.0])
     assert not west.any()
+
+
+def test_dense_catalog_chunks_are_a_few_buffers_wide():
+    """306 pts/m2 (a TLS scan) with a 60 m buffer: 120 m chunks, not 20 m ones."""
+    from lidarqa.tiling.chunks import MIN_BUFFERS, TARGET_POINTS, _work
+
+    cat = _grid_catalog(100.0, 306.0, n=4)
+    assert (TARGET_POINTS / cat.density) ** 0.5 - 2 * 60.0 < 20.0  # the old rule's 20 m
+    size = default_chunk_size(cat, buffer=60.0)
+    assert size == pytest.approx(MIN_BUFFERS * 60.0)
+    assert _work(size, 60.0) <= 4.0 + 1e-9  # was 49 with 20 m chunks
+    assert default_chunk_size(cat, buffer=10.0) < size  # a smaller buffer allows smaller chunks
+
+
+@pytest.mark.parametrize("x0", [515368.60225, 0.0, 59.5, -120.3])
+def test_catalog_that_fits_one_chunk_is_one_chunk(x0):
+    """A 32 x 41 m scan at 306 pts/m2 anywhere on the grid: one chunk, not 4 or 9."""
+    n = int(306 * 32.44 * 40.76)
+    tile = TileInfo(
+        "/scan.laz", n, (x0, 4918340.36, x0 + 32.44, 4918381.12, 0.0, 1.0), None, 6, "1.4"
+    )
+    cat = Catalog((tile,))
+    for buffer in (60.0, 41.0, 5.0):
+        chunks = make_chunks(cat, buffer=buffer)
+        assert len(chunks) == 1, buffer
+        c = chunks[0]
+        assert c.core[0] <= x0 and c.core[2] >= x0 + 32.44
+        assert c.size >= 40.76
+
+
+def test_ground_buffer_is_the_seed_cell_capped_by_the_catalog():
+    from lidarqa.tiling.ground import ground_buffer
+
+    assert ground_buffer(cell_size=60.0) == 60.0
+    assert ground_buffer(cell_size=25.0) == 25.0  # scales with the filter
+    big = _grid_catalog(100.0, 10.0, n=3)  # 300 m across
+    assert ground_buffer(big) == 60.0
+    small = _grid_catalog(10.0, 10.0, n=2)  # 20 m across: a wider buffer reads nothing more
+    assert ground_buffer(small) == pytest.approx(20.0)

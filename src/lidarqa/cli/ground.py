@@ -137,7 +137,7 @@ if TYPE_CHECKING:
     "--buffer",
     type=float,
     default=None,
-    help="Catalog: margin read around each chunk, m (default: max(60, cell size)).",
+    help="Catalog: margin read around each chunk, m (default: the seed cell, see docs/catalogs.md).",
 )
 @click.option(
     "--workers",

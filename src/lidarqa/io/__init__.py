@@ -93,7 +93,14 @@ def read(path: str | os.PathLike, *, z_to_metres: bool = False, crs: Any = None)
 
 
 def write(cloud: PointCloud, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
-    """Write a cloud; the format follows the extension (``.las``, ``.laz``, ``.csv``)."""
+    """Write a cloud; the format follows the extension (``.las``, ``.laz``, ``.csv``).
+
+    Any cloud that was read can be written: a cloud read from LAS/LAZ keeps its header,
+    VLRs, EVLRs and every dimension; a COPC input is written as a plain LAZ (its COPC
+    info VLR and hierarchy EVLR dropped), a LAS 1.0 input as LAS 1.2 with the same point
+    format. COPC output (``*.copc.laz``) is refused with a
+    :class:`~lidarqa.errors.WriteError` before anything is written.
+    """
     suffix = Path(path).suffix.lower()
     if suffix in _LAS:
         return write_las(cloud, path, overwrite=overwrite)

@@ -297,12 +297,17 @@ def check_output_dir(folder: Path, *, what: str = "output") -> None:
         raise WriteError(f"{what} folder {folder} is not writable (permission denied)")
 
 
+# Cloud Optimized Point Cloud: laspy (the LAS library) reads it but cannot write it.
+COPC_SUFFIX = ".copc.laz"
+
+
 def check_output(path: str | os.PathLike, *, overwrite: bool = False) -> Path:
     """Return `path` as a Path after checking it can be written.
 
     Raises :class:`OutputExistsError` if it exists and `overwrite` is false, and
     :class:`WriteError` if it is a directory or special file, or its folder is
-    missing, a file, or not writable.
+    missing, a file, or not writable, or it names a COPC file (``*.copc.laz``),
+    which lidarqa cannot write.
     """
     try:
         p = Path(path)
@@ -316,6 +321,12 @@ def check_output(path: str | os.PathLike, *, overwrite: bool = False) -> Path:
         raise WriteError(f"output {path} cannot be accessed: {exc.strerror or exc}") from None
     if is_dir:
         raise WriteError(f"output {p} is a directory")
+    if p.name.lower().endswith(COPC_SUFFIX):
+        raise WriteError(
+            f"output {p}: lidarqa cannot write COPC (laspy only reads it); write a plain "
+            f"{p.name[: -len(COPC_SUFFIX)]}.laz and convert it with e.g. "
+            "'pdal translate IN.laz OUT.copc.laz' or untwine"
+        )
     check_output_dir(p.parent if str(p.parent) else Path("."))
     if exists and not overwrite:
         raise OutputExistsError(

@@ -26,6 +26,9 @@ __all__ = [
     "open_las",
     "las_header_summary",
     "rewrite_las_classification",
+    "read_copc_box",
+    "is_copc_header",
+    "writable_header",
 ]
 
 _XYZ = ("X", "Y", "Z", "x", "y", "z")
@@ -248,6 +251,131 @@ class LasReader:
         self.close()
 
 
+# --- COPC spatial reads --------------------------------------------------------------------
+
+
+def is_copc_header(header: Any) -> bool:
+    """Whether a laspy header is that of a COPC file (its first VLR is the COPC info)."""
+    vlrs = list(header.vlrs)
+    return bool(vlrs) and str(vlrs[0].user_id).strip("\x00") == "copc" and vlrs[0].record_id == 1
+
+
+def read_copc_box(
+    path: str | os.PathLike, box: tuple[float, float, float, float], *, tol: float = 0.0
+) -> tuple[PointCloud, np.ndarray]:
+    """The points of COPC file `path` inside the closed 2D `box`, with their record numbers.
+
+    Only the octree nodes whose voxels meet the box are read and decompressed (a spatial
+    query, as :meth:`laspy.CopcReader.query` does); their points are then kept by the
+    exact test ``box[0] - tol <= x <= box[2] + tol`` (and the same for y), so callers can
+    apply their own ownership rules to the result. Unlike ``CopcReader.query`` this
+    returns the record number of every point (its position in the file, the order in
+    which :class:`LasReader` streams it), and the points come in record order.
+
+    Parameters
+    ----------
+    path : path-like
+        A COPC file (LAS 1.4 LAZ with the COPC info VLR first).
+    box : (xmin, ymin, xmax, ymax)
+        In the file's coordinates.
+    tol : float, default 0
+        Widening of the box, CRS units.
+
+    Returns
+    -------
+    cloud : PointCloud
+        The points, all dimensions, no LAS source (a part of a file).
+    record : ndarray of int64
+        Record number of each point, increasing.
+
+    Raises
+    ------
+    LasReadError
+        Not a COPC file, or the octree or a node cannot be read.
+    """
+    laspy = _laspy()
+    p = _check_input(path)
+    try:
+        import lazrs
+        from laspy.copc import load_octree_for_query
+
+        with laspy.CopcReader.open(str(p)) as reader:
+            header = reader.header
+            nodes = [
+                n
+                for n in load_octree_for_query(reader.source, reader.copc_info, reader.root_page)
+                if n.point_count > 0
+            ]
+            nodes.sort(key=lambda n: n.offset)
+            counts = np.array([n.point_count for n in nodes], dtype=np.int64)
+            starts = np.concatenate([[0], np.cumsum(counts)[:-1]]) if len(nodes) else counts
+            if int(counts.sum()) != int(header.point_count):
+                raise LasReadError(
+                    f"input {p}: the COPC octree holds {int(counts.sum())} points, the header "
+                    f"declares {header.point_count}"
+                )
+            # a point lies in its node's voxel; the margin covers voxel borders rounded
+            # to the coordinate grid
+            m = tol + 2.0 * float(max(header.scales))
+            pick = [
+                k
+                for k, n in enumerate(nodes)
+                if n.bounds.mins[0] <= box[2] + m
+                and n.bounds.maxs[0] >= box[0] - m
+                and n.bounds.mins[1] <= box[3] + m
+                and n.bounds.maxs[1] >= box[1] - m
+            ]
+            size = header.point_format.size
+            n_pts = int(counts[pick].sum()) if pick else 0
+            raw = np.zeros(n_pts * size, dtype=np.uint8)
+            if pick:
+                table = [(int(nodes[k].point_count), int(nodes[k].byte_size)) for k in pick]
+                data = bytearray(sum(b for _, b in table))
+                view, at = memoryview(data), 0
+                for k in pick:
+                    reader.source.seek(nodes[k].offset)
+                    nb = int(nodes[k].byte_size)
+                    got = reader.source.readinto(view[at : at + nb])
+                    if got != nb:
+                        raise LasReadError(
+                            f"input {p}: COPC node at {nodes[k].offset} is truncated"
+                        )
+                    at += nb
+                lazrs.decompress_points_with_chunk_table(
+                    data,
+                    reader.laszip_vlr.record_data,
+                    raw,
+                    table,
+                    laspy.DecompressionSelection.all().to_lazrs(),
+                )
+            record = (
+                np.concatenate([starts[k] + np.arange(counts[k], dtype=np.int64) for k in pick])
+                if pick
+                else np.empty(0, dtype=np.int64)
+            )
+            rec = laspy.PackedPointRecord.from_buffer(raw, header.point_format)
+            points = laspy.ScaleAwarePointRecord(
+                rec.array, rec.point_format, header.scales, header.offsets
+            )
+            x, y = np.asarray(points.x), np.asarray(points.y)
+            keep = (
+                (x >= box[0] - tol)
+                & (x <= box[2] + tol)
+                & (y >= box[1] - tol)
+                & (y <= box[3] + tol)
+            )
+            if not keep.all():
+                points = points[keep]
+                record = record[keep]
+    except LasReadError:
+        raise
+    except Exception as exc:  # laspy, lazrs and struct errors alike
+        raise LasReadError(f"cannot read {p} as COPC: {_reason(exc)}") from exc
+    cloud = _cloud_from_points(points, header, None, p, is_subset=True)
+    cloud.source = None
+    return cloud, record
+
+
 def open_las(path: str | os.PathLike) -> LasReader:
     """Open a LAS/LAZ file for streaming (see :class:`LasReader`)."""
     return LasReader(path)
@@ -284,10 +412,58 @@ def _new_las(cloud: PointCloud) -> Any:
     return las
 
 
+# --- headers every input can be written with ----------------------------------------------
+# COPC: its info VLR (copc/1) and hierarchy EVLR (copc/1000) describe the octree layout of the
+# point chunks; laspy cannot write them, and they would be false for a plain LAZ written in
+# record order. Other VLRs of user "copc" are kept like any VLR.
+_COPC_RECORDS = {1, 1000}
+# The oldest LAS version laspy writes; older sources are written as this (same point format).
+_MIN_WRITE_VERSION = "1.2"
+
+
+def _is_copc_record(vlr: Any) -> bool:
+    return str(vlr.user_id).strip("\x00") == "copc" and int(vlr.record_id) in _COPC_RECORDS
+
+
+def _without_copc(vlrs: Any) -> Any:
+    """Drop the COPC info and hierarchy records from `vlrs` (a laspy VLR list or None).
+
+    In place, keeping the order: assigning a new list to ``header.vlrs`` would make laspy
+    move the Extra Bytes VLR to the end, and the round trip would no longer be lossless.
+    """
+    if vlrs is not None:
+        for k in reversed(range(len(vlrs))):
+            if _is_copc_record(vlrs[k]):
+                del vlrs[k]
+    return vlrs
+
+
+def writable_header(header: Any) -> Any:
+    """A copy of laspy `header` that laspy can write as a plain LAS/LAZ.
+
+    - COPC in, plain LAZ out: the COPC info VLR is dropped (the hierarchy EVLR is
+      dropped with the EVLRs, see :func:`_without_copc`); every other VLR is kept.
+    - LAS 1.0 (which laspy reads but cannot write) becomes LAS 1.2 with the same point
+      format. The 1.0 header's reserved fields become the 1.2 file source ID and global
+      encoding, both 0: GPS time stays GPS week time (bit 0 clear), the only meaning 1.0
+      knows. LAS 1.1-1.4 keep their version.
+    """
+    laspy = _laspy()
+    out = copy.deepcopy(header)
+    _without_copc(out.vlrs)
+    if str(out.version) == "1.0":
+        out.set_version_and_point_format(
+            laspy.header.Version.from_str(_MIN_WRITE_VERSION), out.point_format
+        )
+        out.file_source_id = 0
+        out.global_encoding = laspy.header.GlobalEncoding()
+    return out
+
+
 def _las_from_source(cloud: PointCloud) -> Any:
     laspy = _laspy()
     src: LasSource = cloud.source
-    header = copy.deepcopy(src.header)
+    header = writable_header(src.header)
     if cloud.crs is not None and _crs_of(header) is None:
         # a CRS given by the user (--crs) for a file that had none: the output carries it
         try:
@@ -298,7 +474,7 @@ def _las_from_source(cloud: PointCloud) -> Any:
     points = laspy.PackedPointRecord(records, header.point_format)
     las = laspy.LasData(header=header, points=points)
     if src.evlrs is not None:
-        las.evlrs = copy.deepcopy(src.evlrs)
+        las.evlrs = _without_copc(copy.deepcopy(src.evlrs))
     # Only touch what changed, so unchanged values keep their exact raw integers.
     current = np.column_stack([np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)])
     if current.shape != cloud.xyz.shape or not np.array_equal(current, cloud.xyz):
@@ -422,6 +598,8 @@ def write_las(
     A cloud read from LAS/LAZ keeps its header, VLRs, EVLRs, point format,
     scales, offsets and every dimension; unchanged values keep their exact raw
     integers, so a read-write cycle reproduces the point records bit for bit.
+    What laspy cannot write is mapped (:func:`writable_header`): COPC in gives a
+    plain LAZ, LAS 1.0 gives LAS 1.2.
 
     Parameters
     ----------
@@ -491,7 +669,8 @@ def rewrite_las_classification(
     ``new_classes(start, classification) -> ndarray`` receives the record number of the
     first point of each piece and the piece's classification values, and returns the new
     values. Every other dimension, the header, its VLRs and the point order are kept;
-    COPC VLRs are dropped (the output is a plain LAS/LAZ). Written atomically.
+    the header is made writable as :func:`writable_header` does (a COPC input gives a
+    plain LAZ, LAS 1.0 gives LAS 1.2). Written atomically.
     """
     laspy = _laspy()
     p = _check_input(src)
@@ -501,10 +680,7 @@ def rewrite_las_classification(
     with atomic_path(target, overwrite=overwrite) as tmp:
         try:
             with laspy.open(str(p)) as reader:
-                header = copy.deepcopy(reader.header)
-                header.vlrs = type(header.vlrs)(
-                    [v for v in header.vlrs if str(v.user_id).strip("\x00") != "copc"]
-                )
+                header = writable_header(reader.header)
                 evlrs = list(getattr(reader, "evlrs", None) or [])
                 with (
                     tmp.open("wb") as fh,
@@ -520,7 +696,7 @@ def rewrite_las_classification(
                             points.classification = new.astype(cls.dtype, copy=False)
                         writer.write_points(points)
                         start += len(points)
-                    evlrs = [e for e in evlrs if str(e.user_id).strip("\x00") != "copc"]
+                    evlrs = [e for e in evlrs if not _is_copc_record(e)]
                     if evlrs:
                         writer.write_evlrs(type(header.vlrs)(evlrs))
                 if start != int(reader.header.point_count):

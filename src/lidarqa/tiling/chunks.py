@@ -14,12 +14,18 @@ column index is clamped to the last one (:attr:`Chunk.last`).
 
 Defaults (chosen from the catalog header data):
 
-- ``buffer``: :data:`DEFAULT_BUFFER` = 60 m, the ground filter's default seed cell
-  (the largest building footprint it is built for). A roof cut by a chunk border is
-  seen whole, with ground around it, as long as it is narrower than the buffer.
+- ``buffer``: the job's own margin (the ground job asks
+  :func:`lidarqa.tiling.ground.ground_buffer`: one seed cell); :data:`DEFAULT_BUFFER`
+  = 60 m, the ground filter's default seed cell, when a job names none.
 - ``chunk_size``: the side whose *buffered* box holds about :data:`TARGET_POINTS`
   points at the catalog's mean density (points / tile area), i.e.
-  ``sqrt(TARGET_POINTS / density) - 2 * buffer``, at least ``MIN_CHUNK`` m. It is then
+  ``sqrt(TARGET_POINTS / density) - 2 * buffer``, but at least :data:`MIN_BUFFERS`
+  buffers wide (and ``MIN_CHUNK`` m): a chunk then reads at most
+  ``(1 + 2 / MIN_BUFFERS)**2`` = 4 times its own area, where a dense cloud with a
+  large buffer read 49 times (20 m chunks, 60 m buffer). When the whole catalog fits
+  in a chunk of that side it is one chunk (the smallest side from its extent, a
+  multiple of the tile size when one fits, that puts the catalog in one grid cell):
+  every chunk would have read all of it. Otherwise the side is
   snapped to the tiling: to ``tile_size / k`` (the largest such fraction not above
   it) when smaller than the tile size, to a multiple of the tile size otherwise, so
   chunks line up with tile borders when the tiles do with the origin -- unless the
@@ -58,6 +64,7 @@ __all__ = [
     "TARGET_POINTS",
     "MIN_CHUNK",
     "SNAP_TOLERANCE",
+    "MIN_BUFFERS",
 ]
 
 #: Default buffer around each chunk, m (the ground filter's default seed cell).
@@ -70,6 +77,9 @@ TARGET_POINTS = 3_500_000
 SNAP_TOLERANCE = 1.15
 #: Smallest default chunk side, m.
 MIN_CHUNK = 20.0
+#: Smallest default chunk side in buffers: a chunk reads at most (1 + 2 / MIN_BUFFERS)**2
+#: times its area, whatever the density (dense TLS/MLS clouds would otherwise get tiny chunks).
+MIN_BUFFERS = 2.0
 # Header bounds are the exact min/max of the scaled coordinates, so the grid cells a tile
 # reaches follow from them with the same formula as the points' (the final pass of a job
 # checks that every point was a core point once). Tiles are matched to buffered boxes with
@@ -137,21 +147,67 @@ class Chunk:
         }
 
 
-def default_chunk_size(catalog: Any, *, buffer: float = DEFAULT_BUFFER) -> float:
-    """The default chunk side for `catalog` (see the module documentation), m."""
+def default_chunk_size(
+    catalog: Any, *, buffer: float = DEFAULT_BUFFER, origin: tuple[float, float] = (0.0, 0.0)
+) -> float:
+    """The default chunk side for `catalog` (see the module documentation), m.
+
+    Parameters
+    ----------
+    catalog : Catalog
+    buffer : float, default DEFAULT_BUFFER
+        The job's margin, m: the side is at least :data:`MIN_BUFFERS` of it.
+    origin : (float, float), default (0, 0)
+        The chunk grid's origin (a catalog that fits one chunk is put in one grid cell).
+    """
     density = catalog.density
-    raw = math.sqrt(TARGET_POINTS / density) - 2.0 * buffer
-    raw = max(raw, MIN_CHUNK)
+    floor = max(MIN_CHUNK, MIN_BUFFERS * float(buffer))
+    raw = max(math.sqrt(TARGET_POINTS / density) - 2.0 * buffer, floor)
     tile = catalog.tile_size()
+    one = _one_chunk_side(catalog, raw, tile, origin)
+    if one is not None:
+        return one
     if tile > 0:
         if raw < tile:
             snapped = tile / math.ceil(tile / raw - 1e-9)
         else:
             snapped = tile * math.floor(raw / tile + 1e-9)
-        if _work(snapped, buffer) <= SNAP_TOLERANCE * _work(raw, buffer):
+        if snapped >= floor and _work(snapped, buffer) <= SNAP_TOLERANCE * _work(raw, buffer):
             return float(snapped)
     step = 10.0 if raw >= 100.0 else 1.0
-    return float(max(math.floor(raw / step) * step, MIN_CHUNK))
+    return float(max(math.floor(raw / step) * step, floor))
+
+
+def _one_chunk_side(
+    catalog: Any, side: float, tile: float, origin: tuple[float, float]
+) -> float | None:
+    """The smallest side <= `side` that puts the whole catalog in one chunk, or None.
+
+    Multiples of the tile size are tried first (chunks stay aligned with the tiles),
+    then whole metres. A side works when the catalog's west and east edges (south and
+    north) fall in the same grid column (row), by the rule of :func:`make_chunks` (an
+    east/north edge on a grid line opens no column/row).
+    """
+    b = [t.bounds2d for t in catalog.tiles if t.n_points > 0]
+    if not b:
+        return None
+    arr = np.asarray(b, dtype=float)
+    x0, y0 = arr[:, 0].min() - origin[0], arr[:, 1].min() - origin[1]
+    x1, y1 = arr[:, 2].max() - origin[0], arr[:, 3].max() - origin[1]
+    span = max(x1 - x0, y1 - y0)
+    if span > side:
+        return None
+
+    def fits(s: float) -> bool:
+        return all(math.ceil(hi / s) - 1 <= math.floor(lo / s) for lo, hi in ((x0, x1), (y0, y1)))
+
+    tries = [tile * k for k in range(1, 65) if span <= tile * k <= side] if tile > 0 else []
+    start = max(math.ceil(span), 1)
+    tries += [float(v) for v in range(start, min(int(math.floor(side)), start + 10_000) + 1)]
+    for s in tries:
+        if fits(s):
+            return float(s)
+    return None
 
 
 def estimated_points(catalog: Any, chunk: Chunk) -> float:
@@ -201,7 +257,11 @@ def make_chunks(
     buffer = DEFAULT_BUFFER if buffer is None else float(buffer)
     if not math.isfinite(buffer) or buffer < 0:
         raise OptionError(f"buffer must be >= 0 m, got {buffer}")
-    size = default_chunk_size(catalog, buffer=buffer) if chunk_size is None else float(chunk_size)
+    size = (
+        default_chunk_size(catalog, buffer=buffer, origin=origin)
+        if chunk_size is None
+        else float(chunk_size)
+    )
     if not math.isfinite(size) or size <= 0:
         raise OptionError(f"chunk size must be > 0 m, got {chunk_size}")
     ox, oy = float(origin[0]), float(origin[1])

@@ -2,8 +2,8 @@
 
 How it works:
 
-1. Each chunk is read with its buffer (default :data:`~lidarqa.tiling.chunks.DEFAULT_BUFFER`,
-   at least the filter's seed cell) and filtered with
+1. Each chunk is read with its buffer (default :func:`ground_buffer`: the filter's
+   seed cell, no wider than the catalog) and filtered with
    :func:`lidarqa.ground.classify_ground`, exactly as ``lidarqa ground`` filters one
    file. Only the labels of the chunk's *core* points are kept: for each tile, the
    record numbers of its core points that are ground, and the number of core points.
@@ -50,6 +50,7 @@ __all__ = [
     "CatalogGroundResult",
     "ground_catalog",
     "catalog_grow_radius",
+    "ground_buffer",
     "WORK_DIR",
 ]
 
@@ -292,6 +293,39 @@ def _assemble_tile(
     return int(mask.sum())
 
 
+def ground_buffer(catalog: Any = None, *, cell_size: float = 60.0) -> float:
+    """The margin (m) the ground job reads around each chunk of `catalog`.
+
+    One seed cell of the filter (`cell_size`, 60 m by default and in every automatic
+    parameter set): the seed grid is snapped to the catalog's (see :func:`make_chunks`),
+    so a chunk then holds every complete seed cell next to its core and seeds its TIN
+    as one run over the whole catalog would; a roof narrower than a seed cell that a
+    chunk border cuts is seen whole. The margin scales with the filter: a smaller
+    `cell_size` (``--cell-size``) gives a smaller buffer, hence smaller chunks (a chunk is
+    at least :data:`~lidarqa.tiling.chunks.MIN_BUFFERS` buffers wide). It is never
+    wider than the catalog's larger side: beyond that a buffer reads nothing more.
+
+    Parameters
+    ----------
+    catalog : Catalog, optional
+        The data (its header bounds); None gives the seed cell alone.
+    cell_size : float, default 60
+        The filter's seed cell, m.
+
+    Returns
+    -------
+    float
+        Buffer, m.
+    """
+    b = float(cell_size)
+    if catalog is not None and getattr(catalog, "tiles", None):
+        x0, y0, x1, y1 = catalog.bounds[:4]
+        span = max(x1 - x0, y1 - y0)
+        if math.isfinite(span) and span > 0:
+            b = min(b, float(math.ceil(span)))
+    return b
+
+
 _AUTO_FIELDS = ("return_number", "number_of_returns", "scan_angle", "scan_angle_rank")
 
 
@@ -414,13 +448,26 @@ def catalog_auto_parameters(
     return chosen, measures, regime
 
 
+def _plain_name(name: str) -> str:
+    """Output name of input tile `name`: a COPC tile is written as a plain LAZ (``.laz``)."""
+    from ..io._atomic import COPC_SUFFIX
+
+    if name.lower().endswith(COPC_SUFFIX):
+        return name[: -len(COPC_SUFFIX)] + ".laz"
+    return name
+
+
 def _output_names(catalog: Any, output_dir: Path) -> list[Path]:
-    names = [Path(t.path).name for t in catalog.tiles]
+    names = [_plain_name(Path(t.path).name) for t in catalog.tiles]
     if len(set(names)) != len(names):
         # same file name in two folders: prefix with the parent folder name
-        names = [f"{Path(t.path).parent.name}_{Path(t.path).name}" for t in catalog.tiles]
+        names = [
+            f"{Path(t.path).parent.name}_{_plain_name(Path(t.path).name)}" for t in catalog.tiles
+        ]
         if len(set(names)) != len(names):
-            names = [f"{k:05d}_{Path(t.path).name}" for k, t in enumerate(catalog.tiles)]
+            names = [
+                f"{k:05d}_{_plain_name(Path(t.path).name)}" for k, t in enumerate(catalog.tiles)
+            ]
     return [output_dir / n for n in names]
 
 
@@ -460,8 +507,9 @@ def ground_catalog(
     method, preset, last_returns_only, exclude_classes, evaluate, ignore_classes, **params
         As :func:`lidarqa.ground.classify_ground`.
     chunk_size, buffer, origin
-        The chunk grid (:func:`make_chunks`); the default buffer is the larger of
-        :data:`DEFAULT_BUFFER` and the filter's seed cell.
+        The chunk grid (:func:`make_chunks`); the default buffer is
+        :func:`ground_buffer` (the filter's seed cell) and the default chunk size
+        follows the density (:func:`default_chunk_size`).
     engine : Engine, optional
         Otherwise one is made from `scheduler` and `workers` (``workers=1`` without a
         scheduler runs serially in this process).
@@ -482,7 +530,7 @@ def ground_catalog(
     from ..ground import METHODS, PRESETS, filter_errors_from_counts
     from ..ground.auto import SENSORS, with_given
     from .catalog import Catalog, open_catalog
-    from .chunks import DEFAULT_BUFFER, make_chunks
+    from .chunks import make_chunks
     from .engine import Engine, run_chunks, run_tasks
 
     if method not in METHODS:
@@ -518,7 +566,7 @@ def ground_catalog(
     except TypeError as exc:
         raise OptionError(f"invalid parameter for method {method!r}: {exc}") from None
     if buffer is None:
-        buffer = max(DEFAULT_BUFFER, float(filt.cell_size))
+        buffer = ground_buffer(catalog, cell_size=float(filt.cell_size))
     if isinstance(filt, SegmentPTD) and filt.grow_radius is None:  # method segment-ptd
         # one surface-growing radius for the whole catalog, as one in-memory run would
         # estimate it, instead of one per chunk (see catalog_grow_radius)
@@ -569,9 +617,9 @@ def ground_catalog(
         )
     own = engine is None
     if own:  # made (not started) before anything is written: bad options fail here
-        engine = Engine("serial") if scheduler is None and workers == 1 else Engine(
-            scheduler, workers=workers
-        )
+        # one chunk (a catalog that fits one) gains nothing from a cluster but its start-up
+        serial = scheduler is None and (workers == 1 or (workers is None and len(chunks) == 1))
+        engine = Engine("serial") if serial else Engine(scheduler, workers=workers)
     made_dir = not out_dir.exists()
     out_dir.mkdir(parents=True, exist_ok=True)
     work = out_dir / WORK_DIR

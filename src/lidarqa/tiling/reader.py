@@ -2,8 +2,13 @@
 
 Tiles are streamed in pieces of :data:`READ_STEP` points (laspy chunk iterators) and
 only the points inside the chunk's buffered box are kept, so memory holds one chunk
-plus one piece at a time. Points come tile by tile (catalog order), in record order
-within a tile, which makes every job's input, hence its result, deterministic.
+plus one piece at a time. A COPC tile that the box covers only in part is read with a
+spatial query instead (:func:`lidarqa.io.las.read_copc_box`: only the octree nodes that
+meet the box are decompressed), which gives the same points with the same record
+numbers. Points come tile by tile (catalog order), in record order within a tile,
+which makes every job's input, hence its result, deterministic, whichever way a tile
+is read. Core ownership is decided afterwards by the chunk (:meth:`Chunk.core_mask`,
+half-open grid cells), never by the reader.
 """
 
 from __future__ import annotations
@@ -63,9 +68,18 @@ def _in_box(xyz: np.ndarray, box: tuple[float, float, float, float]) -> np.ndarr
     )
 
 
-def _read_tile_box(path: str, box: tuple[float, float, float, float], whole: bool) -> tuple:
-    """(xyz, fields, point_index) of the points of `path` inside `box`."""
-    from ..io.las import LasReader
+def _read_tile_box(
+    path: str, box: tuple[float, float, float, float], whole: bool, copc: bool = False
+) -> tuple:
+    """(xyz, fields, point_index) of the points of `path` inside `box`.
+
+    `copc`: the tile is a COPC file; unless `whole`, read it with a spatial query.
+    """
+    from ..io.las import LasReader, read_copc_box
+
+    if copc and not whole:
+        cloud, idx = read_copc_box(path, box, tol=_TOL)
+        return cloud.xyz, (cloud.fields if len(idx) else None), idx
 
     parts_xyz, parts_idx = [], []
     parts_fields: dict[str, list[np.ndarray]] = {}
@@ -117,7 +131,7 @@ def read_chunk(catalog: Any, chunk: Any) -> ChunkData:
         tile = catalog.tiles[t]
         xmin, ymin, xmax, ymax = tile.bounds2d
         whole = xmin >= box[0] and xmax <= box[2] and ymin >= box[1] and ymax <= box[3]
-        xyz, fields, idx = _read_tile_box(tile.path, box, whole)
+        xyz, fields, idx = _read_tile_box(tile.path, box, whole, tile.is_copc)
         if len(xyz) == 0:
             continue
         xyzs.append(xyz)
