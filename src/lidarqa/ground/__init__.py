@@ -36,7 +36,14 @@ from .auto import (
     with_given,
 )
 from .features import SegmentFeatures, detect_object_segments, point_scatterness, segment_features
-from .metrics import FilterErrors, filter_errors, filter_errors_from_counts, filter_errors_from_file
+from .metrics import (
+    FilterErrors,
+    TerrainScores,
+    filter_errors,
+    filter_errors_from_counts,
+    filter_errors_from_file,
+    terrain_scores,
+)
 from .ptd import PTD, PTDResult, mirror_point, ptd_filter
 from .segment_ptd import SegmentPTD, SegmentPTDResult, default_grow_radius, segment_ptd
 
@@ -57,6 +64,8 @@ __all__ = [
     "filter_errors",
     "filter_errors_from_counts",
     "filter_errors_from_file",
+    "TerrainScores",
+    "terrain_scores",
     "GroundResult",
     "classify_ground",
     "ground_candidates",
@@ -136,6 +145,10 @@ class GroundResult:
         ``"absent"`` or ``"all"``.
     n_excluded_noise : int
     evaluation : FilterErrors or None
+    terrain : TerrainScores or None
+        With `evaluate`: the terrain model of the result against the reference's
+        (:func:`~lidarqa.ground.metrics.terrain_scores`), and whether the reference
+        ground looks thinned.
     """
 
     ground_mask: np.ndarray
@@ -151,6 +164,7 @@ class GroundResult:
     parameter_sources: dict = field(default_factory=dict)
     measures: CloudMeasures | None = None
     regime: str | None = None
+    terrain: TerrainScores | None = None
 
     @property
     def n_ground(self) -> int:
@@ -176,6 +190,8 @@ class GroundResult:
         }
         if self.evaluation is not None:
             d.update(_evaluation_dict(self.evaluation))
+        if self.terrain is not None:
+            d["terrain"] = self.terrain.to_dict()
         return d
 
 
@@ -294,7 +310,8 @@ def classify_ground(
         Classes never considered (noise).
     evaluate : bool, default False
         Compare with the cloud's own classification (class 2 = ground, everything
-        else object; `ignore_classes` left out) and attach :class:`FilterErrors`.
+        else object; `ignore_classes` left out) and attach :class:`FilterErrors`
+        and the terrain-model scores (:class:`TerrainScores`).
     ignore_classes : sequence of int, optional
         Reference classes excluded from the evaluation.
     preset : {"auto", "als", "mls"} or None, default "auto"
@@ -357,7 +374,7 @@ def classify_ground(
     }
     details = filt.run(cloud.xyz, candidates=cand, progress=progress)
     ground = details.ground_mask
-    evaluation = None
+    evaluation = terrain = None
     if evaluate:
         if cloud.classification is None:
             raise OptionError(
@@ -368,6 +385,7 @@ def classify_ground(
         if ignore_classes:
             mask = ~np.isin(ref, np.asarray(list(ignore_classes)))
         evaluation = filter_errors(ref == 2, ground, mask=mask)
+        terrain = terrain_scores(cloud.xyz, ground, ref == 2, mask=mask)
     return GroundResult(
         ground_mask=ground,
         candidates=cand,
@@ -382,4 +400,5 @@ def classify_ground(
         parameter_sources=sources,
         measures=measures,
         regime=regime,
+        terrain=terrain,
     )
