@@ -307,7 +307,7 @@ def ground(
             + f", slope median/p90 {m.slope_median:.1f}/{m.slope_p90:.1f} deg, "
             f"largest object {m.largest_object_diameter:.0f} m"
         )
-        echo(f"  regime          {result.regime}")
+        echo(f"  regime          {result.regime} ({result.regime_reason})")
     src = result.parameter_sources
     shown = {k: v for k, v in result.parameters.items() if src.get(k) != "default"}
     if shown:
@@ -331,6 +331,8 @@ def ground(
             "regime": result.regime,
             "measured": res["measured"],
             "parameter_sources": result.parameter_sources,
+            "parameter_notes": result.parameter_notes,
+            "regime_reason": result.regime_reason,
             "last_returns_only": not all_returns,
             "exclude_classes": list(exclude_classes or []),
             "ignore_classes": list(ignore_classes or []),

@@ -33,6 +33,8 @@ from .auto import (
     CloudMeasures,
     auto_parameters,
     measure_cloud,
+    parameter_notes,
+    regime_reason,
     with_given,
 )
 from .features import SegmentFeatures, detect_object_segments, point_scatterness, segment_features
@@ -145,6 +147,15 @@ class GroundResult:
         ``"absent"`` or ``"all"``.
     n_excluded_noise : int
     evaluation : FilterErrors or None
+    parameter_sources : dict
+        Per parameter: ``"preset"`` (a constant of the preset or of the regime the
+        measured figures chose), ``"given"`` (an explicit option) or ``"default"``
+        (the filter class's default).
+    parameter_notes : dict
+        Per ``"preset"`` parameter: which preset, and (with ``preset="auto"``) the
+        measured figures and thresholds that chose its regime.
+    regime_reason : str or None
+        With ``preset="auto"``: the measured figures and thresholds that chose `regime`.
     terrain : TerrainScores or None
         With `evaluate`: the terrain model of the result against the reference's
         (:func:`~lidarqa.ground.metrics.terrain_scores`), and whether the reference
@@ -165,6 +176,8 @@ class GroundResult:
     measures: CloudMeasures | None = None
     regime: str | None = None
     terrain: TerrainScores | None = None
+    parameter_notes: dict = field(default_factory=dict)
+    regime_reason: str | None = None
 
     @property
     def n_ground(self) -> int:
@@ -185,8 +198,10 @@ class GroundResult:
             "warnings": list(self.warnings),
             "preset": self.preset,
             "regime": self.regime,
+            "regime_reason": self.regime_reason,
             "measured": self.measures.to_dict() if self.measures is not None else None,
             "parameter_sources": dict(self.parameter_sources),
+            "parameter_notes": dict(self.parameter_notes),
         }
         if self.evaluation is not None:
             d.update(_evaluation_dict(self.evaluation))
@@ -372,6 +387,12 @@ def classify_ground(
     sources = {
         k: ("given" if k in given else sources.get(k, "default")) for k in filt.to_dict()
     }
+    reason = None
+    if measures is not None:
+        notes = parameter_notes(measures, sources, regime, sensor=sensor)
+        reason = regime_reason(measures, regime, sensor=sensor)
+    else:
+        notes = {k: f"constant of the {preset} preset" for k, v in sources.items() if v == "preset"}
     details = filt.run(cloud.xyz, candidates=cand, progress=progress)
     ground = details.ground_mask
     evaluation = terrain = None
@@ -401,4 +422,6 @@ def classify_ground(
         measures=measures,
         regime=regime,
         terrain=terrain,
+        parameter_notes=notes,
+        regime_reason=reason,
     )
