@@ -122,7 +122,8 @@ KEY_UNITS: dict[str, str] = {
     **_keys(
         _F,
         """type_i type_ii total precision recall frac_lt1 frac_lt2 ground_fraction
-        segmented_fraction cells_off objects_taken ground_lost accept_ratio connect_ratio raised_ratio reject_ratio roof_ratio
+        cells_off objects_taken ground_lost
+        segmented_fraction accept_ratio connect_ratio raised_ratio reject_ratio roof_ratio
         seed_support_ratio min_gain_frac refit_growth correlation alpha fraction q_lo q_hi""",
     ),
     # dimensionless numbers

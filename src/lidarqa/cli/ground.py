@@ -358,7 +358,7 @@ def echo_ground_counts(res: dict, evaluation: object, how: str = "") -> None:
 
 
 def echo_terrain(t: dict | None) -> None:
-    """With --evaluate: the terrain model against the reference's, and the thinned-reference note."""
+    """With --evaluate: the terrain model against the reference's, and the thinned note."""
     if not t:
         return
     if t["reason"]:

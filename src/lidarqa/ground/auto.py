@@ -360,9 +360,9 @@ def regime_reason(measures: CloudMeasures, regime: str, *, sensor: str = "auto")
         kind = f"measured scan angle up to {_fmt(m.scan_angle_max)}° ({cmp} 60°)"
     else:
         cmp = ">" if m.sensor == "mls" else "<="
-        kind = f"no scan angle, {dens} ({cmp} {MLS_DENSITY:g})"
+        kind = f"no scan angle, density {cmp} {MLS_DENSITY:g} pts/m²"
     if regime == "mls":
-        return f"mobile scan: {kind}"
+        return f"mobile scan ({kind}); {dens}"
     cmp = "<" if regime == "als-sparse" else ">="
     return f"airborne ({kind}); {dens} {cmp} {DENSE_ALS:g} (DENSE_ALS)"
 

@@ -393,7 +393,9 @@ def terrain_scores(
     near_limit: float = 0.15,
     thinned_ratio: float = THINNED_RATIO,
 ) -> TerrainScores:
-    """Score the terrain model of a ground filter against the reference's (:ref:`alg-isprs`).
+    """Score the terrain model of a ground filter against the reference's.
+
+    See :ref:`alg-terrain-scores`.
 
     Two Delaunay TINs are built, one of the predicted ground points and one of the
     reference ground points, and compared where both exist: at the centres of a

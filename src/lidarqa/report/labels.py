@@ -207,8 +207,12 @@ LABELS: dict[str, Label] = {
     "terrain.rmse_m": _l("terrain model RMSE (filter − reference TIN)", M),
     "terrain.bias_m": _l("terrain model mean difference (filter − reference)", M),
     "terrain.cells_off": _l("grid cells off by more than the limit", PCT, 100.0),
-    "terrain.objects_taken": _l("filter ground above the reference terrain (objects taken)", PCT, 100.0),
-    "terrain.ground_lost": _l("reference ground off the filter's terrain (ground lost)", PCT, 100.0),
+    "terrain.objects_taken": _l(
+        "filter ground above the reference terrain (objects taken)", PCT, 100.0
+    ),
+    "terrain.ground_lost": _l(
+        "reference ground off the filter's terrain (ground lost)", PCT, 100.0
+    ),
     "terrain.reference_on_surface_ratio": _l(
         "reference non-ground points on its ground surface per ground point"
     ),
