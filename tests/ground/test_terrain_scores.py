@@ -159,3 +159,21 @@ def test_real_references_thinned_or_complete():
         s = terrain_scores(cloud.xyz, cls == 2, cls == 2, mask=~np.isin(cls, (7, 18)))
         assert s.thinned is thinned, (name, s.on_surface_ratio)
         assert s.rmse == 0.0
+
+
+def test_grid_blocks_and_size_limit(scene, monkeypatch):
+    """Scoring the grid in small blocks gives the same figures; a huge extent is refused."""
+    from lidarqa.ground import metrics
+
+    g = scene.is_ground
+    pred = g | (scene.classification == 3)
+    whole = terrain_scores(scene.points, pred, g)
+    monkeypatch.setattr(metrics, "_BLOCK_CELLS", 100)
+    blocks = terrain_scores(scene.points, pred, g)
+    assert blocks.n_cells == whole.n_cells and blocks.cells_off == whole.cells_off
+    assert blocks.rmse == pytest.approx(whole.rmse, rel=1e-12)
+    monkeypatch.setattr(metrics, "MAX_CELLS", 1000)
+    big = terrain_scores(scene.points, pred, g)
+    assert "larger cell" in big.reason and math.isnan(big.rmse)
+    assert big.on_surface_ratio == whole.on_surface_ratio
+    assert terrain_scores(scene.points, pred, g, cell=5.0).reason == ""

@@ -247,6 +247,10 @@ def filter_errors_from_file(
 #: (see :func:`terrain_scores`)
 THINNED_RATIO = 0.25
 
+#: largest grid (cells) :func:`terrain_scores` evaluates; beyond it, a larger cell is needed
+MAX_CELLS = 200_000_000
+_BLOCK_CELLS = 1 << 21
+
 THINNED_NOTE = (
     "the reference ground looks thinned; per-point type I/II errors punish finding more "
     "ground — judge by the terrain model"
@@ -510,28 +514,44 @@ def terrain_scores(
     i1 = np.floor(hi / cell).astype(np.int64)
     if (i1 < i0).any():
         return empty("the predicted and reference ground do not overlap", ratio)
-    ix = np.arange(i0[0], i1[0] + 1)
-    iy = np.arange(i0[1], i1[1] + 1)
-    gx, gy = np.meshgrid((ix + 0.5) * cell, (iy + 0.5) * cell, indexing="ij")
-    centres = np.column_stack([gx.ravel(), gy.ravel()])
+    nx, ny = (i1 - i0 + 1).tolist()
+    if nx * ny > MAX_CELLS:
+        return empty(
+            f"the common extent holds {nx * ny:,} cells of {cell:g} m (more than "
+            f"{MAX_CELLS:,}): score with a larger cell",
+            ratio,
+        )
     pred_tin = _Surface(pg)
-    d = pred_tin.heights(centres) - ref_tin.heights(centres)
-    d = d[np.isfinite(d)]
-    if d.size == 0:
+    iy = np.arange(i0[1], i1[1] + 1)
+    cy = (iy + 0.5) * cell
+    # the grid in blocks of whole columns (bounded memory), summed in a fixed order
+    step = max(1, _BLOCK_CELLS // ny)
+    n_cells = n_off = 0
+    sum_d = sum_d2 = 0.0
+    for x0 in range(int(i0[0]), int(i1[0]) + 1, step):
+        cx = (np.arange(x0, min(x0 + step, int(i1[0]) + 1)) + 0.5) * cell
+        centres = np.column_stack([np.repeat(cx, ny), np.tile(cy, cx.size)])
+        d = pred_tin.heights(centres) - ref_tin.heights(centres)
+        d = d[np.isfinite(d)]
+        n_cells += d.size
+        n_off += int(np.count_nonzero(np.abs(d) > off_limit))
+        sum_d += float(d.sum())
+        sum_d2 += float((d * d).sum())
+    if n_cells == 0:
         return empty("the predicted and reference ground TINs share no grid cell", ratio)
     h_pred = pg[:, 2] - ref_tin.heights(pg[:, :2])
     h_pred = h_pred[np.isfinite(h_pred)]
     h_ref = rg[:, 2] - pred_tin.heights(rg[:, :2])
     h_ref = h_ref[np.isfinite(h_ref)]
     return TerrainScores(
-        rmse=float(np.sqrt(np.mean(d * d))),
-        bias=float(np.mean(d)),
-        cells_off=_share(np.abs(d) > off_limit),
+        rmse=math.sqrt(sum_d2 / n_cells),
+        bias=sum_d / n_cells,
+        cells_off=n_off / n_cells,
         objects_taken=_share(h_pred > above_limit),
         ground_lost=_share(np.abs(h_ref) > above_limit),
         on_surface_ratio=ratio,
         thinned=bool(ratio > thinned_ratio),
-        n_cells=int(d.size),
+        n_cells=int(n_cells),
         n_pred_scored=int(h_pred.size),
         n_ref_scored=int(h_ref.size),
         n_pred_ground=len(pg),
