@@ -60,6 +60,17 @@ def test_return_structure_and_scan_angle():
     narrow = measure_cloud(p, fields={"scan_angle_rank": rng.integers(-20, 21, n)})
     assert wide.sensor == "mls" and narrow.sensor == "als"
     assert not measure_cloud(p).has_returns
+    # the reason for a regime names the measured figures and the thresholds
+    from lidarqa.ground.auto import parameter_notes, regime_reason
+
+    why = regime_reason(wide, "mls")
+    assert why.startswith("mobile scan") and "> 60°" in why
+    assert "<= 60°" in regime_reason(narrow, "als-sparse") and "< 4" in regime_reason(
+        narrow, "als-sparse"
+    )
+    assert "sensor given as als" in regime_reason(wide, "als-sparse", sensor="als")
+    notes = parameter_notes(narrow, {"a": "preset", "b": "given", "filter_density": "preset"}, "x")
+    assert set(notes) == {"a", "filter_density"} and "1.5 × 4 = 6" in notes["filter_density"]
 
 
 def test_slope_measured():
