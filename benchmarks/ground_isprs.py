@@ -7,13 +7,22 @@ with a bridge (classes 2,3,4,5,6,17 evaluated; bridge points labelled ground
 reported). Prints per-sample type I / type II / total error (%) and Cohen's kappa
 (%), the means, and published / measured anchors.
 
-Leave-one-site-out (``--loso``): the sparse airborne set's two most influential
-values (iteration angle and distance) are re-chosen from a small grid on the
-samples of the *other* ISPRS sites (1–8: CSite1–4, FSite5–7, no site 8 sample)
-and the held-out site is scored with that choice. The LOSO mean beside the
-all-sample mean shows whether the fixed values are fitted to these 15 samples.
+Leave-one-site-out (``--loso``), over EVERY constant of the sparse airborne preset
+(``PRESETS["als"][method]``, 16 for segment-PTD): each constant in turn is tried at
+0.75x, 1x and 1.25x its preset value (integers rounded, booleans both ways), the
+others held at the preset. For each ISPRS site (1–7: CSite1–4, FSite5–7) the value
+with the lowest mean total error on the samples of the *other* sites is chosen
+(ties keep the preset value) and the held-out site is scored with it. Per constant it
+prints the all-sample mean at each value, at how many sites the held-out choice
+differs from the preset, and the LOSO mean; then the joint LOSO (every constant at its
+held-out choice at once, one run per held-out sample). A LOSO mean well above the
+all-sample mean says the preset value is fitted to these 15 samples. Cost: 1 + 2 per
+constant configurations of the 15 samples (33 x 15 = 495 filter runs for segment-PTD,
+about 20–30 min on one core) plus 15 joint runs. ``--loso-pair`` keeps the older joint
+3 x 3 grid over the iteration angle and distance.
 
-    python benchmarks/ground_isprs.py [--methods segment-ptd,ptd] [--samples 11,24] [--loso]
+    python benchmarks/ground_isprs.py [--methods segment-ptd,ptd] [--samples 11,24]
+        [--loso] [--loso-pair]
 """
 
 from __future__ import annotations
@@ -107,11 +116,87 @@ def loso(method: str, clouds: dict) -> None:
     )
 
 
+def _variants(value):
+    """The values a constant is tried at: its preset value, 0.75x and 1.25x (both for a bool)."""
+    if isinstance(value, bool):
+        return [value, not value]
+    if isinstance(value, int):
+        return sorted({max(1, round(0.75 * value)), value, round(1.25 * value)})
+    return sorted({0.75 * value, value, 1.25 * value})
+
+
+def loso_all(method: str, clouds: dict, only=None) -> None:
+    """Leave-one-site-out over every constant of the sparse preset, one constant at a time."""
+    from lidarqa.ground import PRESETS
+
+    preset = PRESETS["als"][method]
+    if only:
+        preset = {k: v for k, v in preset.items() if k in only}
+    t0 = time.perf_counter()
+    base = {s: 100 * _score(cloud, method, preset="als")[0].total for s, cloud in clouds.items()}
+    sites = sorted({s[0] for s in clouds})
+    at_preset = np.mean(list(base.values()))
+    print(
+        f"\nleave-one-site-out over every constant of the sparse preset ({method}, "
+        f"{len(preset)} constants; all-sample mean at the preset {at_preset:.2f} %)"
+    )
+    print(
+        f"{'constant':<22}{'preset':>8}  {'all-sample mean total % per value':<44}"
+        f"{'sites moved':>12}{'LOSO mean %':>12}"
+    )
+    chosen: dict[str, dict[str, object]] = {site: {} for site in sites}
+    for k, v in preset.items():
+        tot = {(v, s): t for s, t in base.items()}
+        values = _variants(v)
+        for x in values:
+            if x == v:
+                continue
+            for s, cloud in clouds.items():
+                tot[x, s] = 100 * _score(cloud, method, preset="als", **{k: x})[0].total
+        held = {}
+        moved = 0
+        for site in sites:
+            train = [s for s in clouds if s[0] != site]
+            # lowest training mean; ties keep the preset value
+            best = min(values, key=lambda x: (np.mean([tot[x, s] for s in train]), x != v))
+            chosen[site][k] = best
+            moved += best != v
+            for s in clouds:
+                if s[0] == site:
+                    held[s] = tot[best, s]
+        per_value = ", ".join(
+            f"{x:g}: {np.mean([tot[x, s] for s in clouds]):.2f}" for x in values
+        )
+        print(
+            f"{k:<22}{v!s:>8}  {per_value:<44}{moved:>8}/{len(sites)}"
+            f"{np.mean(list(held.values())):>12.2f}"
+        )
+    joint = {}
+    for site in sites:
+        moved = {k: x for k, x in chosen[site].items() if x != preset[k]}
+        for s, cloud in clouds.items():
+            if s[0] == site:
+                joint[s] = (
+                    100 * _score(cloud, method, preset="als", **moved)[0].total
+                    if moved
+                    else base[s]
+                )
+        print(f"  site {site}: held-out choice differs from the preset in {moved or 'nothing'}")
+    print(
+        f"  joint LOSO (every constant re-chosen without the held-out site): mean total "
+        f"{np.mean(list(joint.values())):.2f} %, max {max(joint.values()):.2f} %; "
+        f"preset on all samples {np.mean(list(base.values())):.2f} %, "
+        f"max {max(base.values()):.2f} %  ({time.perf_counter() - t0:.0f} s)"
+    )
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--methods", default="segment-ptd,ptd")
     ap.add_argument("--samples", default=",".join(SAMPLES))
-    ap.add_argument("--loso", action="store_true")
+    ap.add_argument("--loso", action="store_true", help="LOSO over every preset constant")
+    ap.add_argument("--loso-pair", action="store_true", help="LOSO 3x3 grid, angle x distance")
+    ap.add_argument("--constants", default=None, help="--loso: only these constants (comma list)")
     ap.add_argument("--no-extra", action="store_true")
     a = ap.parse_args()
     if not DATA.is_dir():
@@ -144,6 +229,8 @@ def main() -> None:
                         extra += f", bridge (17) as ground {100 * br:.1f} %"
                     _row(name, e, dt, extra)
         if a.loso:
+            loso_all(method, clouds, a.constants.split(",") if a.constants else None)
+        if a.loso_pair:
             loso(method, clouds)
     print("\nmean total error (%) beside the anchors")
     for method, (m, worst) in means.items():

@@ -123,6 +123,7 @@ KEY_UNITS: dict[str, str] = {
     **_keys(
         _F,
         """type_i type_ii total precision recall frac_lt1 frac_lt2 ground_fraction
+        cells_off objects_taken ground_lost
         segmented_fraction accept_ratio connect_ratio raised_ratio reject_ratio roof_ratio
         seed_support_ratio min_gain_frac refit_growth correlation alpha fraction q_lo q_hi""",
     ),
@@ -130,7 +131,8 @@ KEY_UNITS: dict[str, str] = {
     **_keys(
         _1,
         """a b scale ratio weight w critical std_without_outliers rotation_matrix det
-        min_det scatter_thr trim growth grow_radius_factor kappa_coefficient seed""",
+        min_det scatter_thr trim growth grow_radius_factor kappa_coefficient seed
+        reference_on_surface_ratio thinned_ratio_limit""",
     ),
     # codes and identifiers
     **_keys(

@@ -60,6 +60,17 @@ def test_return_structure_and_scan_angle():
     narrow = measure_cloud(p, fields={"scan_angle_rank": rng.integers(-20, 21, n)})
     assert wide.sensor == "mls" and narrow.sensor == "als"
     assert not measure_cloud(p).has_returns
+    # the reason for a regime names the measured figures and the thresholds
+    from lidarqa.ground.auto import parameter_notes, regime_reason
+
+    why = regime_reason(wide, "mls")
+    assert why.startswith("mobile scan") and "> 60°" in why
+    assert "<= 60°" in regime_reason(narrow, "als-sparse") and "< 4" in regime_reason(
+        narrow, "als-sparse"
+    )
+    assert "sensor given as als" in regime_reason(wide, "als-sparse", sensor="als")
+    notes = parameter_notes(narrow, {"a": "preset", "b": "given", "filter_density": "preset"}, "x")
+    assert set(notes) == {"a", "filter_density"} and "1.5 × 4 = 6" in notes["filter_density"]
 
 
 def test_slope_measured():
@@ -84,7 +95,10 @@ def test_regimes_follow_density_and_sensor_hint():
     dense = measure_cloud(_flat(2 * DENSE_ALS))
     p, src, regime = auto_parameters(sparse, "segment-ptd")
     assert regime == "als-sparse"
-    assert p == ALS_SEGMENT_PARAMS and set(src.values()) == {"measured"}
+    # the preset's constants are labelled as such, not "measured" (issue #28)
+    assert p == ALS_SEGMENT_PARAMS and set(src.values()) == {"preset"}
+    _, dsrc, _ = auto_parameters(dense, "segment-ptd")
+    assert set(dsrc.values()) == {"preset"}
     assert auto_parameters(dense, "segment-ptd")[2] == "als-dense"
     assert auto_parameters(sparse, "segment-ptd", sensor="mls") == ({}, {}, "mls")
     with pytest.raises(OptionError):
@@ -95,16 +109,26 @@ def test_classify_ground_records_provenance_and_explicit_options_win():
     pts = _flat(1.0, size=80.0)
     r = classify_ground(pts, method="ptd")
     assert r.preset == "auto" and r.regime == "als-sparse"
-    assert r.parameter_sources["iter_angle"] == "measured"
+    assert r.parameter_sources["iter_angle"] == "preset"
     assert r.parameter_sources["cell_size"] == "default"
+    # the note says which preset and which measured figures chose the regime
+    note = r.parameter_notes["iter_angle"]
+    assert "als-sparse" in note and "measured density" in note and "< 4" in note
+    assert set(r.parameter_notes) == {k for k, v in r.parameter_sources.items() if v == "preset"}
+    assert "measured density" in r.regime_reason
     assert set(r.parameter_sources) == set(r.parameters)
     g = classify_ground(pts, method="ptd", iter_angle=9.0)
     assert g.parameters["iter_angle"] == 9.0 and g.parameter_sources["iter_angle"] == "given"
+    assert "iter_angle" not in g.parameter_notes
+    a = classify_ground(pts, method="ptd", preset="als")
+    assert a.parameter_sources["iter_angle"] == "preset" and a.regime_reason is None
+    assert a.parameter_notes["iter_angle"] == "constant of the als preset"
     m = classify_ground(pts, method="ptd", preset="mls")
     assert m.measures is None and m.parameters["iter_angle"] == 6.0
     d = json.loads(json.dumps(r.to_dict()))
     assert d["measured"]["density"] == pytest.approx(1.0, rel=0.15)
-    assert d["parameter_sources"]["iter_angle"] == "measured"
+    assert d["parameter_sources"]["iter_angle"] == "preset"
+    assert "measured" not in d["parameter_sources"].values()
 
 
 def test_auto_is_independent_of_input_order():
@@ -142,7 +166,10 @@ def test_cli_prints_and_records_measured_figures(tmp_path):
     doc = json.loads(js.read_text())["parameters"]
     assert doc["preset"] == "auto" and doc["regime"] == "als-sparse"
     assert doc["parameter_sources"]["iter_distance"] == "given" and doc["iter_distance"] == 0.6
-    assert doc["parameter_sources"]["iter_angle"] == "measured"
+    assert doc["parameter_sources"]["iter_angle"] == "preset"
+    assert "als-sparse" in doc["parameter_notes"]["iter_angle"]
+    assert "iter_distance" not in doc["parameter_notes"]
+    assert "(preset)" in res.output and "(measured)" not in res.output
     assert doc["measured"]["density"] == pytest.approx(1.0, rel=0.15)
 
 

@@ -47,6 +47,30 @@ def test_cli_writes_every_point_and_evaluates(data_dir, tmp_path, method):
     e = r["confusion"]
     assert e["ref_ground_pred_ground"] + e["ref_object_pred_ground"] == r["n_ground"]
     assert 0 <= r["total"] < 0.35
+    # the terrain model: the kernel on the written ground against the input's
+    from lidarqa.ground import terrain_scores
+
+    want = terrain_scores(a.xyz, cls_out == 2, np.asarray(a.classification) == 2).to_dict()
+    assert r["terrain"] == pytest.approx(want, nan_ok=True)
+    assert r["terrain"]["reference_thinned"] is False and 0 <= r["terrain"]["rmse_m"] < 1.0
+
+
+def test_cli_says_when_the_reference_looks_thinned(tmp_path):
+    """A vendor ground that kept a third of the ground points: the CLI says so."""
+    from lidarqa.testing import make_scene
+
+    sc = make_scene(seed=2, size=(40.0, 40.0), density=4.0)
+    keep = np.random.default_rng(0).random(len(sc)) < 0.33
+    cls = np.where(sc.is_ground & ~keep, 1, sc.classification).astype(np.uint8)
+    src = tmp_path / "thin.laz"
+    lidarqa.write(PointCloud(sc.points, fields={"classification": cls}), src)
+    res = CliRunner().invoke(
+        cli, ["ground", str(src), "-o", str(tmp_path / "o.laz"), "--evaluate"]
+    )
+    assert res.exit_code == 0, res.output
+    assert "terrain model   RMSE" in res.output
+    assert "the reference ground looks thinned" in res.output
+    assert "judge by the terrain model" in res.output
 
 
 def test_relabel_rules():

@@ -100,7 +100,7 @@ def test_the_automatic_parameters_of_a_sparse_airborne_cloud_set_it():
     pts, labels, kind = _scene()
     r = classify_ground(PointCloud(pts))
     assert r.parameters["facade_distance"] == ALS_SEGMENT_PARAMS["iter_distance"]
-    assert r.parameter_sources["facade_distance"] == "measured"
+    assert r.parameter_sources["facade_distance"] == "preset"
     assert (
         classify_ground(PointCloud(pts), facade_distance=0.0).parameter_sources["facade_distance"]
         == "given"

@@ -72,8 +72,8 @@ def test_auto_switches_it_on_for_dense_airborne_clouds_only(dense_scene):
     m = measure_cloud(dense_scene.points)
     p, src, regime = auto_parameters(m, "segment-ptd")
     assert regime == "als-dense"
-    assert p["filter_density"] == FILTER_DENSITY and src["filter_density"] == "measured"
-    assert p["min_edge_length"] == FILTER_MIN_EDGE and src["min_edge_length"] == "measured"
+    assert p["filter_density"] == FILTER_DENSITY and src["filter_density"] == "preset"
+    assert p["min_edge_length"] == FILTER_MIN_EDGE and src["min_edge_length"] == "preset"
     rng = np.random.default_rng(0)
     for density in (1.0, 1.4 * FILTER_DENSITY):  # sparse, or too close to the target
         n = int(density * 100 * 100)

@@ -1,8 +1,12 @@
-"""Real ISPRS filter-test samples (Sithole & Vosselman 2004), scored with the ALS preset.
+"""Regression guards on the ISPRS filter-test samples (Sithole & Vosselman 2004), ALS preset.
 
-Per-sample bounds are the totals measured with ``benchmarks/ground_isprs.py`` plus a
-margin (regression guards); the 15-sample means must reproduce the measured values and
-meet issue #3's goals.
+These are regression guards, not a validation: the ALS preset's constants were chosen
+on these same 15 samples (``lidarqa.ground.ALS_SEGMENT_PARAMS``), so a pass says that
+the filter still does what it did, not that it generalises (for that, see the
+leave-one-site-out figure of ``benchmarks/ground_isprs.py --loso`` and the other data
+families of ``benchmarks/ground_dtm.py``). Per-sample bounds are the totals measured
+with ``benchmarks/ground_isprs.py`` plus a margin; the 15-sample means must reproduce
+the measured values and meet issue #3's goals.
 """
 
 from __future__ import annotations
@@ -38,6 +42,7 @@ def _filter(method):
 @pytest.mark.parametrize("method", ["segment-ptd", "ptd"])
 @pytest.mark.parametrize("sample", ["samp11", "samp24"])
 def test_bundled_samples(data_dir, method, sample):
+    """Regression guard: the bundled samples stay within 2 points of their measured totals."""
     cloud = lidarqa.read(data_dir / f"{sample}-utm.laz")
     g = _filter(method).ground_mask(cloud.xyz)
     e = filter_errors(cloud.classification == 2, g)
@@ -57,6 +62,7 @@ def test_classify_ground_preset_matches_kernel(data_dir):
 @pytest.mark.slow
 @pytest.mark.parametrize("method", ["segment-ptd", "ptd"])
 def test_all_fifteen_samples(shared_data, method):
+    """Regression guard: the 15-sample mean is reproduced (the preset was chosen on it)."""
     folder = shared_data / "isprs-filtertest-pdal"
     filt = _filter(method)
     totals = []

@@ -105,7 +105,7 @@ def test_the_automatic_parameters_of_a_sparse_airborne_cloud_set_it():
     pts, labels, kind = _scene()
     r = classify_ground(PointCloud(pts))
     assert r.parameters["roof_ratio"] == ALS_SEGMENT_PARAMS["roof_ratio"] > 0
-    assert r.parameter_sources["roof_ratio"] == "measured"
+    assert r.parameter_sources["roof_ratio"] == "preset"
     r0 = classify_ground(PointCloud(pts), roof_ratio=0.0)
     assert r0.parameter_sources["roof_ratio"] == "given"
 

@@ -69,6 +69,10 @@ def test_results_match_synthetic_truth(synthetic_run, synthetic):
     # Ground filter scored against the scene's true classes; classified cloud written.
     assert r["ground"]["n_evaluated"] == len(synthetic["scene"].points)
     assert r["ground"]["total"] < 0.10
+    # the terrain model is scored too; the synthetic reference ground is complete
+    t = r["ground"]["terrain"]
+    assert t["reason"] == "" and t["rmse_m"] < 0.5 and t["n_cells"] > 0
+    assert t["reference_thinned"] is False
     # Edges of the buildings in each strip.
     assert set(r["edges"]["by_source_id"]) == {"1", "2"}
     assert all(v["n_edges"] > 0 for v in r["edges"]["by_source_id"].values())

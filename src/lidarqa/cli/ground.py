@@ -312,7 +312,7 @@ def ground(
             + f", slope median/p90 {m.slope_median:.1f}/{m.slope_p90:.1f} deg, "
             f"largest object {m.largest_object_diameter:.0f} m"
         )
-        echo(f"  regime          {result.regime}")
+        echo(f"  regime          {result.regime} ({result.regime_reason})")
     src = result.parameter_sources
     shown = {k: v for k, v in result.parameters.items() if src.get(k) != "default"}
     if shown:
@@ -325,6 +325,7 @@ def ground(
         f"returns: {res['return_handling']})"
     )
     echo_ground_counts(res, result.evaluation)
+    echo_terrain(res.get("terrain"))
     finish(
         "ground",
         inputs={"path": path, "output": output},
@@ -335,6 +336,8 @@ def ground(
             "regime": result.regime,
             "measured": res["measured"],
             "parameter_sources": result.parameter_sources,
+            "parameter_notes": result.parameter_notes,
+            "regime_reason": result.regime_reason,
             "last_returns_only": not all_returns,
             "exclude_classes": list(exclude_classes or []),
             "ignore_classes": list(ignore_classes or []),
@@ -356,4 +359,29 @@ def echo_ground_counts(res: dict, evaluation: FilterErrors | None, how: str = ""
         echo(
             f"  type I          {100 * e.type_i:.2f} %   type II {100 * e.type_ii:.2f} %   "
             f"total {100 * e.total:.2f} %   kappa {e.kappa:.3f}"
+        )
+
+
+def echo_terrain(t: dict | None) -> None:
+    """With --evaluate: the terrain model against the reference's, and the thinned note."""
+    if not t:
+        return
+    if t["reason"]:
+        echo(f"  terrain model   not scored: {t['reason']}")
+    else:
+        echo(
+            f"  terrain model   RMSE {t['rmse_m']:.2f} m (bias {t['bias_m']:+.2f} m), "
+            f"cells off > {t['off_limit_m']:g} m {100 * t['cells_off']:.1f} % "
+            f"({t['n_cells']:,} cells of {t['cell_m']:g} m)"
+        )
+        echo(
+            f"                  objects taken {100 * t['objects_taken']:.1f} %, ground lost "
+            f"{100 * t['ground_lost']:.1f} % (> {t['above_limit_m']:g} m from the other terrain)"
+        )
+    r = t["reference_on_surface_ratio"]
+    if r is not None:
+        echo(
+            f"  reference       {r:.2f} non-ground points within {t['near_limit_m']:g} m of its "
+            "ground surface per ground point"
+            + (f": {t['note']}" if t["reference_thinned"] else "")
         )

@@ -33,10 +33,19 @@ from .auto import (
     CloudMeasures,
     auto_parameters,
     measure_cloud,
+    parameter_notes,
+    regime_reason,
     with_given,
 )
 from .features import SegmentFeatures, detect_object_segments, point_scatterness, segment_features
-from .metrics import FilterErrors, filter_errors, filter_errors_from_counts, filter_errors_from_file
+from .metrics import (
+    FilterErrors,
+    TerrainScores,
+    filter_errors,
+    filter_errors_from_counts,
+    filter_errors_from_file,
+    terrain_scores,
+)
 from .ptd import PTD, PTDResult, mirror_point, ptd_filter
 from .segment_ptd import SegmentPTD, SegmentPTDResult, default_grow_radius, segment_ptd
 
@@ -57,6 +66,8 @@ __all__ = [
     "filter_errors",
     "filter_errors_from_counts",
     "filter_errors_from_file",
+    "TerrainScores",
+    "terrain_scores",
     "GroundResult",
     "classify_ground",
     "ground_candidates",
@@ -84,7 +95,9 @@ NOISE_CLASSES = (7, 18)
 #: in m, angles in degrees. ``ALS_PARAMS`` is point-PTD's set, ``ALS_SEGMENT_PARAMS``
 #: segment-PTD's (scatterness does not separate ground from vegetation at 1 pt/m², so
 #: it is switched off; steep terrain segments need a steeper façade threshold). Both
-#: were chosen on the 15 ISPRS reference samples themselves (no held-out data).
+#: were chosen on the 15 ISPRS reference samples themselves (no held-out data): the
+#: ISPRS tests (tests/ground/test_isprs.py) are regression guards, not a validation;
+#: ``benchmarks/ground_isprs.py --loso`` gives the leave-one-site-out figure per constant.
 ALS_PARAMS: dict[str, Any] = {
     "iter_angle": 16.0,
     "iter_distance": 0.8,
@@ -136,6 +149,19 @@ class GroundResult:
         ``"absent"`` or ``"all"``.
     n_excluded_noise : int
     evaluation : FilterErrors or None
+    parameter_sources : dict
+        Per parameter: ``"preset"`` (a constant of the preset or of the regime the
+        measured figures chose), ``"given"`` (an explicit option) or ``"default"``
+        (the filter class's default).
+    parameter_notes : dict
+        Per ``"preset"`` parameter: which preset, and (with ``preset="auto"``) the
+        measured figures and thresholds that chose its regime.
+    regime_reason : str or None
+        With ``preset="auto"``: the measured figures and thresholds that chose `regime`.
+    terrain : TerrainScores or None
+        With `evaluate`: the terrain model of the result against the reference's
+        (:func:`~lidarqa.ground.metrics.terrain_scores`), and whether the reference
+        ground looks thinned.
     """
 
     ground_mask: np.ndarray
@@ -151,6 +177,9 @@ class GroundResult:
     parameter_sources: dict = field(default_factory=dict)
     measures: CloudMeasures | None = None
     regime: str | None = None
+    terrain: TerrainScores | None = None
+    parameter_notes: dict = field(default_factory=dict)
+    regime_reason: str | None = None
 
     @property
     def n_ground(self) -> int:
@@ -173,11 +202,15 @@ class GroundResult:
             "warnings": list(self.warnings),
             "preset": self.preset,
             "regime": self.regime,
+            "regime_reason": self.regime_reason,
             "measured": self.measures.to_dict() if self.measures is not None else None,
             "parameter_sources": dict(self.parameter_sources),
+            "parameter_notes": dict(self.parameter_notes),
         }
         if self.evaluation is not None:
             d.update(_evaluation_dict(self.evaluation))
+        if self.terrain is not None:
+            d["terrain"] = self.terrain.to_dict()
         return d
 
 
@@ -296,7 +329,8 @@ def classify_ground(
         Classes never considered (noise).
     evaluate : bool, default False
         Compare with the cloud's own classification (class 2 = ground, everything
-        else object; `ignore_classes` left out) and attach :class:`FilterErrors`.
+        else object; `ignore_classes` left out) and attach :class:`FilterErrors`
+        and the terrain-model scores (:class:`TerrainScores`).
     ignore_classes : sequence of int, optional
         Reference classes excluded from the evaluation.
     preset : {"auto", "als", "mls"} or None, default "auto"
@@ -357,9 +391,15 @@ def classify_ground(
     sources = {
         k: ("given" if k in given else sources.get(k, "default")) for k in filt.to_dict()
     }
+    reason = None
+    if measures is not None:
+        notes = parameter_notes(measures, sources, regime, sensor=sensor)
+        reason = regime_reason(measures, regime, sensor=sensor)
+    else:
+        notes = {k: f"constant of the {preset} preset" for k, v in sources.items() if v == "preset"}
     details = filt.run(cloud.xyz, candidates=cand, progress=progress)
     ground = details.ground_mask
-    evaluation = None
+    evaluation = terrain = None
     if evaluate:
         if cloud.classification is None:
             raise OptionError(
@@ -370,6 +410,7 @@ def classify_ground(
         if ignore_classes:
             mask = ~np.isin(ref, np.asarray(list(ignore_classes)))
         evaluation = filter_errors(ref == 2, ground, mask=mask)
+        terrain = terrain_scores(cloud.xyz, ground, ref == 2, mask=mask)
     return GroundResult(
         ground_mask=ground,
         candidates=cand,
@@ -384,4 +425,7 @@ def classify_ground(
         parameter_sources=sources,
         measures=measures,
         regime=regime,
+        terrain=terrain,
+        parameter_notes=notes,
+        regime_reason=reason,
     )

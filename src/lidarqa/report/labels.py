@@ -203,6 +203,32 @@ LABELS: dict[str, Label] = {
     "eq8_diagonal": _l("paper's eq. 8 (no slope covariance)"),
     "posterior": _l("σ from the plane residuals"),
     "largest_segment": _l("fit only the largest planar segment"),
+    # figures: the ground filter's terrain model against the reference's (ground section)
+    "terrain.rmse_m": _l("terrain model RMSE (filter − reference TIN)", M),
+    "terrain.bias_m": _l("terrain model mean difference (filter − reference)", M),
+    "terrain.cells_off": _l("grid cells off by more than the limit", PCT, 100.0),
+    "terrain.objects_taken": _l(
+        "filter ground above the reference terrain (objects taken)", PCT, 100.0
+    ),
+    "terrain.ground_lost": _l(
+        "reference ground off the filter's terrain (ground lost)", PCT, 100.0
+    ),
+    "terrain.reference_on_surface_ratio": _l(
+        "reference non-ground points on its ground surface per ground point"
+    ),
+    "terrain.reference_thinned": _l("the reference ground looks thinned"),
+    "terrain.n_cells": _l("grid cells scored (inside both TINs)"),
+    "terrain.n_pred_scored": _l("filter ground points scored"),
+    "terrain.n_ref_scored": _l("reference ground points scored"),
+    "terrain.n_pred_ground": _l("filter ground points"),
+    "terrain.n_ref_ground": _l("reference ground points"),
+    "terrain.cell_m": _l("grid cell", M),
+    "terrain.off_limit_m": _l("a cell is off beyond", M),
+    "terrain.above_limit_m": _l("a point is taken / lost beyond", M),
+    "terrain.near_limit_m": _l("on the reference surface within", M),
+    "terrain.thinned_ratio_limit": _l("the reference looks thinned above this ratio"),
+    "terrain.reason": _l("why the terrain model was not scored"),
+    "terrain.note": _l("note on the reference"),
     # figures: NSSDA and ASPRS
     "nssda.accuracy_r": _l("NSSDA horizontal accuracy (95 %)", M),
     "nssda.accuracy_z": _l("NSSDA vertical accuracy (95 %)", M),

@@ -1,4 +1,9 @@
-"""The ``ground`` analysis: filter ground (segment-PTD or PTD) and score it (ISPRS errors)."""
+"""The ``ground`` analysis: filter ground (segment-PTD or PTD) and score it.
+
+Scores: the ISPRS errors per point, and the terrain model of the filter against
+that of the reference (:func:`lidarqa.ground.metrics.terrain_scores`), which is
+the fair score when the reference ground is a thinned subset (said in a note).
+"""
 
 from __future__ import annotations
 
@@ -18,6 +23,7 @@ from .._context import (
 from .._registry import CLOUD_KEY, register
 from .._schema import AnalysisItem, Key, Target, targets
 from ..html import Figure, Table
+from ..labels import labelled_rows
 
 _GROUND_CLASSES = {"segment-ptd": "SegmentPTD", "ptd": "PTD"}
 
@@ -175,6 +181,36 @@ def run_ground(ctx: RunContext, item: AnalysisItem) -> SectionResult:
         )
     else:
         headline = f"{int(ground.sum()):,} of {n:,} points classified as ground"
+    terrain = res.get("terrain")
+    if terrain:
+        shown = {
+            k: v
+            for k, v in terrain.items()
+            if k not in ("note", "reason") and not (v is None and terrain["reason"])
+        }
+        tables.append(
+            Table(
+                "Terrain model (TIN of the filter's ground against the reference's)",
+                ["quantity", "value", "key in report.json"],
+                labelled_rows(shown, prefix="terrain"),
+                code_columns=(2,),
+                note=terrain["reason"]
+                or "cells: centres of a grid aligned on multiples of the cell, inside the convex "
+                "hulls of both ground sets; heights are vertical differences",
+            )
+        )
+        if not terrain["reason"]:
+            headline += (
+                f"; terrain RMSE {terrain['rmse_m']:.2f} m, "
+                f"{100 * terrain['cells_off']:.1f} % of cells off by > "
+                f"{terrain['off_limit_m']:g} m"
+            )
+        if terrain["reference_thinned"]:
+            notes.append(
+                f"{terrain['note']} ({terrain['reference_on_surface_ratio']:.2f} reference "
+                f"non-ground points within {terrain['near_limit_m']:g} m of the reference ground "
+                "surface per reference ground point)"
+            )
     tables.append(
         Table(
             "Filter run",
