@@ -106,6 +106,7 @@ def _baseline(world: dict, out: Path) -> dict[str, list]:
         "assess": ["assess", d / "config.toml", "-o", out / "report"],
         "swaths": ["swaths", d / "scene.las", "--by-source-id", "-o", out / "swaths"],
         "roads": ["roads", d / "scene.las", d / "roads.gpkg", "-o", out / "roads.gpkg"],
+        "qc": ["qc", d / "scene.las", "-o", out / "qc", "--checkpoints", d / "check.csv"],
     }
 
 
