@@ -6,7 +6,7 @@ from typing import Any
 
 import click
 
-from ._common import Steps, common_options, echo, finish, prepare_outputs, settings
+from ._common import Steps, common_options, crs_option, echo, finish, prepare_outputs, settings
 
 
 @click.command()
@@ -33,11 +33,12 @@ from ._common import Steps, common_options, echo, finish, prepare_outputs, setti
               help="Local worker processes (default 1 = serial, no Dask).")
 @click.option("--scheduler", default=None,
               help="Dask scheduler address (tcp://host:port) or 'serial'.")
+@crs_option
 @common_options
 def qc(paths: tuple[str, ...], out: str, spec: str, checkpoints: str | None,
        land_cover: str | None, checkpoint_rmse_v: float, reference: str | None,
        reference_tolerance: float, exclude: str | None, workers: int | None,
-       scheduler: str | None) -> None:
+       scheduler: str | None, crs: str | None) -> None:
     """Check a delivery (PATHS: files, folders, globs, a .vpc) against an acceptance spec.
 
     Per tile: LAS version and point format, CRS as WKT, GPS time type, return
@@ -66,7 +67,7 @@ def qc(paths: tuple[str, ...], out: str, spec: str, checkpoints: str | None,
                         checkpoints=checkpoints, land_cover=land_cover,
                         checkpoint_rmse_v=checkpoint_rmse_v, reference=reference,
                         reference_tolerance=reference_tolerance, exclude=exclude,
-                        engine=engine, progress=not s.quiet)
+                        engine=engine, progress=not s.quiet, crs=crs)
     summ = result.summary()
     echo(f"{sp.title}: {summ['n_tiles']} tile(s), {summ['n_pass']} pass, {summ['n_warn']} warn, "
          f"{summ['n_fail']} fail")
@@ -80,7 +81,7 @@ def qc(paths: tuple[str, ...], out: str, spec: str, checkpoints: str | None,
                          "reference": reference, "exclude": exclude},
            parameters={"spec": sp.name, "land_cover": land_cover,
                        "checkpoint_rmse_v": checkpoint_rmse_v,
-                       "reference_tolerance": reference_tolerance, "out": out},
+                       "reference_tolerance": reference_tolerance, "out": out, "crs": crs},
            results=doc)
     if result.status == "fail":
         from ..errors import TargetNotMetError

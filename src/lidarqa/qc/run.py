@@ -211,6 +211,7 @@ def run_qc(
     engine: Any = None,
     progress: bool = False,
     html: bool = True,
+    crs: Any = None,
 ) -> QCResult:
     """Check a delivery against an acceptance profile, tile by tile.
 
@@ -242,6 +243,9 @@ def run_qc(
     progress : bool, default False
     html : bool, default True
         Write ``qc.html`` too (needs matplotlib for the map).
+    crs : optional
+        CRS assumed for tiles that declare none (they still fail the ``crs`` check: the
+        spec wants it in the header).
 
     Returns
     -------
@@ -260,7 +264,7 @@ def run_qc(
     cps = _checkpoints(checkpoints, land_cover) if checkpoints is not None else None
     if land_cover is not None and checkpoints is None:
         raise OptionError("land_cover (VVA) needs check points")
-    catalog = source if isinstance(source, Catalog) else open_catalog(source, skip_bad=True)
+    catalog = source if isinstance(source, Catalog) else open_catalog(source, skip_bad=True, crs=crs)
     exclude_wkb = _read_exclude(exclude, catalog.crs)
     # tiles in another CRS than the block's are checked too, and fail their crs check
     other: list[Any] = []
