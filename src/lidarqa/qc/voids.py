@@ -100,17 +100,13 @@ def find_voids(occupied: np.ndarray, *, x0: float, y0: float, cell: float,
         wet[np.unique(labels[near & opened])] = True
     import shapely
 
+    geoms = _label_polygons(labels, n, x0, y0, cell)
     polys, areas, n_water = [], [], 0
-    objs = ndimage.find_objects(labels)
     for lab in range(1, n + 1):
         if wet[lab]:
             n_water += 1
             continue
-        sl = objs[lab - 1]
-        sub = labels[sl] == lab
-        rows, cols = np.nonzero(sub)
-        r0, c0 = sl[0].start, sl[1].start
-        geom = _cells_polygon(rows + r0, cols + c0, x0, y0, cell)
+        geom = geoms[lab]
         if exclude is not None:
             geom = shapely.difference(geom, exclude)
             if geom.is_empty or geom.area < min_side * min_side * 0.999:
@@ -119,6 +115,31 @@ def find_voids(occupied: np.ndarray, *, x0: float, y0: float, cell: float,
         polys.append(geom)
         areas.append(float(geom.area))
     return VoidResult(tuple(polys), tuple(areas), n_water)
+
+
+def _label_polygons(labels: np.ndarray, n: int, x0: float, y0: float, cell: float
+                    ) -> dict[int, Any]:
+    """Polygon of every label 1..n (rasterio's polygonizer when present, else cell runs)."""
+    import shapely
+
+    try:
+        from rasterio import features
+        from rasterio.transform import Affine
+    except ImportError:
+        from scipy import ndimage
+
+        out = {}
+        for lab, sl in enumerate(ndimage.find_objects(labels), start=1):
+            rows, cols = np.nonzero(labels[sl] == lab)
+            out[lab] = _cells_polygon(rows + sl[0].start, cols + sl[1].start, x0, y0, cell)
+        return out
+    parts: dict[int, list[Any]] = {}
+    tr = Affine(cell, 0.0, x0, 0.0, cell, y0)  # row 0 is the south edge
+    for geom, value in features.shapes(labels.astype(np.int32), mask=labels > 0,
+                                       connectivity=8, transform=tr):
+        parts.setdefault(int(value), []).append(shapely.geometry.shape(geom))
+    return {lab: (ps[0] if len(ps) == 1 else shapely.union_all(ps))
+            for lab, ps in parts.items()}
 
 
 def _cells_polygon(rows: np.ndarray, cols: np.ndarray, x0: float, y0: float, cell: float) -> Any:
