@@ -171,6 +171,20 @@ KEY_UNITS: dict[str, str] = {
     # a verdict's value and target have the unit of the metric named beside them
     "value": "unit of the metric",
     "target": "unit of the metric",
+    # lidarqa qc: a check's limit has the unit of its value; the profile's limits
+    "limit": "unit of the metric",
+    "min_anpd": "1/m²",
+    "min_spatial_distribution": _F,
+    "distribution": _F,
+    "void_factor": _1,
+    "max_duplicates": _N,
+    "min_checkpoints": _N,
+    "n_check": _N,
+    "point_formats": _ID,
+    "codes": _ID,
+    "matrix": _N,
+    "reference_tolerance": _M,
+    "overall_accuracy": _F,
 }
 
 #: Statistics whose unit is that of the quantity they summarise (the parent key):
@@ -180,7 +194,9 @@ STAT_KEYS = frozenset("min max median mean std p95 rms max_abs".split())
 #: Objects whose members all have one unit: ``{"classes": {"2": 21786}}`` counts points per
 #: class code (while a list ``"classes": [2, 6]`` holds codes), ``timings_s`` seconds per step.
 GROUP_UNITS: dict[str, str] = {
-    **dict.fromkeys("classes point_source_ids flags confusion sigma_classes".split(), _N),
+    **dict.fromkeys("classes point_source_ids flags confusion sigma_classes failed_by_check".split(),
+                    _N),
+    **dict.fromkeys("producers_accuracy users_accuracy".split(), _F),
     "timings_s": "second",
 }
 GROUP_KEYS = frozenset(GROUP_UNITS)

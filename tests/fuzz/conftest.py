@@ -109,6 +109,7 @@ def _baseline(world: dict, out: Path) -> dict[str, list]:
         # no input; runs the demo (seconds when warm): its --json output is fuzzed in
         # test_fuzz_outputs.py::test_demo_hostile_outputs, refused before any work
         "warmup": ["warmup", "--json", out / "warmup.json"],
+        "qc": ["qc", d / "scene.las", "-o", out / "qc", "--checkpoints", d / "check.csv"],
     }
 
 

@@ -35,7 +35,8 @@ Exit status:
   1    error, explained in one line on stderr (bad input, option, output; nothing to measure)
   2    malformed command line, or an internal error (a bug: please report it)
   3    an optional dependency is missing (the message names the extra to install)
-  4    completed, but an accuracy target was not met (assess, checkpoints --target-*)
+  4    completed, but an accuracy target was not met (assess, checkpoints --target-*,
+       qc: a tile fails the spec)
   130  interrupted (SIGINT); 143 terminated (SIGTERM); no partial output is left behind
 """
 
@@ -53,6 +54,7 @@ COMMANDS: dict[str, str] = {
     "swaths": "lidarqa.cli.swaths:swaths",
     "roads": "lidarqa.cli.roads:roads",
     "assess": "lidarqa.cli.assess:assess",
+    "qc": "lidarqa.cli.qc:qc",
     "demo": "lidarqa.cli.assess:demo",
     "warmup": "lidarqa.cli.warmup:warmup",
 }

@@ -25,6 +25,7 @@ __all__ = [
     "write_las",
     "open_las",
     "las_header_summary",
+    "las_header_facts",
     "rewrite_las_classification",
     "read_copc_box",
     "is_copc_header",
@@ -381,11 +382,21 @@ def open_las(path: str | os.PathLike) -> LasReader:
     return LasReader(path)
 
 
-def _new_las(cloud: PointCloud) -> Any:
+def _new_las(
+    cloud: PointCloud,
+    *,
+    point_format: int | None = None,
+    version: str | None = None,
+    adjusted_gps_time: bool = False,
+) -> Any:
     """Build a fresh LAS 1.4 / PDRF 6 (or 7 with RGB) for a cloud with no LAS source."""
     laspy = _laspy()
     has_rgb = all(c in cloud.fields for c in ("red", "green", "blue"))
-    header = laspy.LasHeader(point_format=7 if has_rgb else 6, version="1.4")
+    if point_format is None:
+        point_format = 7 if has_rgb else 6
+    header = laspy.LasHeader(point_format=int(point_format), version=version or "1.4")
+    if adjusted_gps_time:
+        header.global_encoding.gps_time_type = laspy.header.GpsTimeType.STANDARD
     mins = colmin(cloud.xyz) if len(cloud) else np.zeros(3)
     header.offsets = np.floor(mins)
     header.scales = np.array([0.001, 0.001, 0.001])
@@ -592,6 +603,9 @@ def write_las(
     *,
     overwrite: bool = False,
     compress: bool | None = None,
+    point_format: int | None = None,
+    version: str | None = None,
+    adjusted_gps_time: bool = False,
 ) -> Path:
     """Write `cloud` to LAS or LAZ, atomically.
 
@@ -607,11 +621,22 @@ def write_las(
         LAZ or LAS; by default from the extension (``.laz`` compresses).
     overwrite : bool, default False
         Replace an existing file.
+    point_format, version : optional
+        For a cloud with no LAS source: the point data record format and LAS version
+        (default 6 or 7 with RGB, "1.4").
+    adjusted_gps_time : bool, default False
+        For a cloud with no LAS source: mark GPS times as adjusted standard GPS time
+        (global encoding bit 0).
     """
     target = check_output(path, overwrite=overwrite)
     if compress is None:
         compress = target.suffix.lower() == ".laz"
-    las = _las_from_source(cloud) if cloud.source is not None else _new_las(cloud)
+    if cloud.source is not None:
+        las = _las_from_source(cloud)
+    else:
+        las = _new_las(
+            cloud, point_format=point_format, version=version, adjusted_gps_time=adjusted_gps_time
+        )
     src = cloud.source
     unchanged = (
         src is not None
@@ -649,6 +674,47 @@ def las_header_summary(cloud_or_reader: Any) -> dict[str, Any]:
         "offsets": [float(o) for o in header.offsets],
         "generating_software": str(getattr(header, "generating_software", "")).strip("\x00 "),
         "n_vlrs": len(header.vlrs),
+    }
+
+
+def las_header_facts(reader: LasReader) -> dict[str, Any]:
+    """Facts of an open file's header that delivery checks compare with a specification.
+
+    Returns plain Python values: ``version`` ("1.4"), ``point_format``,
+    ``gps_time_type`` ("adjusted standard" or "week"), ``wkt`` (global encoding WKT
+    bit), ``has_wkt_vlr``, ``has_geotiff_vlr``, ``point_count``, ``points_by_return``
+    (list, index 0 = first returns), ``mins``/``maxs`` (x, y, z), ``scales``,
+    ``offsets``, ``file_source_id`` and ``global_encoding`` (the raw integer).
+    """
+    h = reader.header
+    ge = h.global_encoding
+    try:
+        raw_ge = int(ge.value)
+    except Exception:
+        raw_ge = int(getattr(ge, "_value", 0) or 0)
+    kinds = set()
+    for v in list(h.vlrs) + list(getattr(reader._reader, "evlrs", None) or []):
+        uid = str(getattr(v, "user_id", "")).strip("\x00")
+        rid = int(getattr(v, "record_id", -1))
+        if uid == "LASF_Projection" and rid == 2112:
+            kinds.add("wkt")
+        elif uid == "LASF_Projection" and rid in (34735, 34736, 34737):
+            kinds.add("geotiff")
+    return {
+        "version": str(h.version),
+        "point_format": int(h.point_format.id),
+        "gps_time_type": "adjusted standard" if raw_ge & 1 else "week",
+        "wkt": bool(raw_ge & 16),
+        "has_wkt_vlr": "wkt" in kinds,
+        "has_geotiff_vlr": "geotiff" in kinds,
+        "point_count": int(h.point_count),
+        "points_by_return": [int(n) for n in h.number_of_points_by_return],
+        "mins": [float(v) for v in h.mins],
+        "maxs": [float(v) for v in h.maxs],
+        "scales": [float(v) for v in h.scales],
+        "offsets": [float(v) for v in h.offsets],
+        "file_source_id": int(getattr(h, "file_source_id", 0) or 0),
+        "global_encoding": raw_ge,
     }
 
 

@@ -88,6 +88,8 @@ class Report:
     attribution: str | None = None
     config_text: str | None = None
     section_titles: dict[str, str] = field(default_factory=dict)
+    #: Figures shown first, above the summary (e.g. ``lidarqa qc``'s block map).
+    lead: list[Figure] = field(default_factory=list)
 
 
 def _is_float(v: Any) -> bool:
@@ -323,6 +325,9 @@ def render_html(report: Report) -> str:
     if report.attribution:
         parts.append(f'<div class="attribution">Data: {_e(report.attribution)}</div>')
     parts.append("</header>")
+    if report.lead:
+        parts.append('<div class="figs lead">' + "".join(_figure(f) for f in report.lead)
+                     + "</div>")
 
     # A compact summary that stays at the top of the window while scrolling.
     bar = ['<nav id="summary-bar" aria-label="Summary"><span class="bar-title">Summary</span>']

@@ -22,7 +22,9 @@ model (``scene.ground_z(xy)``). :func:`rigid_motion` moves points and truth
 together; :func:`score_edges` / :func:`score_corners` score detections against
 the truth; :func:`sample_checkpoints` gives true ground check points;
 :mod:`lidarqa.testing.cases` has edge-case arrays; :func:`write_tiles` /
-:func:`write_block` write scenes as tiled deliveries (catalog tests, benchmarks).
+:func:`write_block` write scenes as tiled deliveries (catalog tests, benchmarks);
+:func:`make_delivery` writes a LAS 1.4 delivery with known density and planted defects
+(``lidarqa qc`` tests).
 Hypothesis strategies live in ``lidarqa.testing.strategies`` (needs the ``test``
 extra; not imported here).
 
@@ -34,6 +36,7 @@ extra; not imported here).
 
 from . import cases
 from ._shapes import TerrainModel
+from .delivery import Delivery, make_delivery
 from .interchange import InterchangeScene, make_interchange
 from .profiles import ground_profile
 from .scenes import (
@@ -56,6 +59,8 @@ from .strips import StripScene, make_strip_scene
 from .tiles import write_block, write_tiles
 
 __all__ = [
+    "Delivery",
+    "make_delivery",
     "Scene",
     "TruePlane",
     "BuildingSpec",

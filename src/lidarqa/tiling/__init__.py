@@ -6,6 +6,7 @@
 - :func:`read_chunk` streams the points of one chunk plus its buffer;
 - :class:`Engine` and :func:`run_chunks` run a pure task on every chunk, serially, on a
   local Dask cluster or on any Dask cluster, with results in chunk order;
+  :func:`run_tiles` runs a per-file task (one whole tile each) on the same engine;
 - :func:`ground_catalog` classifies ground over a whole catalog (output tiles = input
   tiles, every point once, resumable, byte-identical for any number of workers).
 
@@ -14,7 +15,7 @@ Dask is imported only when a non-serial engine starts.
 
 from .catalog import Catalog, CatalogError, TileInfo, open_catalog
 from .chunks import DEFAULT_BUFFER, Chunk, default_chunk_size, make_chunks
-from .engine import ChunkFailedError, ChunkOutcome, Engine, run_chunks
+from .engine import ChunkFailedError, ChunkOutcome, Engine, TileRef, run_chunks, run_tiles
 from .reader import ChunkData, read_chunk
 
 __all__ = [
@@ -32,6 +33,8 @@ __all__ = [
     "ChunkOutcome",
     "ChunkFailedError",
     "run_chunks",
+    "run_tiles",
+    "TileRef",
     "ground_catalog",
 ]
 

@@ -32,7 +32,17 @@ from typing import Any
 
 from ..errors import MissingDependencyError, OptionError, TilingError
 
-__all__ = ["Engine", "ChunkOutcome", "ChunkFailedError", "run_chunks", "run_task", "run_tasks"]
+__all__ = [
+    "Engine",
+    "ChunkOutcome",
+    "ChunkFailedError",
+    "TileRef",
+    "run_chunks",
+    "run_task",
+    "run_tasks",
+    "run_tile_task",
+    "run_tiles",
+]
 
 
 class ChunkFailedError(TilingError):
@@ -206,6 +216,33 @@ def run_task(catalog: Any, chunk: Any, task: Callable[[Any], Any]) -> Any:
     return task(read_chunk(catalog, chunk))
 
 
+@dataclass(frozen=True)
+class TileRef:
+    """One tile of a catalog as a unit of work for :func:`run_tiles` (a chunk-like item).
+
+    Attributes
+    ----------
+    id : str
+        The tile's file name (unique in a catalog: its paths are).
+    index : int
+        Index into ``catalog.tiles``.
+    tiles : tuple of int
+        ``(index,)``, so that the engine's size estimate works as for chunks.
+    buffered : tuple of 4 floats
+        The tile's header bounds ``(xmin, ymin, xmax, ymax)``.
+    """
+
+    id: str
+    index: int
+    tiles: tuple[int, ...]
+    buffered: tuple[float, float, float, float]
+
+
+def run_tile_task(catalog: Any, ref: TileRef, task: Callable[[Any], Any]) -> Any:
+    """Run ``task(tile_info)`` on one tile (what a worker does for one tile)."""
+    return task(catalog.tiles[ref.index])
+
+
 def _error_text(exc: BaseException) -> str:
     text = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
     return f"{type(exc).__name__}: {text}"[:300] if text else type(exc).__name__
@@ -268,6 +305,7 @@ def run_chunks(
     keep_results: bool = True,
     description: str = "Chunks",
     order_seed: int | None = None,
+    runner: Callable[[Any, Any, Callable[[Any], Any]], Any] = run_task,
 ) -> list[ChunkOutcome]:
     """Run ``task(read_chunk(catalog, chunk))`` on every chunk.
 
@@ -295,6 +333,9 @@ def run_chunks(
     order_seed : int, optional
         Submit the chunks in a shuffled order (seeded); tests use it to check that
         results do not depend on the completion order.
+    runner : callable, default :func:`run_task`
+        What a worker runs for one item: ``runner(catalog, item, task)``.
+        :func:`run_tiles` passes :func:`run_tile_task` (whole tiles, no chunk read).
 
     Returns
     -------
@@ -341,7 +382,7 @@ def run_chunks(
                     while True:
                         attempts += 1
                         try:
-                            res = run_task(catalog, chunks[i], task)
+                            res = runner(catalog, chunks[i], task)
                         except (KeyboardInterrupt, SystemExit):
                             raise
                         except Exception as exc:
@@ -355,7 +396,7 @@ def run_chunks(
                         break
                     bar.advance()
             else:
-                _run_dask(engine, catalog, chunks, order, task, retries, record, bar)
+                _run_dask(engine, catalog, chunks, order, task, retries, record, bar, runner)
         finally:
             bar.close()
     finally:
@@ -373,7 +414,7 @@ def run_chunks(
     return result
 
 
-def _run_dask(engine, catalog, chunks, order, task, retries, record, bar) -> None:
+def _run_dask(engine, catalog, chunks, order, task, retries, record, bar, runner=run_task) -> None:
     distributed = _dask()
     client = engine.client
     cat_future = client.scatter(catalog, broadcast=True, hash=False)
@@ -384,7 +425,7 @@ def _run_dask(engine, catalog, chunks, order, task, retries, record, bar) -> Non
     def submit(i: int) -> Any:
         attempts[i] = attempts.get(i, 0) + 1
         fut = client.submit(
-            run_task,
+            runner,
             cat_future,
             chunks[i],
             task,
@@ -421,6 +462,64 @@ def _run_dask(engine, catalog, chunks, order, task, retries, record, bar) -> Non
         for fut in list(fut_index):
             fut.cancel()
         raise
+
+
+def run_tiles(
+    catalog: Any,
+    task: Callable[[Any], Any],
+    *,
+    tiles: Sequence[int] | None = None,
+    engine: Engine | None = None,
+    progress: bool = True,
+    retries: int = 1,
+    description: str = "Tiles",
+    order_seed: int | None = None,
+) -> list[ChunkOutcome]:
+    """Run ``task(tile_info)`` on every tile of `catalog` (a job whose unit is the file).
+
+    For per-file work that streams a tile itself (header checks, per-tile grids): the
+    worker gets the :class:`~lidarqa.tiling.TileInfo`, not a chunk of points, so memory
+    is what the task keeps while it streams. Failures are isolated as in
+    :func:`run_chunks` with ``skip_failed=True``: a tile that raises after its retries
+    gets a failed outcome (``ok=False`` and the error) and the others run on.
+
+    Parameters
+    ----------
+    catalog : Catalog
+    task : callable
+        Pure and picklable: ``task(tile_info) -> result``.
+    tiles : sequence of int, optional
+        Indices into ``catalog.tiles`` (default: every tile).
+    engine, progress, retries, description, order_seed
+        As for :func:`run_chunks`.
+
+    Returns
+    -------
+    list of ChunkOutcome
+        In the order of `tiles`; ``outcome.chunk`` is a :class:`TileRef`.
+    """
+    idx = range(len(catalog.tiles)) if tiles is None else [int(i) for i in tiles]
+    refs = [
+        TileRef(
+            id=catalog.tiles[i].path,
+            index=i,
+            tiles=(i,),
+            buffered=tuple(float(v) for v in catalog.tiles[i].bounds2d),
+        )
+        for i in idx
+    ]
+    return run_chunks(
+        catalog,
+        refs,
+        task,
+        engine=engine,
+        progress=progress,
+        retries=retries,
+        skip_failed=True,
+        description=description,
+        order_seed=order_seed,
+        runner=run_tile_task,
+    )
 
 
 def run_tasks(

@@ -1,0 +1,165 @@
+"""The per-tile work of ``qc``: one streaming pass over a tile's points (runs on a worker)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .conformance import (
+    FAIL,
+    PASS,
+    WARN,
+    Check,
+    PointStats,
+    count_duplicates,
+    duplicate_keys,
+    header_checks,
+    point_checks,
+    point_stats,
+    worst,
+)
+from .density import DensityGrids, DensityResult, counted_mask, density_result, first_return_mask
+from .voids import VOID_CELLS, VoidResult, find_voids
+
+__all__ = ["TileQC", "TileTask", "READ_STEP"]
+
+#: Points read from a tile at a time (memory per worker: one piece plus the grids).
+READ_STEP = 1_000_000
+
+
+@dataclass(frozen=True)
+class TileQC:
+    """Everything ``qc`` measured on one tile (picklable, small: grids are per cell)."""
+
+    path: str
+    checks: dict[str, Check]
+    n_points: int = 0
+    facts: dict[str, Any] = field(default_factory=dict)
+    stats: PointStats | None = None
+    density: DensityResult | None = None
+    voids: VoidResult | None = None
+    data_bounds: tuple[float, float, float, float] | None = None
+    crs_name: str | None = None
+
+    @property
+    def status(self) -> str:
+        return worst(c.status for c in self.checks.values())
+
+
+@dataclass(frozen=True)
+class TileTask:
+    """``TileTask(spec)(tile_info) -> TileQC``: conformance, density and voids of one tile.
+
+    Attributes
+    ----------
+    spec : QCSpec
+    exclude_wkb : bytes, optional
+        Polygons (WKB) subtracted from the voids (water bodies).
+    read_step : int
+        Points per streamed piece.
+    """
+
+    spec: Any
+    exclude_wkb: bytes | None = None
+    read_step: int = READ_STEP
+
+    def __call__(self, tile: Any) -> TileQC:
+        from ..io.las import LasReader, las_header_facts
+
+        spec = self.spec
+        with LasReader(tile.path) as r:
+            facts = las_header_facts(r)
+            crs = r.crs
+            pf = facts["point_format"]
+            hb = (facts["mins"][0], facts["mins"][1], facts["maxs"][0], facts["maxs"][1])
+            cell = spec.distribution_cell_m
+            grids = DensityGrids(hb, cell=cell, void_cell=spec.void_side_m / VOID_CELLS,
+                                 coarse_factor=max(int(round(spec.density_cell / cell)), 1))
+            stats = PointStats()
+            keys = []
+            has_returns = True
+            for piece in r.chunks(self.read_step):
+                xyz, f = piece.xyz, piece.fields
+                n = len(xyz)
+                stats = stats + point_stats(xyz, f, max_returns=15 if pf >= 6 else 5)
+                keys.append(duplicate_keys(xyz, f.get("gps_time"), scales=facts["scales"],
+                                           offsets=facts["offsets"]))
+                first, has = first_return_mask(f, n)
+                has_returns = has_returns and has
+                grids.add(xyz, first=first, counted=counted_mask(f, n, point_format=pf),
+                          withheld=f.get("withheld"), classification=f.get("classification"),
+                          source_id=f.get("point_source_id"))
+        dup = count_duplicates(np.concatenate(keys)) if keys else 0
+        del keys
+        checks = header_checks(facts, spec, crs=crs)
+        checks.update(point_checks(stats, facts, spec, duplicates=dup))
+        if stats.n == 0:
+            checks["density"] = Check(FAIL, 0.0, spec.min_anpd, "the tile holds no point")
+            return TileQC(tile.path, checks, 0, facts, stats, crs_name=_name(crs))
+        data_bounds = (stats.mins[0], stats.mins[1], stats.maxs[0], stats.maxs[1])
+        dens = density_result(grids, data_bounds)
+        vg = grids.void
+        inside = vg.inner_mask(data_bounds)
+        exclude = None
+        if self.exclude_wkb is not None:
+            import shapely
+
+            exclude = shapely.from_wkb(self.exclude_wkb)
+        voids = find_voids(grids.occupied.reshape(vg.ny, vg.nx), x0=vg.x0, y0=vg.y0,
+                           cell=vg.cell, min_side=spec.void_side_m, inside=inside,
+                           water=grids.water_void.reshape(vg.ny, vg.nx), exclude=exclude)
+        checks.update(_density_checks(dens, voids, spec, has_returns, grids.outside))
+        return TileQC(tile.path, checks, stats.n, facts, stats, dens, voids, data_bounds,
+                      _name(crs))
+
+
+def _name(crs: Any) -> str | None:
+    return None if crs is None else str(crs.name)
+
+
+def _density_checks(dens: DensityResult, voids: VoidResult, spec: Any, has_returns: bool,
+                    outside: int) -> dict[str, Check]:
+    out: dict[str, Check] = {}
+    note = "" if has_returns else " (no return numbers: every point counted as a first return)"
+    a = dens.anpd
+    if not math.isfinite(a):
+        st, msg = FAIL, "no first return to measure the density on"
+    elif a < spec.min_anpd:
+        st, msg = FAIL, f"ANPD {a:.2f} first returns/m² below the minimum {spec.min_anpd:g}"
+    else:
+        st, msg = PASS, f"ANPD {a:.2f} first returns/m² (single swath, overlap excluded)"
+    if st == PASS and not has_returns:
+        st = WARN
+    if dens.n_multi_swath_cells:
+        msg += f"; {dens.n_multi_swath_cells:,} cells with unflagged overlap (dominant swath kept)"
+    if outside:
+        msg += f"; {outside:,} points outside the header bounds not gridded"
+    out["density"] = Check(st, _r(a), spec.min_anpd, msg + note)
+    d = dens.distribution
+    if not math.isfinite(d):
+        st, msg = FAIL, "no 2 x ANPS cell inside the data extent"
+    else:
+        st = PASS if d >= spec.min_spatial_distribution else FAIL
+        msg = (f"{100 * d:.1f} % of {dens.n_distribution_cells:,} cells of "
+               f"{spec.distribution_cell_m:.2f} m hold a first return")
+    if st == PASS and not has_returns:
+        st = WARN
+    out["spatial_distribution"] = Check(st, _r(d), spec.min_spatial_distribution, msg + note)
+    area = voids.total_area
+    st = FAIL if area > spec.max_void_area_m2 else PASS
+    if voids.areas:
+        msg = (f"{len(voids.areas)} void(s) of at least ({spec.void_side_m:.2f} m)², "
+               f"{area:.1f} m² in all, largest {max(voids.areas):.1f} m²")
+    else:
+        msg = f"no void of ({spec.void_side_m:.2f} m)² or more"
+    if voids.n_water:
+        msg += f"; {voids.n_water} empty area(s) left out as water"
+    out["voids"] = Check(st, round(area, 3), spec.max_void_area_m2, msg)
+    return out
+
+
+def _r(v: float) -> float | None:
+    return round(float(v), 6) if math.isfinite(v) else None

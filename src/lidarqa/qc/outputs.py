@@ -1,0 +1,260 @@
+"""The files of a ``qc`` run: qc.json, qc.gpkg (tiles, voids), density.tif, qc.html."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import OutputExistsError, WriteError
+
+__all__ = ["OUTPUT_NAMES", "check_outputs", "write_outputs", "block_map_png"]
+
+#: Output name -> file name in the output folder.
+OUTPUT_NAMES = {"json": "qc.json", "gpkg": "qc.gpkg", "density": "density.tif",
+                "html": "qc.html"}
+_COLOURS = {"pass": "#3a9a4a", "warn": "#e0a526", "fail": "#c8352b"}
+
+
+def check_outputs(out: str | os.PathLike, *, overwrite: bool = False) -> Path:
+    """Refuse an output folder that holds a previous run's files (unless `overwrite`)."""
+    from ..io._atomic import check_output_dir
+
+    if str(out).strip() == "":
+        raise WriteError("the output folder name is empty")
+    d = Path(out)
+    if d.exists() and not d.is_dir():
+        raise WriteError(f"output {d} exists and is not a folder")
+    anc = d
+    while not anc.exists() and anc != anc.parent:
+        anc = anc.parent
+    check_output_dir(anc if anc.exists() else Path("."))
+    if not overwrite:
+        for name in OUTPUT_NAMES.values():
+            if (d / name).exists():
+                raise OutputExistsError(f"output {d / name} exists; add --overwrite to replace it")
+    return d
+
+
+def write_outputs(result: Any, out: str | os.PathLike, *, overwrite: bool = False,
+                  html: bool = True, document: dict | None = None) -> dict[str, str]:
+    """Write every output of `result` into folder `out`; returns name -> path."""
+    from ..io._atomic import note_created
+
+    d = Path(out)
+    if not d.exists():
+        d.mkdir(parents=True)
+        note_created(d)
+    paths: dict[str, str] = {}
+    gpkg = d / OUTPUT_NAMES["gpkg"]
+    _write_gpkg(result, gpkg, overwrite=overwrite)
+    paths["gpkg"] = str(gpkg)
+    if result.density is not None:
+        from ..io.raster import write_geotiff
+
+        r = result.density
+        tif = d / OUTPUT_NAMES["density"]
+        write_geotiff(tif, r["array"], x0=r["x0"], y1=r["y1"], cell_size=r["cell"],
+                      crs=result.crs, overwrite=overwrite)
+        paths["density"] = str(tif)
+    if html:
+        page = d / OUTPUT_NAMES["html"]
+        _write_html(result, page, overwrite=overwrite)
+        paths["html"] = str(page)
+    js = d / OUTPUT_NAMES["json"]
+    paths["json"] = str(js)
+    doc = document or qc_document(result, paths)
+    from .._json import to_jsonable
+    from ..io._atomic import atomic_output
+
+    with atomic_output(js, overwrite=overwrite) as tmp:
+        tmp.write_text(json.dumps(to_jsonable(doc), indent=2, allow_nan=False) + "\n",
+                       encoding="utf-8")
+    return paths
+
+
+def qc_document(result: Any, paths: dict[str, str]) -> dict[str, Any]:
+    """The qc.json document (the same layout as every command's ``--json``)."""
+    from .._version import __version__
+
+    res = result.to_dict()
+    res["outputs"] = dict(paths)
+    return {"lidarqa_version": __version__, "command": "qc",
+            "inputs": {"tiles": [t.path for t in result.tiles]},
+            "parameters": {"spec": result.spec.name}, "results": res}
+
+
+def _write_gpkg(result: Any, path: Path, *, overwrite: bool) -> None:
+    from .._validate import require
+    from ..io._atomic import atomic_output
+
+    pyogrio = require("pyogrio", "vector")
+    shapely = require("shapely", "vector")
+    from .run import CHECK_ORDER
+
+    names = [k for k in CHECK_ORDER if any(k in t.checks for t in result.tiles)]
+    tiles = [t for t in result.tiles]
+    geoms = np.array([shapely.to_wkb(shapely.box(*t.footprint)) if t.footprint else None
+                      for t in tiles], dtype=object)
+    fields: dict[str, np.ndarray] = {
+        "path": np.array([t.path for t in tiles], dtype=object),
+        "status": np.array([t.status for t in tiles], dtype=object),
+        "n_points": np.array([t.n_points for t in tiles], dtype=np.int64),
+    }
+    for k in names:
+        fields[k] = np.array([t.checks[k].status if k in t.checks else "" for t in tiles],
+                             dtype=object)
+    for k in ("density", "spatial_distribution", "voids"):
+        if k in names:
+            fields[f"{k}_value"] = np.array(
+                [float(t.checks[k].value) if k in t.checks and t.checks[k].value is not None
+                 else np.nan for t in tiles])
+    vgeoms = np.array([shapely.to_wkb(g) for _, g, _ in result.voids], dtype=object)
+    vfields = {"path": np.array([p for p, _, _ in result.voids], dtype=object),
+               "area_m2": np.array([a for _, _, a in result.voids], dtype=np.float64)}
+    crs_wkt = result.crs.to_wkt() if result.crs is not None else None
+    import warnings
+
+    with atomic_output(path, overwrite=overwrite) as tmp:
+        target = tmp.with_suffix(".gpkg")
+        try:
+            for i, (layer, gtype, g, f) in enumerate((("tiles", "Polygon", geoms, fields),
+                                                       ("voids", "MultiPolygon", vgeoms,
+                                                        vfields))):
+                if gtype == "MultiPolygon" and len(g):
+                    g = np.array([shapely.to_wkb(shapely.multipolygons(
+                        shapely.get_parts(shapely.from_wkb(w)))) for w in g], dtype=object)
+                with warnings.catch_warnings():
+                    warnings.filterwarnings("ignore", message=".*'crs' was not provided.*")
+                    pyogrio.raw.write(str(target), g, geometry_type=gtype,
+                                      field_data=list(f.values()), fields=list(f), crs=crs_wkt,
+                                      driver="GPKG", layer=layer, encoding="UTF-8",
+                                      append=i > 0)
+            os.replace(target, tmp)
+        except WriteError:
+            raise
+        except Exception as exc:
+            raise WriteError(f"cannot write {path}: {exc}") from exc
+        finally:
+            if target.exists():
+                target.unlink()
+
+
+def block_map_png(result: Any) -> bytes:
+    """The block map: tile footprints coloured by status, voids outlined (PNG bytes)."""
+    from matplotlib.patches import Patch, Rectangle
+
+    from ..report.plots import _plt, _png
+
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(7.5, 6.0))
+    tiles = [t for t in result.tiles if t.footprint]
+    if tiles:
+        b = np.array([t.footprint for t in tiles])
+        x0 = float(np.floor(b[:, 0].min() / 10) * 10)
+        y0 = float(np.floor(b[:, 1].min() / 10) * 10)
+        for t in tiles:
+            xa, ya, xb, yb = t.footprint
+            ax.add_patch(Rectangle((xa - x0, ya - y0), xb - xa, yb - ya,
+                                   facecolor=_COLOURS.get(t.status, "#999"), alpha=0.75,
+                                   edgecolor="black", linewidth=0.6))
+            bad = [k for k, c in t.checks.items() if c.status == "fail"]
+            if bad and len(tiles) <= 60:
+                ax.text((xa + xb) / 2 - x0, (ya + yb) / 2 - y0, "\n".join(bad[:3]),
+                        ha="center", va="center", fontsize=6)
+        for _, g, _ in result.voids:
+            for part in getattr(g, "geoms", [g]):
+                xs, ys = part.exterior.xy
+                ax.fill(np.asarray(xs) - x0, np.asarray(ys) - y0, facecolor="none",
+                        edgecolor="#1b4f9c", linewidth=1.0)
+        ax.set_xlim(b[:, 0].min() - x0, b[:, 2].max() - x0)
+        ax.set_ylim(b[:, 1].min() - y0, b[:, 3].max() - y0)
+        ax.set_xlabel(f"x − {x0:,.0f} (m)")
+        ax.set_ylabel(f"y − {y0:,.0f} (m)")
+    ax.set_aspect("equal")
+    n = result.summary()
+    ax.legend(handles=[Patch(facecolor=_COLOURS["pass"], label=f"pass ({n['n_pass']})"),
+                       Patch(facecolor=_COLOURS["warn"], label=f"warn ({n['n_warn']})"),
+                       Patch(facecolor=_COLOURS["fail"], label=f"fail ({n['n_fail']})"),
+                       Patch(facecolor="none", edgecolor="#1b4f9c", label="void")],
+              loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
+    ax.set_title(f"{result.spec.title}: {n['n_tiles']} tile(s)")
+    return _png(fig)
+
+
+def _write_html(result: Any, path: Path, *, overwrite: bool) -> None:
+    from .._version import __version__
+    from ..io._atomic import atomic_output
+    from ..report.html import Figure, Report, Section, SummaryRow, Table, render_html
+    from .run import CHECK_ORDER
+
+    spec = result.spec
+    summ = result.summary()
+    names = [k for k in CHECK_ORDER if any(k in t.checks for t in result.tiles)]
+    rows, sections = [], []
+    for k in names:
+        failing = [t for t in result.tiles if k in t.checks and t.checks[k].status != "pass"]
+        n_fail = sum(1 for t in failing if t.checks[k].status == "fail")
+        verdict = "fail" if n_fail else "pass"
+        src = spec.source(_LIMIT_KEY.get(k, k))
+        head = (f"{n_fail} of {len(result.tiles)} tile(s) fail" if n_fail else
+                f"every tile passes" + (f" ({len(failing)} warn)" if failing else ""))
+        rows.append(SummaryRow(k.replace("_", " "), f"check-{k}", head, verdict, src))
+        sec = Section(id=f"check-{k}", title=k.replace("_", " "), kind="qc", headline=head,
+                      verdict=verdict)
+        if src:
+            sec.paragraphs.append(f"Limit from: {src}.")
+        if failing:
+            sec.tables.append(Table("Tiles that fail or warn", ["tile", "status", "value",
+                                                                 "limit", "message"],
+                                    [[Path(t.path).name, t.checks[k].status,
+                                      _cell(t.checks[k].value), _cell(t.checks[k].limit),
+                                      t.checks[k].message] for t in failing]))
+        sections.append(sec)
+    for k, b in result.block.items():
+        rows.append(SummaryRow(k.upper(), f"block-{k}", b.get("message", ""),
+                               b.get("status", "n/a") if b.get("status") != "warn" else "n/a",
+                               spec.source("max_nva_rmse_m") if k == "nva" else ""))
+        sec = Section(id=f"block-{k}", title=k.upper(), kind="qc",
+                      headline=b.get("message", ""), verdict=b.get("status", "n/a"))
+        scalar = [[kk, _cell(v)] for kk, v in b.items()
+                  if not isinstance(v, dict | list) and kk not in ("message",)]
+        sec.tables.append(Table("", ["item", "value"], scalar))
+        if isinstance(b.get("matrix"), list):
+            codes = b.get("codes", [])
+            sec.tables.append(Table("Confusion matrix (rows: reference, columns: delivery)",
+                                    ["reference \\ delivery"] + [str(c) for c in codes],
+                                    [[str(c)] + list(r) for c, r in zip(codes, b["matrix"],
+                                                                        strict=True)]))
+        sections.append(sec)
+    lead = []
+    try:
+        lead.append(Figure("Block map", block_map_png(result),
+                           "tiles coloured by status (failing checks written in the tile); "
+                           "voids outlined in blue"))
+    except Exception:  # noqa: BLE001 - no matplotlib: the page without its map
+        pass
+    report = Report(
+        title=f"Delivery acceptance: {spec.title}",
+        subtitle=(f"{summ['n_tiles']} tile(s): {summ['n_pass']} pass, {summ['n_warn']} warn, "
+                  f"{summ['n_fail']} fail; verdict {summ['status'].upper()}"),
+        summary=rows, sections=sections, parameters={"spec": spec.to_dict()},
+        provenance=[("lidarqa", __version__), ("spec", spec.name)],
+        inputs=[], versions={}, lead=lead)
+    with atomic_output(path, overwrite=overwrite) as tmp:
+        tmp.write_text(render_html(report), encoding="utf-8")
+
+
+_LIMIT_KEY = {"las_version": "las_versions", "point_format": "point_formats", "crs": "require_wkt",
+              "gps_time": "gps_time_type", "classes": "allowed_classes",
+              "duplicates": "max_duplicates", "density": "min_anpd",
+              "spatial_distribution": "min_spatial_distribution", "voids": "void_factor"}
+
+
+def _cell(v: Any) -> Any:
+    if isinstance(v, list):
+        return ", ".join(map(str, v[:12])) + (" ..." if len(v) > 12 else "")
+    return "–" if v is None else v
