@@ -67,7 +67,7 @@ def _on_catalog(kind: str, paths: tuple[str, ...], output: str, classes: Any, so
     _check_suffix(output)
     features_on_catalog(kind, paths, output, classes=classes, source_id=source_id,
                         segment_options={k: opts[k] for k in _SEGMENT_KEYS if k in opts},
-                        options=options, cat_opts=cat)
+                        options=options, cat_opts=cat, crs=input_crs(opts.get("crs")))
     return True
 
 

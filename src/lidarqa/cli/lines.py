@@ -400,7 +400,8 @@ def repeatability(
             files, classes=classes, source_id=source_id, edge_options={"steps": step_edges},
             match_options={"weight": weight, "sensitivity": sensitivity, "threshold": threshold,
                            "rotate": rotate, "denominator": denominator, "auto": auto},
-            cat_opts=cat_opts, print_rows=lambda rows: _print_rows(rows, threshold, pool=True))
+            cat_opts=cat_opts, crs=given,
+            print_rows=lambda rows: _print_rows(rows, threshold, pool=True))
         return
     if catalog_options_given(cat_opts):
         raise OptionError("catalog options apply to repeatability --by-source-id only")
