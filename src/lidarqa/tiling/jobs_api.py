@@ -29,6 +29,7 @@ Example
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -119,6 +120,13 @@ def open_sources(sources: Any, *, skip_bad: bool = False, crs: Any = None,
                        source_id=source_id, z_to_metres=z_to_metres)
 
 
+def region_chunks(source: Any, **chunk_opts: Any) -> list[Any]:
+    """One whole-area region for a single file, else the chunk grid (see :mod:`.apply`)."""
+    from .apply import region_chunks as _regions
+
+    return _regions(source, **chunk_opts)
+
+
 def _run(catalog: Any, chunks: Sequence[Any], task: Any, run_opts: dict[str, Any],
          description: str) -> tuple[list[Any], list[Any | None]]:
     from . import run_chunks
@@ -143,13 +151,12 @@ def _split(kw: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any], dict[str
 
 
 def _sample_points(source: Any, chunks: Sequence[Any]) -> np.ndarray:
-    """Selected points of one chunk near the middle of the block (to fix data-driven defaults)."""
-    order = sorted(range(len(chunks)), key=lambda i: -len(chunks[i].tiles))
-    for i in order[:3]:
-        cloud = source.read_chunk(chunks[i]).cloud
-        if len(cloud) > 100:
-            return cloud.xyz
-    return np.empty((0, 3))
+    """Selected points of the source's central sample window (to fix data-driven defaults).
+
+    The window does not depend on the chunking, so a file and a folder of its tiles
+    get the same defaults.
+    """
+    return source.sample().xyz
 
 
 # ------------------------------------------------------------------ vector features
@@ -191,7 +198,7 @@ def catalog_features(
     open_opts, chunk_opts, run_opts = _split(dict(common))
     catalog = open_sources(sources, classes=classes or None, source_id=source_id or None,
                            z_to_metres=False, **open_opts)
-    chunks = make_chunks(catalog, **chunk_opts)
+    chunks = region_chunks(catalog, **chunk_opts)
     seg_opts, opts = fixed_auto_options(_sample_points(catalog, chunks), kind=kind,
                                         segment_options=segment_options, options=options)
     task = VectorTask(kind=kind, segment_options=seg_opts,
@@ -246,8 +253,10 @@ def catalog_vertical_check(
         xyz = cp.xyz.copy()
         xyz[:, 2] *= catalog.z_factor
         cp = PointSet(cp.ids, xyz, dict(cp.attributes), crs=cp.crs)
-    chunks = chunks_with_points(make_chunks(catalog, **chunk_opts), cp.xyz)
+    chunks = chunks_with_points(region_chunks(catalog, **chunk_opts), cp.xyz)
     cls = tuple(int(c) for c in classes) if classes is not None else None
+    if max_edge is None and not chunks:  # no check point inside the catalog: nothing to compare
+        max_edge = math.nan
     if max_edge is None:
         _, spacing = _run(catalog, chunks, CheckSpacingTask(cp.xyz, classes=cls), run_opts,
                           "Ground spacing")
@@ -295,9 +304,9 @@ def catalog_heights(
     ref = np.asarray(reference_xyz, dtype=np.float64).reshape(-1, 3)
     from .jobs_vector import owned
 
-    if chunk_opts["buffer"] is None:
+    if chunk_opts["buffer"] is None and (catalog.is_catalog or chunk_opts["chunk_size"]):
         chunk_opts["buffer"] = heights_buffer(mxy, options)
-    chunks = tuple(c for c in make_chunks(catalog, **chunk_opts)
+    chunks = tuple(c for c in region_chunks(catalog, **chunk_opts)
                    if owned(mxy, c).any() or owned(ref, c).any())
     task = HeightsTask(mxy, ref, options=dict(options or {}), classes=None,
                        bounds=tuple(float(v) for v in catalog.bounds[:4]))
@@ -351,7 +360,7 @@ def catalog_repeatability(
     open_opts, chunk_opts, run_opts = _split(dict(common))
     catalog = open_sources(sources, classes=classes or None, source_id=source_id or None,
                            z_to_metres=False, **open_opts)
-    chunks = make_chunks(catalog, **chunk_opts)
+    chunks = region_chunks(catalog, **chunk_opts)
     seg_opts, e_opts = fixed_auto_options(_sample_points(catalog, chunks),
                                           segment_options=segment_options, options=edge_options)
     task = StripEdgesTask(segment_options=seg_opts, edge_options=e_opts)

@@ -299,6 +299,44 @@ class Source:
                      buffered=(box[0] - 1.0, box[1] - 1.0, box[2] + 1.0, box[3] + 1.0),
                      tiles=tiles, index=(0, 0), size=size, origin=(box[0], box[1]))
 
+    def window(self, box: Sequence[float]) -> Any:
+        """A region reading exactly `box` ``(xmin, ymin, xmax, ymax)`` (e.g. a sample)."""
+        from .chunks import Chunk
+
+        b = tuple(float(v) for v in box[:4])
+        if self.catalog is None:
+            tiles: tuple[int, ...] = (0,)
+        else:
+            tiles = tuple(i for i, t in enumerate(self.catalog.tiles)
+                          if t.bounds[0] <= b[2] and t.bounds[2] >= b[0]
+                          and t.bounds[1] <= b[3] and t.bounds[3] >= b[1])
+        size = max(b[2] - b[0], b[3] - b[1], 1e-9) * 1.000001
+        return Chunk(id="window", row=0, col=0, core=b, buffered=b, tiles=tiles,
+                     index=(0, 0), size=size, origin=(b[0], b[1]))
+
+    def sample(self, *, side: float = 100.0, min_points: int = 100) -> Any:
+        """Selected points of a square window at the centre of the area (a cloud).
+
+        The same window whatever the chunking, so data-driven defaults measured on it
+        (point spacing) are the same for a file and for a catalog of its tiles. The
+        window grows (x2) until it holds `min_points` points or covers the area.
+        """
+        if self.catalog is not None:
+            xmin, ymin, xmax, ymax = self.catalog.bounds
+        else:
+            xyz = self.cloud.xyz
+            xmin, ymin = xyz[:, :2].min(0) if len(xyz) else (0.0, 0.0)
+            xmax, ymax = xyz[:, :2].max(0) if len(xyz) else (0.0, 0.0)
+        cx, cy = 0.5 * (xmin + xmax), 0.5 * (ymin + ymax)
+        half = 0.5 * side
+        while True:
+            box = (cx - half, cy - half, cx + half, cy + half)
+            cloud = self.read_chunk(self.window(box)).cloud
+            covers = box[0] <= xmin and box[1] <= ymin and box[2] >= xmax and box[3] >= ymax
+            if len(cloud) >= min_points or covers:
+                return cloud
+            half *= 2.0
+
     def chunks(self, *, chunk_size: float | None = None, buffer: float | None = None,
                origin: tuple[float, float] = (0.0, 0.0)) -> list[Any]:
         """The chunk grid of a catalog run (one whole-area chunk for an in-memory cloud)."""
