@@ -23,7 +23,7 @@ FT = 1200.0 / 3937.0  # US survey foot, m
 
 def run(*args: object) -> object:
     args = [str(a) for a in args]
-    if Path(args[1]).is_dir() and args[0] != "info":  # a catalog: serial (no LocalCluster)
+    if Path(args[1]).is_dir() and args[0] not in ("info", "roads"):  # catalog: serial
         args += ["--workers", "1"]
     return CliRunner().invoke(cli, ["-q", *args])
 
@@ -288,3 +288,39 @@ def test_every_option_of_a_catalog_command_is_honoured_or_refused(name):
     target = {p for p in params if p.startswith("target_")}  # checked by finish() on both
     unknown = params - HONOURED[name] - REFUSED[name] - _COMMON - target
     assert not unknown, f"{name}: options with no catalog path: {sorted(unknown)}"
+
+
+# ------------------------------------------------------------------ roads
+
+
+@pytest.fixture(scope="module")
+def semis_quadrants(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The IGN 1 km tile with a road bridge, cut into four quadrant files."""
+    path = IGN / "test_semis_2023_0299_6802_LA93_IGN69.laz"
+    if not path.is_file():
+        pytest.skip("../shared/lidar-data is not present")
+    import laspy
+
+    las = laspy.read(path)
+    folder = tmp_path_factory.mktemp("semis")
+    x, y = np.asarray(las.x), np.asarray(las.y)
+    for i, mx in enumerate((x < 299500.0, x >= 299500.0)):
+        for j, my in enumerate((y < 6801500.0, y >= 6801500.0)):
+            out = laspy.LasData(las.header)
+            out.points = las.points[mx & my]
+            out.update_header()
+            out.write(folder / f"q{i}{j}.laz")
+    return folder
+
+
+@needs_shared
+@pytest.mark.slow
+def test_roads_on_a_folder_equals_the_file(semis_quadrants, tmp_path):
+    """Regression: roads refused folders."""
+    roads = Path(__file__).parents[1] / "data" / "ign-bridge-roads.geojson"
+    a = results(tmp_path, "roads", IGN / "test_semis_2023_0299_6802_LA93_IGN69.laz", roads,
+                "-o", tmp_path / "a.gpkg")
+    b = results(tmp_path, "roads", semis_quadrants, roads, "-o", tmp_path / "b.gpkg")
+    assert a["n_roads"] == b["n_roads"] == 2
+    assert a["n_map_points"] == b["n_map_points"] and a["n_failed"] == b["n_failed"] == 0
+    assert abs(a["sigma_mean"] - b["sigma_mean"]) < 1e-3
