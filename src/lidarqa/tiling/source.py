@@ -32,7 +32,8 @@ import numpy as np
 
 from ..errors import OptionError
 
-__all__ = ["Selection", "Source", "open_source", "is_catalog_input"]
+__all__ = ["Selection", "Source", "open_source", "is_catalog_input", "sample_boxes",
+           "sample_points"]
 
 _LAS = {".las", ".laz"}
 
@@ -314,28 +315,31 @@ class Source:
         return Chunk(id="window", row=0, col=0, core=b, buffered=b, tiles=tiles,
                      index=(0, 0), size=size, origin=(b[0], b[1]))
 
+    @property
+    def area_bounds(self) -> tuple[float, float, float, float]:
+        """``(xmin, ymin, xmax, ymax)``: the tiles' header bounds (an in-memory cloud's extent)."""
+        if self.catalog is not None:
+            return tuple(float(v) for v in self.catalog.bounds)
+        xyz = self.cloud.xyz
+        if not len(xyz):
+            return (0.0, 0.0, 0.0, 0.0)
+        lo, hi = xyz[:, :2].min(0), xyz[:, :2].max(0)
+        return (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
+
     def sample(self, *, side: float = 100.0, min_points: int = 100) -> Any:
         """Selected points of a square window at the centre of the area (a cloud).
 
-        The same window whatever the chunking, so data-driven defaults measured on it
-        (point spacing) are the same for a file and for a catalog of its tiles. The
-        window grows (x2) until it holds `min_points` points or covers the area.
+        The same window whatever the chunking (:func:`sample_boxes`), so data-driven
+        defaults measured on it (point spacing) are the same for a file and for a
+        catalog of its tiles. The window grows (x2) until it holds `min_points`
+        points or covers the area.
         """
-        if self.catalog is not None:
-            xmin, ymin, xmax, ymax = self.catalog.bounds
-        else:
-            xyz = self.cloud.xyz
-            xmin, ymin = xyz[:, :2].min(0) if len(xyz) else (0.0, 0.0)
-            xmax, ymax = xyz[:, :2].max(0) if len(xyz) else (0.0, 0.0)
-        cx, cy = 0.5 * (xmin + xmax), 0.5 * (ymin + ymax)
-        half = 0.5 * side
-        while True:
-            box = (cx - half, cy - half, cx + half, cy + half)
+        cloud = None
+        for box in sample_boxes(self.area_bounds, side=side):
             cloud = self.read_chunk(self.window(box)).cloud
-            covers = box[0] <= xmin and box[1] <= ymin and box[2] >= xmax and box[3] >= ymax
-            if len(cloud) >= min_points or covers:
-                return cloud
-            half *= 2.0
+            if len(cloud) >= min_points:
+                break
+        return cloud
 
     def chunks(self, *, chunk_size: float | None = None, buffer: float | None = None,
                origin: tuple[float, float] = (0.0, 0.0)) -> list[Any]:
@@ -346,6 +350,35 @@ class Source:
 
         return list(make_chunks(self.catalog, chunk_size=chunk_size, buffer=buffer,
                                 origin=origin))
+
+
+def sample_boxes(bounds: Sequence[float], *, side: float = 100.0) -> Iterable[tuple]:
+    """Square windows centred on `bounds`, of side `side`, 2 x `side`... up to covering it."""
+    xmin, ymin, xmax, ymax = (float(v) for v in bounds[:4])
+    cx, cy = 0.5 * (xmin + xmax), 0.5 * (ymin + ymax)
+    half = 0.5 * side
+    while True:
+        box = (cx - half, cy - half, cx + half, cy + half)
+        yield box
+        if box[0] <= xmin and box[1] <= ymin and box[2] >= xmax and box[3] >= ymax:
+            return
+        half *= 2.0
+
+
+def sample_points(xyz: np.ndarray, bounds: Sequence[float], *, side: float = 100.0,
+                  min_points: int = 100) -> np.ndarray:
+    """The points of `xyz` in the window :meth:`Source.sample` reads (for in-memory runs)."""
+    from .reader import _TOL
+
+    p = np.asarray(xyz, dtype=np.float64)
+    out = p[:0]
+    for box in sample_boxes(bounds, side=side):
+        keep = ((p[:, 0] >= box[0] - _TOL) & (p[:, 0] <= box[2] + _TOL)
+                & (p[:, 1] >= box[1] - _TOL) & (p[:, 1] <= box[3] + _TOL))
+        out = p[keep]
+        if len(out) >= min_points:
+            break
+    return out
 
 
 def _as_list(paths: Any) -> list[str]:
