@@ -274,6 +274,16 @@ def strips_laz(tmp_path, monkeypatch):
         return Segments(np.arange(len(pts)), pts[:, 0], pts[:, 1], crs=crs)
 
     monkeypatch.setattr(_lines_io, "extract_segments", fake_extract)
+
+    # a cloud's edges go through the area engine (one region for one file)
+    from lidarqa.tiling import jobs_vector
+
+    def fake_features(points, *, kind, core=None, crs=None, box=None, **options):
+        seg = fake_extract(points, crs=crs)
+        seg.attributes["at_buffer_edge"] = np.zeros(len(seg), dtype=np.int64)
+        return seg if core is None else jobs_vector.keep_anchored(seg, core)
+
+    monkeypatch.setattr(jobs_vector, "vector_features", fake_features)
     return path, s
 
 

@@ -83,6 +83,7 @@ __all__ = [
     "asprs2023_accuracy",
     "match_points",
     "assess_checkpoints",
+    "summarise_vertical",
     "vertical_check",
 ]
 
@@ -1266,6 +1267,56 @@ def vertical_check(
     flag[(flag == "ok") & (dnear > search_radius + tol)] = "no_ground_nearby"
     flag = flag.astype(str)
     dz = tin_z - c[:, 2]
+    return summarise_vertical(
+        cp, tin_z, dz, flag, longest, n_ground=len(g), max_edge=float(max_edge),
+        search_radius=float(search_radius), checkpoint_rmse_v=checkpoint_rmse_v,
+    )
+
+
+def summarise_vertical(
+    check: PointSet,
+    tin_z: np.ndarray,
+    dz: np.ndarray,
+    flag: np.ndarray,
+    longest_edge: np.ndarray,
+    *,
+    n_ground: int,
+    max_edge: float,
+    search_radius: float,
+    checkpoint_rmse_v: float = 0.0,
+) -> VerticalCheckReport:
+    """The summary half of :func:`vertical_check`: figures from per-check-point values.
+
+    The per-point values (TIN height, dz, flag, longest triangle edge) come from
+    one region (an in-memory run) or are merged from the chunks of a catalog
+    run; either way the report is made here, so both give the same figures.
+
+    Parameters
+    ----------
+    check : PointSet
+        All check points (m), in any order.
+    tin_z, dz, flag, longest_edge : ndarray of shape (M,)
+        Per check point, in the order of `check`; ``flag == "ok"`` marks the
+        points compared.
+    n_ground : int
+        Distinct ground points (XY) of the TIN.
+    max_edge, search_radius : float
+        The thresholds used (m).
+    checkpoint_rmse_v : float, default 0
+        Vertical RMSE of the check-point survey (m).
+
+    Returns
+    -------
+    VerticalCheckReport
+
+    Raises
+    ------
+    NothingToMeasureError
+        No check point could be compared.
+    """
+    m = len(check)
+    ck = _keys(check.ids)
+    flag = np.asarray(flag).astype(str)
     order = _sort_order(ck)
     ok = flag[order] == "ok"
     n_ok = int(ok.sum())
@@ -1293,14 +1344,14 @@ def vertical_check(
     warn.extend(nssda.warnings)
     warn.extend(asprs.warnings)
     return VerticalCheckReport(
-        ids=cp.ids[order],
-        check_xyz=cp.xyz[order],
+        ids=check.ids[order],
+        check_xyz=check.xyz[order],
         tin_z=tin_z[order],
         dz=dz[order],
         flag=flag[order],
-        longest_edge=longest[order],
+        longest_edge=longest_edge[order],
         n_check=n_ok,
-        n_ground=len(g),
+        n_ground=int(n_ground),
         max_edge=float(max_edge),
         search_radius=float(search_radius),
         stats=stats,

@@ -91,14 +91,16 @@ def _engine(scheduler: str | None, workers: int | None) -> Iterator[Any]:
         yield eng
 
 
-def _open(paths: Sequence[str], skip_bad: bool | None, steps: Steps) -> Any:
-    from ..tiling import open_catalog
+def _open(paths: Sequence[str], skip_bad: bool | None, steps: Steps, *, crs: Any = None,
+          z_to_metres: bool = True) -> Any:
+    from ..tiling.source import open_source
     from ._catalog import _bad_lines
 
     with steps(f"Reading the headers of {', '.join(paths)}"):
-        catalog = open_catalog(list(paths), skip_bad=bool(skip_bad))
-    _bad_lines(catalog.bad)
-    return catalog
+        source = open_source(list(paths), skip_bad=bool(skip_bad), crs=crs,
+                             z_to_metres=z_to_metres)
+    _bad_lines(source.bad)
+    return source
 
 
 def _common(cat_opts: dict[str, Any], eng: Any) -> dict[str, Any]:
@@ -166,6 +168,7 @@ def features_on_catalog(
     segment_options: dict[str, Any],
     options: dict[str, Any],
     cat_opts: dict[str, Any],
+    crs: Any = None,
 ) -> None:
     """``lidarqa planes|edges|corners CATALOG -o OUT``: each feature once (anchor-in-core)."""
     from ..io.vector import write_points, write_segments
@@ -173,7 +176,7 @@ def features_on_catalog(
 
     prepare_outputs(output, inputs=tuple(paths))
     steps = Steps()
-    catalog = _open(paths, cat_opts.get("skip_bad"), steps)
+    catalog = _open(paths, cat_opts.get("skip_bad"), steps, crs=crs, z_to_metres=False)
     with _engine(cat_opts.get("scheduler"), cat_opts.get("workers")) as eng:
         run = catalog_features(catalog, kind=kind, classes=classes, source_id=source_id,
                                segment_options=segment_options, options=options,
@@ -218,6 +221,8 @@ def vertical_on_catalog(
     output: str | None,
     *,
     classes: Any,
+    source_id: Any = None,
+    crs: Any = None,
     max_edge: float | None,
     checkpoint_rmse_v: float,
     cat_opts: dict[str, Any],
@@ -225,37 +230,55 @@ def vertical_on_catalog(
 ) -> None:
     """``lidarqa checkpoints CATALOG CHECK --vertical`` (reads only chunks with check points)."""
     from ..io.crs import crs_name, ensure_same_crs
-    from ..io.vector import read_points, write_points
+    from ..io.vector import PointSet, read_points, write_points
     from ..tiling.jobs_api import catalog_vertical_check
 
     prepare_outputs(output, inputs=(*paths, check_path))
     steps = Steps()
     with steps("Reading check points"):
-        chk = read_points(check_path)
-    catalog = _open(paths, cat_opts.get("skip_bad"), steps)
-    ensure_same_crs(catalog.crs, chk.crs, what=("MEASURED", "CHECK"))
-    crs = catalog.crs if catalog.crs is not None else chk.crs
+        chk = read_points(check_path, crs=crs)
+    source = _open(paths, cat_opts.get("skip_bad"), steps, crs=crs)
+    ensure_same_crs(source.native_crs, chk.crs, what=("MEASURED", "CHECK"))
+    crs_used = source.native_crs if source.native_crs is not None else chk.crs
+    if source.native_crs is None and chk.crs is not None:  # the check points' CRS for both
+        from ..tiling.source import open_source
+
+        source = open_source(source.catalog, crs=chk.crs)
+    notes: list[str] = []
+    if source.z_factor != 1.0 or source.xy_factor != 1.0:
+        from ..io.crs import horizontal_unit, vertical_unit
+
+        notes.append(
+            f"coordinates converted to metres (horizontal unit: "
+            f"{horizontal_unit(crs_used)[0] or 'metre'}, vertical unit: "
+            f"{vertical_unit(crs_used)[0] or 'metre'})")
     with _engine(cat_opts.get("scheduler"), cat_opts.get("workers")) as eng:
-        run = catalog_vertical_check(catalog, chk, classes=tuple(classes) if classes else (2,),
-                                     max_edge=max_edge, checkpoint_rmse_v=checkpoint_rmse_v,
+        run = catalog_vertical_check(source, chk, classes=tuple(classes) if classes else (2,),
+                                     source_id=source_id, max_edge=max_edge,
+                                     checkpoint_rmse_v=checkpoint_rmse_v,
                                      **_common(cat_opts, eng))
     report = run.value
     if output is not None:
         with steps("Writing " + output), reproducible_vectors():
             res = report.residual_points()
-            res.crs = chk.crs or crs
-            write_points(res, output, overwrite=settings().overwrite)
+            # the check points in their own (unconverted) coordinates, as for one file
+            xyz = res.xyz.copy()
+            xyz[:, :2] /= source.xy_factor
+            xyz[:, 2] /= source.z_factor
+            out = PointSet(res.ids, xyz, res.attributes, crs=chk.crs or crs_used)
+            write_points(out, output, overwrite=settings().overwrite)
     results = report.to_dict()
+    results["warnings"] = notes + results["warnings"]
     results["units"] = "m"
     results["catalog"] = _run_summary(run)
     summary(results, True)
     _echo_run(run)
     finish("checkpoints",
            inputs={"measured": list(paths), "check": check_path},
-           parameters={"vertical": True, "classes": classes or [2],
+           parameters={"vertical": True, "classes": classes or [2], "source_id": source_id,
                        "max_edge": results["vertical"]["max_edge"],
                        "checkpoint_rmse_v": checkpoint_rmse_v, "output": output,
-                       "crs": crs_name(crs), "chunk_size": cat_opts.get("chunk_size"),
+                       "crs": crs_name(crs_used), "chunk_size": cat_opts.get("chunk_size"),
                        "buffer": cat_opts.get("buffer"), "workers": cat_opts.get("workers"),
                        "scheduler": cat_opts.get("scheduler")},
            results=results)
@@ -271,6 +294,7 @@ def heights_on_catalog(
     reference_xyz: Any,
     *,
     classes: Any,
+    source_id: Any = None,
     options: dict[str, Any],
     cat_opts: dict[str, Any],
 ) -> tuple[Any, Any]:
@@ -278,8 +302,8 @@ def heights_on_catalog(
     from ..tiling.jobs_api import catalog_heights
 
     with _engine(cat_opts.get("scheduler"), cat_opts.get("workers")) as eng:
-        run = catalog_heights(catalog, map_xy, reference_xyz, classes=classes, options=options,
-                              **_common(cat_opts, eng))
+        run = catalog_heights(catalog, map_xy, reference_xyz, classes=classes,
+                              source_id=source_id, options=options, **_common(cat_opts, eng))
     return run.value, run
 
 
@@ -295,13 +319,14 @@ def repeatability_on_catalog(
     cat_opts: dict[str, Any],
     print_rows: Callable[[list[dict]], None],
     edge_options: dict[str, Any] | None = None,
+    crs: Any = None,
 ) -> None:
     """``lidarqa repeatability CATALOG --by-source-id``: every strip pair over the whole block."""
     from ..tiling.jobs_api import catalog_repeatability
 
     prepare_outputs(inputs=tuple(paths))
     steps = Steps()
-    catalog = _open(paths, cat_opts.get("skip_bad"), steps)
+    catalog = _open(paths, cat_opts.get("skip_bad"), steps, crs=crs, z_to_metres=False)
     with _engine(cat_opts.get("scheduler"), cat_opts.get("workers")) as eng:
         run = catalog_repeatability(catalog, classes=classes, source_id=source_id,
                                     match_options=match_options, edge_options=edge_options,

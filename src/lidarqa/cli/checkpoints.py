@@ -230,7 +230,8 @@ def checkpoints(
                               "needs --vertical")
         from ._catalog_jobs import vertical_on_catalog
 
-        vertical_on_catalog(measured, check, output, classes=classes, max_edge=max_edge,
+        vertical_on_catalog(measured, check, output, classes=classes, source_id=source_id,
+                            crs=given, max_edge=max_edge,
                             checkpoint_rmse_v=checkpoint_rmse_v, cat_opts=cat_opts,
                             summary=_summary)
         return

@@ -67,7 +67,7 @@ def _on_catalog(kind: str, paths: tuple[str, ...], output: str, classes: Any, so
     _check_suffix(output)
     features_on_catalog(kind, paths, output, classes=classes, source_id=source_id,
                         segment_options={k: opts[k] for k in _SEGMENT_KEYS if k in opts},
-                        options=options, cat_opts=cat)
+                        options=options, cat_opts=cat, crs=input_crs(opts.get("crs")))
     return True
 
 
@@ -109,6 +109,18 @@ def _load(path: str, classes: list[int] | None, source_id: list[int] | None, ste
     if f != 1.0:
         xyz[:, 2] *= f
     return sub, xyz, f
+
+
+def _auto(path: str, sub: Any, kind: str, opts: dict, options: dict) -> tuple[dict, dict]:
+    """Data-driven defaults (growing radius, support distance) measured on the central sample
+    window the catalog run uses, so a file and a folder of its tiles get the same ones."""
+    from ..tiling.jobs_vector import fixed_auto_options
+    from ..tiling.source import open_source, sample_points
+
+    bounds = open_source(path, z_to_metres=False).area_bounds  # headers only for LAS/LAZ
+    seg = {k: opts[k] for k in _SEGMENT_KEYS if k in opts}
+    return fixed_auto_options(sample_points(sub.xyz, bounds), kind=kind, segment_options=seg,
+                              options=options)
 
 
 def _segment(xyz: np.ndarray, opts: dict, steps: Steps):
@@ -159,6 +171,7 @@ def planes(paths: tuple[str, ...], output: str, classes: list[int] | None,
     prepare_outputs(output, inputs=(path,))
     steps = Steps()
     sub, xyz, f = _load(path, classes, source_id, steps, opts.pop("crs", None))
+    opts["grow_radius"] = _auto(path, sub, "planes", opts, {})[0]["grow_radius"]
     seg = _segment(xyz, opts, steps)
     cen = seg.centroid.copy()
     cen[:, 2] /= f
@@ -222,6 +235,8 @@ def edges(paths: tuple[str, ...], output: str, classes: list[int] | None,
     prepare_outputs(output, inputs=(path,))
     steps = Steps()
     sub, xyz, f = _load(path, classes, source_id, steps, opts.pop("crs", None))
+    seg_auto, e_auto = _auto(path, sub, "edges", opts, {"near_dist": near_dist})
+    opts["grow_radius"], near_dist = seg_auto["grow_radius"], e_auto["near_dist"]
     seg = _segment(xyz, opts, steps)
     with steps("Intersecting adjacent planes"):
         e, skipped = edges_from_segmentation(xyz, seg, near_dist=near_dist, min_angle=min_angle,
@@ -285,6 +300,7 @@ def corners(paths: tuple[str, ...], output: str, classes: list[int] | None,
     prepare_outputs(output, inputs=(path,))
     steps = Steps()
     sub, xyz, f = _load(path, classes, source_id, steps, opts.pop("crs", None))
+    opts["grow_radius"] = _auto(path, sub, "corners", opts, {})[0]["grow_radius"]
     seg = _segment(xyz, opts, steps)
     with steps("Intersecting plane triples"):
         c, refused = corners_from_segmentation(seg, xyz, min_det=min_det, min_angle=min_angle,

@@ -340,7 +340,7 @@ def heights(
     on_catalog = wants_catalog((cloud,), cat_opts)
     sigma_strip_source = "given"
     if on_catalog:
-        from ..tiling import open_catalog
+        from ..tiling.source import open_source
 
         if largest_segment:
             raise OptionError("--largest-segment is not available on a catalog")
@@ -350,8 +350,10 @@ def heights(
                 "the value (e.g. from `lidarqa swaths`)"
             )
         with steps("Reading the headers of " + cloud):
-            cat = open_catalog([cloud], skip_bad=bool(cat_opts.get("skip_bad")))
-        pc: Any = type("Header", (), {"crs": cat.crs})()
+            cat = open_source([cloud], skip_bad=bool(cat_opts.get("skip_bad")), crs=given,
+                              classes=classes, source_id=source_id)
+        require_metric_xy(cat.native_crs, cloud, "the search radius and the plane fits need")
+        pc: Any = type("Header", (), {"crs": cat.native_crs})()
     else:
         with steps("Reading " + cloud):
             pc = read(cloud, crs=given)
@@ -408,7 +410,7 @@ def heights(
     if on_catalog:
         from ._catalog_jobs import heights_on_catalog
 
-        report, catalog_run = heights_on_catalog(cat, mp.xyz[:, :2], ref_xyz, classes=classes,
+        report, catalog_run = heights_on_catalog(cat, mp.xyz[:, :2], ref_xyz, classes=None,
                                                  options=options, cat_opts=cat_opts)
     else:
         with steps(f"Fitting {len(mp):,} map points, testing {len(ref):,} reference points"):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 from collections.abc import Callable
 from itertools import combinations
+from pathlib import Path
 from typing import Any
 
 import click
@@ -76,8 +77,8 @@ def _matching_options(func: Callable[..., Any]) -> Callable[..., Any]:
 
 
 @click.command()
-@click.argument("test", type=click.Path(dir_okay=False))
-@click.argument("model", type=click.Path(dir_okay=False))
+@click.argument("test", type=click.Path())
+@click.argument("model", type=click.Path())
 @_matching_options
 @click.option(
     "--ground-truth",
@@ -113,6 +114,7 @@ def _matching_options(func: Callable[..., Any]) -> Callable[..., Any]:
     default=None,
     help="Point-cloud input: point_source_id(s) (flight strip) of the model points.",
 )
+@catalog_options
 @common_options
 def lines(
     test: str,
@@ -129,14 +131,16 @@ def lines(
     test_source_id: list[int] | None,
     model_source_id: list[int] | None,
     crs: str | None,
+    **cat_opts: Any,
 ) -> None:
     """Match TEST line segments to MODEL segments; OLHD both ways and LHD (Poreba & Goulette 2013).
 
     TEST and MODEL are segment files (CSV id,x1,y1,z1,x2,y2,z2, GeoPackage, GeoJSON) or
     point clouds, whose edges are extracted (select with --classes and --*-source-id, so
-    two strips of one file can be compared).
+    two strips of one file can be compared). A cloud may be a catalog (several files, a
+    folder, a glob, a .vpc): its edges are then found chunk by chunk, each edge once.
     """
-    from ..accuracy._lines_io import load_segments, read_pairs
+    from ..accuracy._lines_io import read_pairs
     from ..accuracy.lines import match_segments
 
     given = input_crs(crs)
@@ -145,14 +149,9 @@ def lines(
     steps = Steps()
     test_label = test + _selection(classes, test_source_id)
     model_label = model + _selection(classes, model_source_id)
-    with steps("Reading test " + test_label) as progress:
-        t = load_segments(
-            test, classes=classes, source_id=test_source_id, crs=given, progress=progress
-        )
-    with steps("Reading model " + model_label) as progress:
-        m = load_segments(
-            model, classes=classes, source_id=model_source_id, crs=given, progress=progress
-        )
+    t = _side_segments("test", test, test_label, classes, test_source_id, given, steps, cat_opts)
+    m = _side_segments("model", model, model_label, classes, model_source_id, given, steps,
+                       cat_opts)
     gt = None
     if ground_truth:
         with steps("Reading ground truth"):
@@ -225,6 +224,48 @@ def lines(
         },
         results=d,
     )
+
+
+def _side_segments(side: str, path: str, label: str, classes: Any, source_id: Any, given: Any,
+                   steps: Steps, cat_opts: dict[str, Any]) -> Any:
+    """One side's segments: a segment file, a cloud's edges, or a catalog's edges (chunked,
+    each edge once) read through a source with this side's selection."""
+    import numpy as np
+
+    from ..accuracy._lines_io import load_segments
+    from ..tiling.source import is_catalog_input
+
+    if is_catalog_input(path) or Path(path).suffix.lower() in (".las", ".laz"):
+        from ..errors import NothingToMeasureError
+        from ..tiling.jobs_api import catalog_features
+
+        try:
+            import lidarqa.geometry.edges  # noqa: F401
+        except ImportError:
+            from ..accuracy._lines_io import extract_segments
+
+            extract_segments(np.empty((0, 3)))  # raises the clear "not available" error
+
+        from ..tiling.apply import engine_for
+
+        with steps(f"Extracting the edges of {side} {label}"), engine_for(
+                workers=cat_opts.get("workers"), scheduler=cat_opts.get("scheduler")) as eng:
+            run = catalog_features(path, kind="edges", classes=classes, source_id=source_id,
+                                   crs=given, progress=not settings().quiet, engine=eng,
+                                   chunk_size=cat_opts.get("chunk_size"),
+                                   buffer=cat_opts.get("buffer"),
+                                   skip_bad=bool(cat_opts.get("skip_bad")), skip_failed=True)
+        if run.failed:
+            from ..errors import TilingError
+
+            raise TilingError(f"{side}: {len(run.failed)} chunk(s) failed: "
+                              + ", ".join(run.failed))
+        if len(run.value) == 0:
+            raise NothingToMeasureError(f"{side} {label}: no edges found")
+        return run.value
+    with steps(f"Reading {side} " + label) as progress:
+        return load_segments(path, classes=classes, source_id=source_id, crs=given,
+                             progress=progress)
 
 
 def _selection(classes: list[int] | None, source_id: list[int] | None) -> str:
@@ -400,7 +441,8 @@ def repeatability(
             files, classes=classes, source_id=source_id, edge_options={"steps": step_edges},
             match_options={"weight": weight, "sensitivity": sensitivity, "threshold": threshold,
                            "rotate": rotate, "denominator": denominator, "auto": auto},
-            cat_opts=cat_opts, print_rows=lambda rows: _print_rows(rows, threshold, pool=True))
+            cat_opts=cat_opts, crs=given,
+            print_rows=lambda rows: _print_rows(rows, threshold, pool=True))
         return
     if catalog_options_given(cat_opts):
         raise OptionError("catalog options apply to repeatability --by-source-id only")

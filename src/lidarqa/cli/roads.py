@@ -189,17 +189,17 @@ def roads(
     unless given. Writes 3D map points, 3D polygons (one per level) and a TIN.
     """
     from ..accuracy.roads import read_road_polygons, reconstruct_roads, write_roads
-    from ..io import read
     from ..io.crs import z_to_metres_factor
+    from ..tiling.source import open_source
 
     given_crs = input_crs(crs)
     prepare_outputs(output, inputs=(cloud, map_path))
     given = _parse_shift(shift)
     steps = Steps()
     with steps("Reading " + cloud):
-        pc = read(cloud, crs=given_crs)
-        if classes:
-            pc = pc.select(classes=classes)
+        # a file, or a catalog (folder, glob, .vpc) read as one region through its source
+        pc = open_source(cloud, crs=given_crs, classes=classes or None,
+                         z_to_metres=False).read(require_points=False)
         xyz = pc.xyz.copy()
         xyz[:, 2] *= z_to_metres_factor(pc.crs)
     with steps("Reading map polygons"):

@@ -190,9 +190,15 @@ class RunContext:
         if name not in self._clouds:
             from ..io import read
 
+            from ..tiling.source import is_catalog_input, open_source
+
             spec = self.config.inputs[name]
             with self.step(f"Reading {spec.path.name}"):
-                cloud = read(spec.path)
+                if is_catalog_input(str(spec.path)):  # a catalog in memory: one region
+                    cloud = open_source(str(spec.path), z_to_metres=False).read(
+                        require_points=False)
+                else:
+                    cloud = read(spec.path)
             if cloud.crs is None and spec.effective_crs is not None:
                 cloud.crs = spec.effective_crs
             elif cloud.crs is None:

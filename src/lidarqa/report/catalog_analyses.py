@@ -10,13 +10,14 @@ buffers, merged exactly, see :mod:`lidarqa.tiling.jobs_api`) instead of
 reading the cloud into memory, and its report section adds the catalog
 overview map (tiles, chunks coloured by status, strips) and the per-chunk
 status table (:mod:`lidarqa.report.catalog_overview`). Available on catalogs:
-``info`` (the catalog summary from the headers), ``edges``,
-``checkpoints`` with ``vertical = true`` and a check-point file, ``swaths`` (strips by
+``info`` (the catalog summary from the headers), ``edges``, ``swaths`` (strips by
 ``point_source_id``), ``ground`` (the catalog ground job, ISPRS counts summed over the
 chunks), ``lines`` (edges of catalog inputs extracted chunk by chunk), and
-``heights`` with map-point and reference-point inputs. The others
-report a clear error for that analysis while the rest of the report runs.
-Chunks use the default size and buffer and run in this process.
+``heights`` with map-point and reference-point inputs; ``checkpoints`` with
+``vertical = true`` runs chunk by chunk from its own module. Every other analysis
+(and heights with points derived from the cloud) runs its file analysis on the
+catalog read into memory through its source, as one region, so a catalog input
+is never refused. Chunks use the default size and buffer and run in this process.
 """
 
 from __future__ import annotations
@@ -96,31 +97,18 @@ def catalog_analysis(ctx: Any, item: Any) -> Callable[[Any, Any], Any] | None:
     spec = ctx.config.inputs.get(name) if name else None
     if spec is None or spec.kind != "clouds" or not is_catalog_path(spec.path):
         return None
-    func = _CATALOG_ANALYSES.get(item.kind)
-    if func is None:
-        def unavailable(ctx: Any, item: Any) -> Any:
-            raise AnalysisError(
-                f"analysis [{item.kind}] cannot run on the catalog input {name!r} yet "
-                f"(available on catalogs: {', '.join(sorted(_CATALOG_ANALYSES))}); "
-                "give it one cloud file"
-            )
-
-        return unavailable
-    return func
+    # the others (and checkpoints, which handles catalogs itself) run their file analysis:
+    # the catalog is read through its source as one region (RunContext.cloud)
+    return _CATALOG_ANALYSES.get(item.kind)
 
 
 # ------------------------------------------------------------------ sections
 
 
 def _with_overview(res: Any, run: Any, title: str) -> Any:
-    from .catalog_overview import catalog_section
+    from .catalog_overview import with_overview
 
-    sec = catalog_section(run, title=title)
-    res.figures = [*res.figures, *sec["figures"]]
-    res.tables = [*res.tables, *sec["tables"]]
-    res.notes = [*res.notes, *sec["notes"]]
-    res.results["catalog"] = sec["results"]
-    return res
+    return with_overview(res, run, title)
 
 
 def _info(ctx: Any, item: Any) -> Any:
@@ -228,51 +216,6 @@ def _edges(ctx: Any, item: Any) -> Any:
     return _with_overview(res, runs[0], f"{name}: chunks")
 
 
-def _checkpoints(ctx: Any, item: Any) -> Any:
-    from ..tiling.jobs_api import catalog_vertical_check
-    from . import plots
-    from ._context import SectionResult
-    from ._context import write_vector as _write_vector_safe
-
-    opts = item.options
-    if not isinstance(opts["check"], str):
-        raise AnalysisError("on a catalog, the vertical check needs a check-point file "
-                            "(check = \"<points input>\"), not points sampled from a cloud")
-    if opts.get("source_ids"):
-        raise AnalysisError("source_ids is not available for a vertical check on a catalog")
-    name = opts["measured"]
-    check = ctx.points(opts["check"])
-    params = dict(item.params)
-    classes = params.pop("classes", (2,))
-    with ctx.step(f"Vertical check of the catalog {name}"):
-        run = catalog_vertical_check(ctx.config.inputs[name].path, check,
-                                     classes=tuple(np.atleast_1d(classes).tolist()),
-                                     skip_failed=True, **params)
-    rep = run.value
-    res = rep.to_dict()
-    notes: list[str] = [str(w) for w in res.get("warnings", [])]
-    _write_vector_safe(ctx, item, rep.residual_points(), "residuals", opts["format"], notes)
-    residuals = np.column_stack([np.zeros(len(rep.dz)), np.zeros(len(rep.dz)), rep.dz])
-    residuals[rep.flag != "ok"] = np.nan
-    with ctx.step("Plotting residuals"):
-        figs = [Figure("Residual vectors", plots.plot_residual_vectors(
-            rep.check_xyz, residuals, "Check-point residuals"), "colour: vertical residual"),
-            Figure("Residual histograms", plots.plot_residual_histograms(residuals))]
-    table = Table("Residual statistics (m)", ["axis", "mean", "std", "RMSE", "max |residual|"],
-                  [["z", res.get("mean_z"), res.get("std_z"), res.get("rmse_z"),
-                    res.get("max_abs_z")]], note=f"{res['n_check']} check points")
-    out = SectionResult(
-        results=res,
-        headline=(f"RMSE z {res['rmse_z']:.3f} m, mean {res['mean_z']:+.3f} m over "
-                  f"{res['n_check']} check points (catalog)"),
-        figures=figs, tables=[table], notes=notes,
-        paragraphs=[f"Heights of a TIN of the ground of the catalog {name} at the check points "
-                    f"({opts['check']}), minus the check heights; each check point is compared "
-                    "in the chunk whose core holds it."],
-    )
-    return _with_overview(out, run, f"{name}: chunks read")
-
-
 def _heights(ctx: Any, item: Any) -> Any:
     from ..io.vector import PointSet
     from ..tiling.jobs_api import catalog_heights
@@ -283,19 +226,17 @@ def _heights(ctx: Any, item: Any) -> Any:
 
     opts = item.options
     name, m, r = opts["cloud"], opts["map"], opts["reference"]
-    if not isinstance(m, str) or not isinstance(r, str):
-        raise AnalysisError("on a catalog, heights needs a map-point input (map = \"<input>\") "
-                            "and a reference-point input (reference = \"<points input>\"), not "
-                            "points derived from the cloud")
-    if opts.get("source_ids"):
-        raise AnalysisError("source_ids is not available for heights on a catalog")
+    if not isinstance(m, str) or not isinstance(r, str):  # points derived from the cloud
+        from .analyses.heights import run_heights
+
+        return run_heights(ctx, item)  # on the catalog in memory (one region)
     mod = _import("lidarqa.accuracy.heights", "heights")
     mp_in = mod.read_map_points(ctx.config.inputs[m].path, spacing=opts["map_spacing"])
     ref_xyz = ctx.points(r).xyz
     with ctx.step(f"Heights of {len(mp_in):,} map points on the catalog {name}"):
         run = catalog_heights(ctx.config.inputs[name].path, mp_in.xyz[:, :2], ref_xyz,
-                              classes=opts["classes"], options=dict(item.params),
-                              skip_failed=True)
+                              classes=opts["classes"], source_id=opts.get("source_ids"),
+                              options=dict(item.params), skip_failed=True)
     rep = run.value
     res = rep.to_dict()
     mpts = rep.map_points
@@ -377,6 +318,8 @@ def _ground(ctx: Any, item: Any) -> Any:
                                  evaluate=bool(opts["evaluate"]), ignore_classes=ignore or None,
                                  workers=1, overwrite=True, **params)
     d = res.to_dict()
+    if not opts["write_cloud"]:  # the tiles were written to a temporary folder, now gone
+        d.update(outputs=[], vpc=None)
     notes.extend(res.warnings)
     e = res.evaluation
     tables = []
@@ -430,6 +373,5 @@ _CATALOG_ANALYSES: dict[str, Callable[[Any, Any], Any]] = {
     "lines": _lines,
     "swaths": _swaths,
     "edges": _edges,
-    "checkpoints": _checkpoints,
     "heights": _heights,
 }

@@ -24,7 +24,8 @@ import numpy as np
 
 from .html import Figure, Table
 
-__all__ = ["STATUS_COLOURS", "catalog_section", "plot_catalog_overview", "status_table"]
+__all__ = ["STATUS_COLOURS", "catalog_section", "plot_catalog_overview", "status_table",
+           "with_overview"]
 
 #: Fill colour of a chunk by status.
 STATUS_COLOURS = {
@@ -165,3 +166,13 @@ def catalog_section(run: Any, *, title: str = "Catalog") -> dict[str, Any]:
                 + ", ".join(f"{v} {k}" for k, v in counts.items() if v))
     return {"results": results, "headline": headline, "figures": [fig],
             "tables": [status_table(rows), tab_tiles], "notes": notes}
+
+
+def with_overview(res: Any, run: Any, title: str) -> Any:
+    """`res` (a SectionResult) with the catalog overview map and chunk table of `run` added."""
+    sec = catalog_section(run, title=title)
+    res.figures = [*res.figures, *sec["figures"]]
+    res.tables = [*res.tables, *sec["tables"]]
+    res.notes = [*res.notes, *sec["notes"]]
+    res.results["catalog"] = sec["results"]
+    return res

@@ -210,7 +210,14 @@ class Engine:
 
 
 def run_task(catalog: Any, chunk: Any, task: Callable[[Any], Any]) -> Any:
-    """Read `chunk` and run `task` on it (what a worker does for one chunk)."""
+    """Read `chunk` and run `task` on it (what a worker does for one chunk).
+
+    `catalog` is a :class:`~lidarqa.tiling.Catalog` (every point) or a
+    :class:`~lidarqa.tiling.source.Source` (its selection and units applied at read time).
+    """
+    reader = getattr(catalog, "read_chunk", None)
+    if reader is not None:
+        return task(reader(chunk))
     from .reader import read_chunk
 
     return task(read_chunk(catalog, chunk))

@@ -65,6 +65,15 @@ def chunks_with_points(chunks: Sequence[Any], xy: Any) -> tuple[Any, ...]:
     return tuple(c for c in chunks if len(p) and owned(p, c).any())
 
 
+def _metric_xy(xyz: np.ndarray, factor: float) -> np.ndarray:
+    """`xyz` with x, y in metres (the chunk grid stays in the CRS's units)."""
+    if factor == 1.0:
+        return xyz
+    out = xyz.copy()
+    out[:, :2] *= factor
+    return out
+
+
 def _ground_xy(chunk_data: Any, classes: tuple[int, ...] | None) -> np.ndarray:
     cloud = chunk_data.cloud
     if classes is None:
@@ -147,6 +156,7 @@ class VerticalCheckTask:
     max_edge: float
     search_radius: float | None = None
     classes: tuple[int, ...] | None = (2,)
+    xy_factor: float = 1.0
 
     def __call__(self, chunk_data: Any) -> VerticalPart:
         from ..accuracy.checkpoints import vertical_check
@@ -154,6 +164,7 @@ class VerticalCheckTask:
 
         core = chunk_data.chunk
         margin = min(core.core[0] - core.buffered[0], core.core[1] - core.buffered[1])
+        margin *= self.xy_factor
         if margin < 2.0 * self.max_edge:
             raise TilingError(f"chunk {core.id}: the buffer ({margin:g} m) must be at least "
                               f"2 x max_edge = {2 * self.max_edge:g} m for the vertical check")
@@ -167,10 +178,10 @@ class VerticalCheckTask:
         flag = np.full(m, "outside_tin", dtype="<U16")
         if m:
             sub = self.check.subset(idx)
-            sub = PointSet(np.arange(m), sub.xyz)  # own numbering: keeps the index order
+            sub = PointSet(np.arange(m), _metric_xy(sub.xyz, self.xy_factor))  # own numbering
             try:
                 r = vertical_check(
-                    cloud.xyz, sub,
+                    _metric_xy(cloud.xyz, self.xy_factor), sub,
                     classification=None if self.classes is None else cloud.classification,
                     classes=self.classes if self.classes is not None else (2,),
                     max_edge=self.max_edge, search_radius=self.search_radius,
@@ -201,16 +212,7 @@ def merge_vertical(
     chunk) is flagged ``"outside_tin"``. Figures are computed from the
     check points in id order, as in :func:`vertical_check`.
     """
-    from ..accuracy.checkpoints import (
-        ASPRSAccuracy,  # noqa: F401  (re-exported types of the report)
-        ResidualStats,
-        VerticalCheckReport,
-        _keys,
-        _sort_order,
-        asprs2023_accuracy,
-        nssda_accuracy,
-        residual_statistics,
-    )
+    from ..accuracy.checkpoints import summarise_vertical
 
     m = len(check)
     tin_z, dz, longest = np.full(m, np.nan), np.full(m, np.nan), np.full(m, np.nan)
@@ -227,32 +229,10 @@ def merge_vertical(
         longest[p.index], flag[p.index] = p.longest_edge, p.flag
         n_ground += p.n_ground
     dz[~seen] = np.nan
-    order = _sort_order(_keys(check.ids))
-    ok = flag[order] == "ok"
-    n_ok = int(ok.sum())
-    warn = []
-    if m - n_ok:
-        warn.append(f"{m - n_ok} of {m} check point(s) flagged (outside the TIN or in sparse "
-                    "ground) and left out")
-    if n_ok:
-        stats = residual_statistics(np.column_stack(
-            [np.full(n_ok, np.nan), np.full(n_ok, np.nan), dz[order][ok]]))
-    else:
-        nan3 = np.full(3, np.nan)
-        stats = ResidualStats(0, nan3, nan3, nan3, nan3, math.nan, math.nan)
-        warn.append("no check point could be compared with the ground TIN")
-    nssda = nssda_accuracy(math.nan, math.nan, float(stats.rmse[2]), n_check=n_ok)
-    asprs = asprs2023_accuracy(math.nan, math.nan, float(stats.rmse[2]), n_check=n_ok,
-                               checkpoint_rmse_v=checkpoint_rmse_v)
-    warn.extend(nssda.warnings)
-    warn.extend(asprs.warnings)
-    return VerticalCheckReport(
-        ids=check.ids[order], check_xyz=check.xyz[order], tin_z=tin_z[order], dz=dz[order],
-        flag=flag[order].astype(str), longest_edge=longest[order], n_check=n_ok,
-        n_ground=n_ground, max_edge=float(max_edge),
+    return summarise_vertical(
+        check, tin_z, dz, flag, longest, n_ground=n_ground, max_edge=float(max_edge),
         search_radius=float(max_edge / 2 if search_radius is None else search_radius),
-        stats=stats, nssda=nssda, asprs2023=asprs, warnings=tuple(warn),
-    )
+        checkpoint_rmse_v=checkpoint_rmse_v)
 
 
 # ============================================================ heights

@@ -29,6 +29,7 @@ Example
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -36,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import OptionError
+from ..io.vector import PointSet
 
 __all__ = [
     "CatalogRun",
@@ -101,13 +103,28 @@ def chunk_status(outcome: Any) -> dict[str, Any]:
             "error": outcome.error}
 
 
-def open_sources(sources: Any, *, skip_bad: bool = False, crs: Any = None) -> Any:
-    """A :class:`~lidarqa.tiling.Catalog` as is, or one opened from paths/folder/glob/.vpc."""
-    from . import Catalog, open_catalog
+def open_sources(sources: Any, *, skip_bad: bool = False, crs: Any = None,
+                 classes: Any = None, source_id: Any = None, z_to_metres: bool = True) -> Any:
+    """A :class:`~lidarqa.tiling.source.Source` (see :func:`~lidarqa.tiling.source.open_source`).
 
-    if isinstance(sources, Catalog):
-        return sources
-    return open_catalog(sources, skip_bad=skip_bad, crs=crs)
+    A Source given keeps its CRS and units and takes the selection given here when
+    one is given.
+    """
+    from .source import Source, open_source
+
+    if isinstance(sources, Source):
+        if classes is None and source_id is None:
+            return sources
+        return sources.select(classes=classes, source_id=source_id)
+    return open_source(sources, skip_bad=skip_bad, crs=crs, classes=classes,
+                       source_id=source_id, z_to_metres=z_to_metres)
+
+
+def region_chunks(source: Any, **chunk_opts: Any) -> list[Any]:
+    """One whole-area region for a single file, else the chunk grid (see :mod:`.apply`)."""
+    from .apply import region_chunks as _regions
+
+    return _regions(source, **chunk_opts)
 
 
 def _run(catalog: Any, chunks: Sequence[Any], task: Any, run_opts: dict[str, Any],
@@ -133,19 +150,13 @@ def _split(kw: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any], dict[str
     return open_opts, chunk_opts, run_opts
 
 
-def _sample_points(catalog: Any, chunks: Sequence[Any], classes: Any, source_id: Any) -> np.ndarray:
-    """Selected points of one chunk near the middle of the block (to fix data-driven defaults)."""
-    from . import read_chunk
+def _sample_points(source: Any, chunks: Sequence[Any]) -> np.ndarray:
+    """Selected points of the source's central sample window (to fix data-driven defaults).
 
-    order = sorted(range(len(chunks)), key=lambda i: -len(chunks[i].tiles))
-    for i in order[:3]:
-        cd = read_chunk(catalog, chunks[i])
-        cloud = cd.cloud
-        if classes or source_id:
-            cloud = cloud.select(classes=classes, source_id=source_id)
-        if len(cloud) > 100:
-            return cloud.xyz
-    return np.empty((0, 3))
+    The window does not depend on the chunking, so a file and a folder of its tiles
+    get the same defaults.
+    """
+    return source.sample().xyz
 
 
 # ------------------------------------------------------------------ vector features
@@ -185,13 +196,12 @@ def catalog_features(
     from .jobs_vector import VectorTask, fixed_auto_options, merge_vector_parts
 
     open_opts, chunk_opts, run_opts = _split(dict(common))
-    catalog = open_sources(sources, **open_opts)
-    chunks = make_chunks(catalog, **chunk_opts)
-    cls = tuple(int(c) for c in classes) if classes else None
-    sid = tuple(int(s) for s in source_id) if source_id else None
-    seg_opts, opts = fixed_auto_options(_sample_points(catalog, chunks, cls, sid), kind=kind,
+    catalog = open_sources(sources, classes=classes or None, source_id=source_id or None,
+                           z_to_metres=False, **open_opts)
+    chunks = region_chunks(catalog, **chunk_opts)
+    seg_opts, opts = fixed_auto_options(_sample_points(catalog, chunks), kind=kind,
                                         segment_options=segment_options, options=options)
-    task = VectorTask(kind=kind, classes=cls, source_id=sid, segment_options=seg_opts,
+    task = VectorTask(kind=kind, segment_options=seg_opts,
                       options=opts, bounds=_bounds2d(catalog))
     outcomes, parts = _run(catalog, chunks, task, run_opts, f"{kind.capitalize()}")
     value = merge_vector_parts(parts, tolerance=tolerance, crs=catalog.crs)
@@ -207,6 +217,7 @@ def catalog_vertical_check(
     check: Any,
     *,
     classes: Sequence[int] | None = (2,),
+    source_id: Sequence[int] | None = None,
     max_edge: float | None = None,
     search_radius: float | None = None,
     checkpoint_rmse_v: float = 0.0,
@@ -214,8 +225,16 @@ def catalog_vertical_check(
 ) -> CatalogRun:
     """``checkpoints --vertical`` over a catalog: only chunks holding check points are read.
 
-    The buffer must be at least ``2 x max_edge`` (the ground TIN's reach); the
-    default buffer (tens of metres) is far above that for dense ground.
+    The check points are in the source's CRS and units (heights are converted to
+    metres with the source's factor, as the cloud's); ``source_id`` selects the
+    strips read, ``classes`` the points of the ground TIN. The buffer must be at
+    least ``2 x max_edge`` (the ground TIN's reach); the default buffer (tens of
+    metres) is far above that for dense ground.
+
+    Raises
+    ------
+    NothingToMeasureError
+        No check point could be compared (as for one file).
     """
     from ..accuracy.checkpoints import _as_pointset
     from . import make_chunks
@@ -228,17 +247,27 @@ def catalog_vertical_check(
     )
 
     open_opts, chunk_opts, run_opts = _split(dict(common))
-    catalog = open_sources(sources, **open_opts)
+    catalog = open_sources(sources, source_id=source_id or None, **open_opts)
     cp = _as_pointset(check, "check")
-    chunks = chunks_with_points(make_chunks(catalog, **chunk_opts), cp.xyz)
+    if catalog.z_factor != 1.0:
+        xyz = cp.xyz.copy()
+        xyz[:, 2] *= catalog.z_factor
+        cp = PointSet(cp.ids, xyz, dict(cp.attributes), crs=cp.crs)
+    chunks = chunks_with_points(region_chunks(catalog, **chunk_opts), cp.xyz)
     cls = tuple(int(c) for c in classes) if classes is not None else None
+    if max_edge is None and not chunks:  # no check point inside the catalog: nothing to compare
+        max_edge = math.nan
     if max_edge is None:
         _, spacing = _run(catalog, chunks, CheckSpacingTask(cp.xyz, classes=cls), run_opts,
                           "Ground spacing")
-        max_edge = max_edge_from_spacing(spacing)
+        max_edge = max_edge_from_spacing(spacing) * catalog.xy_factor
     task = VerticalCheckTask(cp, max_edge=float(max_edge), search_radius=search_radius,
-                             classes=cls)
+                             classes=cls, xy_factor=catalog.xy_factor)
     outcomes, parts = _run(catalog, chunks, task, run_opts, "Check points")
+    if catalog.xy_factor != 1.0:
+        xyz = cp.xyz.copy()
+        xyz[:, :2] *= catalog.xy_factor
+        cp = PointSet(cp.ids, xyz, dict(cp.attributes), crs=cp.crs)
     value = merge_vertical(parts, cp, max_edge=float(max_edge), search_radius=search_radius,
                            checkpoint_rmse_v=checkpoint_rmse_v)
     return CatalogRun(value, catalog, tuple(chunks), tuple(outcomes), {"max_edge": max_edge})
@@ -250,10 +279,14 @@ def catalog_heights(
     reference_xyz: Any,
     *,
     classes: Sequence[int] | None = None,
+    source_id: Sequence[int] | None = None,
     options: dict[str, Any] | None = None,
     **common: Any,
 ) -> CatalogRun:
     """Height quality (map point heights, TIN, w-tests) over a catalog.
+
+    The laser points are read through the source: its selection (``classes``,
+    ``source_id``) and its heights in metres; `reference_xyz` must be in metres.
 
     Map points are fitted from the chunk that owns them; a chunk whose buffer
     is too narrow for the fits or the TIN around its reference points fails
@@ -265,17 +298,17 @@ def catalog_heights(
     from .jobs_accuracy import HeightsTask, merge_heights
 
     open_opts, chunk_opts, run_opts = _split(dict(common))
-    catalog = open_sources(sources, **open_opts)
+    catalog = open_sources(sources, classes=classes or None, source_id=source_id or None,
+                           **open_opts)
     mxy = np.asarray(map_xy, dtype=np.float64).reshape(len(map_xy), -1)[:, :2]
     ref = np.asarray(reference_xyz, dtype=np.float64).reshape(-1, 3)
     from .jobs_vector import owned
 
-    if chunk_opts["buffer"] is None:
+    if chunk_opts["buffer"] is None and (catalog.is_catalog or chunk_opts["chunk_size"]):
         chunk_opts["buffer"] = heights_buffer(mxy, options)
-    chunks = tuple(c for c in make_chunks(catalog, **chunk_opts)
+    chunks = tuple(c for c in region_chunks(catalog, **chunk_opts)
                    if owned(mxy, c).any() or owned(ref, c).any())
-    cls = tuple(int(c) for c in classes) if classes else None
-    task = HeightsTask(mxy, ref, options=dict(options or {}), classes=cls,
+    task = HeightsTask(mxy, ref, options=dict(options or {}), classes=None,
                        bounds=_bounds2d(catalog))
     outcomes, parts = _run(catalog, chunks, task, run_opts, "Heights")
     value = merge_heights(parts, mxy, ref, options=options)
@@ -325,14 +358,12 @@ def catalog_repeatability(
     from .jobs_vector import fixed_auto_options
 
     open_opts, chunk_opts, run_opts = _split(dict(common))
-    catalog = open_sources(sources, **open_opts)
-    chunks = make_chunks(catalog, **chunk_opts)
-    cls = tuple(int(c) for c in classes) if classes else None
-    sid = tuple(int(s) for s in source_id) if source_id else None
-    seg_opts, e_opts = fixed_auto_options(_sample_points(catalog, chunks, cls, sid),
+    catalog = open_sources(sources, classes=classes or None, source_id=source_id or None,
+                           z_to_metres=False, **open_opts)
+    chunks = region_chunks(catalog, **chunk_opts)
+    seg_opts, e_opts = fixed_auto_options(_sample_points(catalog, chunks),
                                           segment_options=segment_options, options=edge_options)
-    task = StripEdgesTask(classes=cls, source_ids=sid, segment_options=seg_opts,
-                          edge_options=e_opts)
+    task = StripEdgesTask(segment_options=seg_opts, edge_options=e_opts)
     outcomes, parts = _run(catalog, chunks, task, run_opts, "Strip edges")
     strips = merge_strip_edges(parts, tolerance=tolerance)
     rows = strip_pairs(strips, **(match_options or {}))

@@ -143,6 +143,8 @@ def _title(opts: dict) -> str:
     order=50,
 )
 def run_checkpoints(ctx: RunContext, item: AnalysisItem) -> SectionResult:
+    from ...tiling.source import is_catalog_input
+
     """Check points: residuals, RMSE and ASPRS/NSSDA figures (or the vertical check of a cloud)."""
     from ...io.vector import PointSet
     from .. import plots
@@ -185,13 +187,30 @@ def run_checkpoints(ctx: RunContext, item: AnalysisItem) -> SectionResult:
         if len(idx) < c["n"]:
             notes.append(f"only {len(idx)} of the {c['n']} requested check points could be sampled")
         write_vector(ctx, item, check, "check_points", opts["format"], notes)
+    run = None
     if opts["vertical"]:
-        tested = ctx.select(opts["measured"], None, opts["source_ids"])
         measured_label = selection_label(opts["measured"], None, opts["source_ids"])
+        spec = ctx.config.inputs[opts["measured"]]
         with ctx.step(f"Vertical check of {measured_label}"):
-            rep = mod.vertical_check(
-                tested.xyz, check, classification=tested.classification, **item.params
-            )
+            if is_catalog_input(str(spec.path)):  # chunk by chunk, only chunks with check points
+                from ...tiling.jobs_api import catalog_vertical_check
+                from ...tiling.source import open_source
+
+                source = open_source(str(spec.path), z_to_metres=False)
+                params = dict(item.params)
+                classes = params.pop("classes", (2,))
+                run = catalog_vertical_check(
+                    source, check, classes=tuple(np.atleast_1d(classes).tolist()),
+                    source_id=opts["source_ids"], skip_failed=True, **params)
+                rep = run.value
+                paragraphs.append(
+                    f"{opts['measured']} is a catalog: each check point is compared in the "
+                    "chunk whose core holds it; only those chunks are read.")
+            else:
+                tested = ctx.select(opts["measured"], None, opts["source_ids"])
+                rep = mod.vertical_check(
+                    tested.xyz, check, classification=tested.classification, **item.params
+                )
         residuals = np.column_stack([np.zeros(len(rep.dz)), np.zeros(len(rep.dz)), rep.dz])
         ok = rep.flag == "ok"
         residuals[~ok] = np.nan
@@ -320,7 +339,7 @@ def run_checkpoints(ctx: RunContext, item: AnalysisItem) -> SectionResult:
             f"RMSE z {res['rmse_z']:.3f} m, RMSE h {res['rmse_h']:.3f} m over {res['n_check']} "
             f"check points"
         )
-    return SectionResult(
+    out = SectionResult(
         results=res,
         headline=headline,
         figures=figures,
@@ -329,6 +348,11 @@ def run_checkpoints(ctx: RunContext, item: AnalysisItem) -> SectionResult:
         paragraphs=paragraphs,
         caveats=caveats,
     )
+    if run is not None:
+        from ..catalog_overview import with_overview
+
+        out = with_overview(out, run, f"{opts['measured']}: chunks read")
+    return out
 
 
 def _with_unit(key: str) -> str:
