@@ -30,7 +30,6 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import AnalysisError
 from .html import Figure, Table
 
 __all__ = ["catalog_analysis", "catalog_crs", "catalog_record", "is_catalog_path"]
@@ -150,20 +149,6 @@ def _edge_options(options: dict[str, Any]) -> tuple[dict[str, Any], dict[str, An
     """(plane segmentation options, edge options) from ``extract_edges`` keywords."""
     params = dict(options)
     return {k: params.pop(k) for k in _SEGMENT_KEYS if k in params}, params
-
-
-def catalog_edges(path: Any, classes: Any, source_id: Any, options: dict[str, Any]) -> Any:
-    """The edges of a catalog selection, each edge once (what ``ctx.edges`` gives for a
-    catalog input, e.g. for the ``lines`` analysis)."""
-    from ..tiling.jobs_api import catalog_features
-
-    seg_opts, params = _edge_options(options)
-    run = catalog_features(path, kind="edges", classes=classes, source_id=source_id,
-                           segment_options=seg_opts, options=params)
-    if run.failed:
-        raise AnalysisError(f"edges of the catalog {path}: chunk(s) {', '.join(run.failed)} "
-                            "failed")
-    return run.value
 
 
 def _edges(ctx: Any, item: Any) -> Any:
