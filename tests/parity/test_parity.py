@@ -173,6 +173,7 @@ def test_checkpoints_vertical_source_id_changes_the_catalog_answer(ign, tmp_path
 
 
 @needs_shared
+@pytest.mark.slow
 def test_checkpoints_with_nothing_to_measure_fail_alike(ign, tmp_path):
     """Regression: zero usable check points gave NaN figures on a catalog."""
     for src in (ign["file"], ign["folder"]):
