@@ -244,6 +244,9 @@ def vertical_on_catalog(
         from ..tiling.source import open_source
 
         source = open_source(source.catalog, crs=chk.crs)
+    from .checkpoints import _unit_factors
+
+    _unit_factors(crs_used, "MEASURED")  # refuses a geographic CRS, as for one file
     notes: list[str] = []
     if source.z_factor != 1.0 or source.xy_factor != 1.0:
         from ..io.crs import horizontal_unit, vertical_unit
