@@ -10,7 +10,16 @@ from ._version import __version__
 from .errors import LidarQAError
 from .io import PointCloud, open, read, write  # noqa: A004
 
-__all__ = ["__version__", "LidarQAError", "PointCloud", "read", "write", "open", "show_versions"]
+__all__ = ["__version__", "LidarQAError", "PointCloud", "read", "write", "open", "open_source",
+           "show_versions"]
+
+
+def __getattr__(name: str):
+    if name == "open_source":  # lazy: the tiling package is not needed to read one file
+        from .tiling.source import open_source
+
+        return open_source
+    raise AttributeError(f"module 'lidarqa' has no attribute {name!r}")
 
 
 def show_versions() -> dict[str, str | None]:

@@ -23,6 +23,7 @@ __all__ = [
     "TargetNotMetError",
     "NothingToMeasureError",
     "TilingError",
+    "CatalogError",
     "MissingDependencyError",
     "LidarQAWarning",
     "DegenerateGeometryWarning",
@@ -99,6 +100,10 @@ class NothingToMeasureError(LidarQAError, ValueError):
 
 class TilingError(LidarQAError):
     """Tiled processing could not be set up or merged."""
+
+
+class CatalogError(TilingError, ReadError):
+    """A catalog cannot be built: missing/corrupt/duplicate files, empty folder, mixed CRSs."""
 
 
 class MissingDependencyError(LidarQAError, ImportError):

@@ -5,26 +5,20 @@ from __future__ import annotations
 import contextlib
 import signal
 from collections.abc import Iterator, Sequence
-from pathlib import Path
 from typing import Any
 
 import click
 
-from ._common import Steps, echo, finish, settings
+from ._common import Steps, echo, finish
 
-__all__ = ["is_catalog", "ground_on_catalog", "info_on_catalog", "sigterm_as_interrupt"]
+__all__ = ["bad_lines", "is_catalog", "info_on_catalog", "sigterm_as_interrupt"]
 
 
 def is_catalog(paths: Sequence[str]) -> bool:
     """True for several paths, a folder, a glob pattern or a ``.vpc`` file."""
-    if len(paths) != 1:
-        return True
-    p = paths[0]
-    return (
-        Path(p).is_dir()
-        or Path(p).suffix.lower() == ".vpc"
-        or (any(ch in p for ch in "*?[") and not Path(p).exists())
-    )
+    from ..tiling.source import is_catalog_input
+
+    return is_catalog_input(list(paths))
 
 
 @contextlib.contextmanager
@@ -49,103 +43,11 @@ def sigterm_as_interrupt() -> Iterator[None]:
         signal.signal(signal.SIGTERM, old)
 
 
-def _bad_lines(bad: Sequence[tuple[str, str]]) -> None:
+def bad_lines(bad: Sequence[tuple[str, str]]) -> None:
     if bad:
         click.echo(f"Skipped {len(bad)} bad input(s):", err=True)
         for p, r in bad:
             click.echo(f"  {p}: {r}", err=True)
-
-
-def ground_on_catalog(
-    paths: Sequence[str],
-    output: str,
-    *,
-    method: str,
-    preset: str | None,
-    params: dict[str, Any],
-    sensor: str = "auto",
-    all_returns: bool,
-    exclude_classes: Any,
-    evaluate: bool,
-    ignore_classes: Any,
-    chunk_size: float | None,
-    buffer: float | None,
-    workers: int | None,
-    scheduler: str | None,
-    resume: bool,
-    skip_bad: bool,
-) -> None:
-    from ..tiling import open_catalog
-    from ..tiling.ground import ground_catalog
-
-    s = settings()
-    if s.json_path:
-        from ..io import check_output
-
-        check_output(s.json_path, overwrite=s.overwrite)
-    steps = Steps()
-    with steps(f"Reading the headers of {', '.join(paths)}"):
-        catalog = open_catalog(list(paths), skip_bad=skip_bad)
-    _bad_lines(catalog.bad)
-    with sigterm_as_interrupt():
-        result = ground_catalog(
-            catalog,
-            output,
-            method=method,
-            preset=preset,
-            sensor=sensor,
-            last_returns_only=not all_returns,
-            exclude_classes=exclude_classes or (),
-            evaluate=evaluate,
-            ignore_classes=ignore_classes,
-            chunk_size=chunk_size,
-            buffer=buffer,
-            workers=workers,
-            scheduler=scheduler,
-            resume=resume,
-            skip_bad=skip_bad,
-            overwrite=s.overwrite,
-            progress=not s.quiet,
-            **params,
-        )
-    res = result.to_dict()
-    for w in result.warnings:
-        click.echo(f"Warning: {w}", err=True)
-    echo(f"{len(catalog.tiles)} tile(s) -> {output}  ({result.vpc})")
-    echo(f"  method          {method}")
-    auto = result.parameters.get("auto")
-    if auto:
-        echo(f"  parameters      auto: {auto['regime']} (measured once on a sample of whole tiles)")
-    echo(
-        f"  chunks          {result.n_chunks} of {result.chunk_size:g} m, "
-        f"buffer {result.buffer:g} m"
-        + (f" ({result.n_chunks_resumed} resumed)" if result.n_chunks_resumed else "")
-    )
-    echo(f"  points          {res['n_points']:,}")
-    from .ground import echo_ground_counts
-
-    echo_ground_counts(res, result.evaluation, " (counts summed over chunks)")
-    if catalog.bad:
-        echo(f"  skipped         {len(catalog.bad)} bad input(s)")
-    finish(
-        "ground",
-        inputs={"paths": list(paths), "output": output},
-        parameters={
-            "method": method,
-            "preset": preset,
-            "sensor": sensor,
-            "last_returns_only": not all_returns,
-            "exclude_classes": list(exclude_classes or []),
-            "ignore_classes": list(ignore_classes or []),
-            "chunk_size": result.chunk_size,
-            "buffer": result.buffer,
-            "workers": workers,
-            "scheduler": scheduler,
-            **result.parameters.get("filter", {}),
-            **({"auto": result.parameters["auto"]} if "auto" in result.parameters else {}),
-        },
-        results=res,
-    )
 
 
 def _strip_counts(catalog: Any) -> tuple[dict[int, int], dict[str, list[int]]]:
@@ -176,7 +78,7 @@ def info_on_catalog(paths: Sequence[str], *, skip_bad: bool = False, strips: boo
 
     with Steps()(f"Reading the headers of {', '.join(paths)}"):
         catalog = open_catalog(list(paths), skip_bad=skip_bad)
-    _bad_lines(catalog.bad)
+    bad_lines(catalog.bad)
     d = catalog.to_dict()
     chunks = make_chunks(catalog)
     d["default_chunks"] = {

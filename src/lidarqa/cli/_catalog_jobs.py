@@ -94,12 +94,12 @@ def _engine(scheduler: str | None, workers: int | None) -> Iterator[Any]:
 def _open(paths: Sequence[str], skip_bad: bool | None, steps: Steps, *, crs: Any = None,
           z_to_metres: bool = True) -> Any:
     from ..tiling.source import open_source
-    from ._catalog import _bad_lines
+    from ._catalog import bad_lines
 
     with steps(f"Reading the headers of {', '.join(paths)}"):
         source = open_source(list(paths), skip_bad=bool(skip_bad), crs=crs,
                              z_to_metres=z_to_metres)
-    _bad_lines(source.bad)
+    bad_lines(source.bad)
     return source
 
 
@@ -244,6 +244,9 @@ def vertical_on_catalog(
         from ..tiling.source import open_source
 
         source = open_source(source.catalog, crs=chk.crs)
+    from .checkpoints import _unit_factors
+
+    _unit_factors(crs_used, "MEASURED")  # refuses a geographic CRS, as for one file
     notes: list[str] = []
     if source.z_factor != 1.0 or source.xy_factor != 1.0:
         from ..io.crs import horizontal_unit, vertical_unit

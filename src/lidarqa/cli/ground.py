@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
 
 import click
 
-from ._catalog import is_catalog
+from ._catalog import bad_lines, is_catalog, sigterm_as_interrupt
 from ._common import (
     INT_LIST,
     Steps,
@@ -16,6 +17,7 @@ from ._common import (
     finish,
     input_crs,
     prepare_outputs,
+    settings,
 )
 
 if TYPE_CHECKING:
@@ -241,8 +243,6 @@ def ground(
         )
     params.update(given)
     if is_catalog(paths) or any(v is not None for v in catalog_opts.values()):
-        from ._catalog import ground_on_catalog
-
         ground_on_catalog(
             paths,
             output,
@@ -385,3 +385,93 @@ def echo_terrain(t: dict | None) -> None:
             "ground surface per ground point"
             + (f": {t['note']}" if t["reference_thinned"] else "")
         )
+
+
+def ground_on_catalog(
+    paths: Sequence[str],
+    output: str,
+    *,
+    method: str,
+    preset: str | None,
+    params: dict[str, Any],
+    sensor: str = "auto",
+    all_returns: bool,
+    exclude_classes: Any,
+    evaluate: bool,
+    ignore_classes: Any,
+    chunk_size: float | None,
+    buffer: float | None,
+    workers: int | None,
+    scheduler: str | None,
+    resume: bool,
+    skip_bad: bool,
+) -> None:
+    from ..tiling import open_catalog
+    from ..tiling.ground import ground_catalog
+
+    s = settings()
+    if s.json_path:
+        from ..io import check_output
+
+        check_output(s.json_path, overwrite=s.overwrite)
+    steps = Steps()
+    with steps(f"Reading the headers of {', '.join(paths)}"):
+        catalog = open_catalog(list(paths), skip_bad=skip_bad)
+    bad_lines(catalog.bad)
+    with sigterm_as_interrupt():
+        result = ground_catalog(
+            catalog,
+            output,
+            method=method,
+            preset=preset,
+            sensor=sensor,
+            last_returns_only=not all_returns,
+            exclude_classes=exclude_classes or (),
+            evaluate=evaluate,
+            ignore_classes=ignore_classes,
+            chunk_size=chunk_size,
+            buffer=buffer,
+            workers=workers,
+            scheduler=scheduler,
+            resume=resume,
+            skip_bad=skip_bad,
+            overwrite=s.overwrite,
+            progress=not s.quiet,
+            **params,
+        )
+    res = result.to_dict()
+    for w in result.warnings:
+        click.echo(f"Warning: {w}", err=True)
+    echo(f"{len(catalog.tiles)} tile(s) -> {output}  ({result.vpc})")
+    echo(f"  method          {method}")
+    auto = result.parameters.get("auto")
+    if auto:
+        echo(f"  parameters      auto: {auto['regime']} (measured once on a sample of whole tiles)")
+    echo(
+        f"  chunks          {result.n_chunks} of {result.chunk_size:g} m, "
+        f"buffer {result.buffer:g} m"
+        + (f" ({result.n_chunks_resumed} resumed)" if result.n_chunks_resumed else "")
+    )
+    echo(f"  points          {res['n_points']:,}")
+    echo_ground_counts(res, result.evaluation, " (counts summed over chunks)")
+    if catalog.bad:
+        echo(f"  skipped         {len(catalog.bad)} bad input(s)")
+    finish(
+        "ground",
+        inputs={"paths": list(paths), "output": output},
+        parameters={
+            "method": method,
+            "preset": preset,
+            "sensor": sensor,
+            "last_returns_only": not all_returns,
+            "exclude_classes": list(exclude_classes or []),
+            "ignore_classes": list(ignore_classes or []),
+            "chunk_size": result.chunk_size,
+            "buffer": result.buffer,
+            "workers": workers,
+            "scheduler": scheduler,
+            **result.parameters.get("filter", {}),
+            **({"auto": result.parameters["auto"]} if "auto" in result.parameters else {}),
+        },
+        results=res,
+    )

@@ -37,21 +37,10 @@ from ._common import (
 OUT_SUFFIXES = (".csv", ".gpkg", ".geojson")  # GeoJSON: unfitted map points are written 2D
 
 
-def _horizontal_vertical(crs: Any) -> tuple[Any, Any]:
-    if crs is None:
-        return None, None
-    if crs.is_compound and len(crs.sub_crs_list) >= 2:
-        return crs.sub_crs_list[0], crs.sub_crs_list[1]
-    return crs, None
-
-
 def _check_crs(a: Any, b: Any, names: tuple[str, str]) -> None:
-    from ..io.crs import ensure_same_crs
+    from ..io.crs import ensure_same_crs_parts
 
-    ha, va = _horizontal_vertical(a)
-    hb, vb = _horizontal_vertical(b)
-    ensure_same_crs(ha, hb, what=names)
-    ensure_same_crs(va, vb, what=(names[0] + " vertical", names[1] + " vertical"))
+    ensure_same_crs_parts(a, b, what=names)
 
 
 def _read_reference(path: str, crs: Any = None) -> Any:
@@ -512,9 +501,8 @@ def _heights_by_levels(
 ) -> None:
     """``lidarqa heights`` with road polygons: test each reference point on its own level."""
     from ..accuracy.roads import compare_road_heights, read_road_polygons, reconstruct_roads
-    from ..io.crs import z_to_metres_factor
+    from ..io.crs import check_map_crs, z_to_metres_factor
     from ..io.vector import PointSet
-    from .roads import check_map_crs
 
     with steps("Reading road polygons and reference points"):
         polys, ids, crs = read_road_polygons(map_path)

@@ -40,31 +40,6 @@ def _parse_shift(value: str | None) -> tuple[float, float] | None:
     return dx, dy
 
 
-def check_map_crs(cloud_crs: object, map_crs: object, polygons: np.ndarray, path: str) -> None:
-    """Cloud and map CRS must agree; say so when a projected map was read as WGS 84.
-
-    A GeoJSON file without a ``crs`` member is WGS 84 by definition, so a map
-    digitised in a projected CRS and saved that way reads as longitude/latitude.
-    """
-    import shapely
-
-    from ..errors import CRSMismatchError
-    from .heights import _check_crs
-
-    try:
-        _check_crs(cloud_crs, map_crs, ("cloud", "map"))
-    except CRSMismatchError as exc:
-        x0, y0, x1, y1 = shapely.total_bounds(polygons)
-        geographic = bool(getattr(map_crs, "is_geographic", False))
-        if geographic and not (-180 <= x0 <= x1 <= 180 and -90 <= y0 <= y1 <= 90):
-            raise CRSMismatchError(
-                f"{exc}. The map's coordinates are not longitude/latitude: {Path(path).name} "
-                "has no CRS of its own (a GeoJSON file without a 'crs' member is WGS 84 by "
-                "definition); store the map with its CRS, e.g. as a GeoPackage"
-            ) from exc
-        raise
-
-
 def _fmt_cm(v: float) -> str:
     return "n/a" if v is None or not np.isfinite(v) else f"{v * 100:.1f} cm"
 
@@ -189,7 +164,7 @@ def roads(
     unless given. Writes 3D map points, 3D polygons (one per level) and a TIN.
     """
     from ..accuracy.roads import read_road_polygons, reconstruct_roads, write_roads
-    from ..io.crs import z_to_metres_factor
+    from ..io.crs import check_map_crs, z_to_metres_factor
     from ..tiling.source import open_source
 
     given_crs = input_crs(crs)

@@ -247,7 +247,8 @@ def swaths(
     if on_catalog:
         from ._catalog_jobs import _engine, _open
 
-        catalog = _open(files, cat_opts.get("skip_bad"), steps)
+        # heights are converted by the chunk task (as load_strips does for files)
+        catalog = _open(files, cat_opts.get("skip_bad"), steps, z_to_metres=False)
         crs = catalog.crs
         with _engine(cat_opts.get("scheduler"), cat_opts.get("workers")) as eng:
             from ..tiling.jobs_swaths import catalog_swaths

@@ -24,6 +24,8 @@ __all__ = [
     "vertical_unit",
     "z_to_metres_factor",
     "heights_to_metres",
+    "ensure_same_crs_parts",
+    "check_map_crs",
     "reproject",
     "ensure_same_crs",
     "parse_crs",
@@ -238,6 +240,48 @@ def ensure_same_crs(
             f"{what[0]} CRS ({crs_label(a)}) differs from {what[1]} CRS ({crs_label(b)}); "
             "reproject one of them first"
         )
+
+
+def _horizontal_vertical(crs: Any) -> tuple[Any, Any]:
+    if crs is None:
+        return None, None
+    if crs.is_compound and len(crs.sub_crs_list) >= 2:
+        return crs.sub_crs_list[0], crs.sub_crs_list[1]
+    return crs, None
+
+
+def ensure_same_crs_parts(a: Any, b: Any, *, what: tuple[str, str] = ("a", "b")) -> None:
+    """:func:`ensure_same_crs` on the horizontal and on the vertical parts of `a` and `b`.
+
+    A compound CRS is compared part by part, so a 2D CRS matches the horizontal part of a
+    compound one (a missing part is accepted, as a missing CRS).
+    """
+    ha, va = _horizontal_vertical(a)
+    hb, vb = _horizontal_vertical(b)
+    ensure_same_crs(ha, hb, what=what)
+    ensure_same_crs(va, vb, what=(what[0] + " vertical", what[1] + " vertical"))
+
+
+def check_map_crs(cloud_crs: Any, map_crs: Any, polygons: np.ndarray, path: Any) -> None:
+    """Cloud and map CRS must agree; say so when a projected map was read as WGS 84.
+
+    A GeoJSON file without a ``crs`` member is WGS 84 by definition, so a map
+    digitised in a projected CRS and saved that way reads as longitude/latitude.
+    """
+    import shapely
+
+    try:
+        ensure_same_crs_parts(cloud_crs, map_crs, what=("cloud", "map"))
+    except CRSMismatchError as exc:
+        x0, y0, x1, y1 = shapely.total_bounds(polygons)
+        geographic = bool(getattr(map_crs, "is_geographic", False))
+        if geographic and not (-180 <= x0 <= x1 <= 180 and -90 <= y0 <= y1 <= 90):
+            raise CRSMismatchError(
+                f"{exc}. The map's coordinates are not longitude/latitude: {Path(path).name} "
+                "has no CRS of its own (a GeoJSON file without a 'crs' member is WGS 84 by "
+                "definition); store the map with its CRS, e.g. as a GeoPackage"
+            ) from exc
+        raise
 
 
 def reproject(xyz: np.ndarray, source: Any, target: Any) -> np.ndarray:

@@ -189,7 +189,6 @@ class RunContext:
         """The point cloud input `name` (read once)."""
         if name not in self._clouds:
             from ..io import read
-
             from ..tiling.source import is_catalog_input, open_source
 
             spec = self.config.inputs[name]
@@ -241,12 +240,12 @@ class RunContext:
         key = (cloud, _norm_ids(classes), _norm_ids(source_id), _freeze(options))
         spec = self.config.inputs.get(cloud)
         if key not in self._edges and spec is not None and spec.kind == "clouds":
-            from .catalog_analyses import catalog_edges, is_catalog_path
+            from ..tiling.source import is_catalog_input
 
-            if is_catalog_path(spec.path):  # chunk by chunk, each edge once
+            if is_catalog_input(str(spec.path)):  # chunk by chunk, each edge once
                 label = selection_label(cloud, classes, source_id)
                 with self.step(f"Extracting edges ({label}, catalog)"):
-                    self._edges[key] = catalog_edges(spec.path, classes, source_id, options)
+                    self._edges[key] = _catalog_edges(spec.path, classes, source_id, options)
         if key not in self._edges:
             extract_edges = library_attr("lidarqa.geometry.edges", "extract_edges", "edges")
             sub = self.select(cloud, classes, source_id)
@@ -271,6 +270,22 @@ class RunContext:
         p.parent.mkdir(parents=True, exist_ok=True)
         self.outputs.setdefault(item.id, []).append(rel.as_posix())
         return p
+
+
+def _catalog_edges(path: Any, classes: Any, source_id: Any, options: dict[str, Any]) -> Any:
+    """The edges of a catalog selection, each edge once (chunk by chunk)."""
+    from ..errors import AnalysisError
+    from ..tiling.jobs_api import catalog_features
+
+    params = dict(options)
+    seg_opts = {k: params.pop(k) for k in ("grow_radius", "grow_dist", "seed_method",
+                                            "min_segment_size", "max_rmse") if k in params}
+    run = catalog_features(str(path), kind="edges", classes=classes, source_id=source_id,
+                           segment_options=seg_opts, options=params)
+    if run.failed:
+        raise AnalysisError(f"edges of the catalog {path}: chunk(s) {', '.join(run.failed)} "
+                            "failed")
+    return run.value
 
 
 def _norm_ids(value: Any) -> tuple[int, ...] | None:

@@ -12,9 +12,10 @@ overview map (tiles, chunks coloured by status, strips) and the per-chunk
 status table (:mod:`lidarqa.report.catalog_overview`). Available on catalogs:
 ``info`` (the catalog summary from the headers), ``edges``, ``swaths`` (strips by
 ``point_source_id``), ``ground`` (the catalog ground job, ISPRS counts summed over the
-chunks), ``lines`` (edges of catalog inputs extracted chunk by chunk), and
-``heights`` with map-point and reference-point inputs; ``checkpoints`` with
-``vertical = true`` runs chunk by chunk from its own module. Every other analysis
+chunks), and ``lines`` (edges of catalog inputs extracted chunk by chunk).
+``checkpoints`` with ``vertical = true`` and ``heights`` with map-point and
+reference-point files run chunk by chunk from their own modules (one section code for
+a file and a catalog). Every other analysis
 (and heights with points derived from the cloud) runs its file analysis on the
 catalog read into memory through its source, as one region, so a catalog input
 is never refused. Chunks use the default size and buffer and run in this process.
@@ -30,7 +31,6 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import AnalysisError
 from .html import Figure, Table
 
 __all__ = ["catalog_analysis", "catalog_crs", "catalog_record", "is_catalog_path"]
@@ -152,22 +152,6 @@ def _edge_options(options: dict[str, Any]) -> tuple[dict[str, Any], dict[str, An
     return {k: params.pop(k) for k in _SEGMENT_KEYS if k in params}, params
 
 
-def catalog_edges(path: Any, classes: Any, source_id: Any, options: dict[str, Any]) -> Any:
-    """The edges of a catalog selection, each edge once.
-
-    What ``ctx.edges`` gives for a catalog input, e.g. for the ``lines`` analysis.
-    """
-    from ..tiling.jobs_api import catalog_features
-
-    seg_opts, params = _edge_options(options)
-    run = catalog_features(path, kind="edges", classes=classes, source_id=source_id,
-                           segment_options=seg_opts, options=params)
-    if run.failed:
-        raise AnalysisError(f"edges of the catalog {path}: chunk(s) {', '.join(run.failed)} "
-                            "failed")
-    return run.value
-
-
 def _edges(ctx: Any, item: Any) -> Any:
     from ..tiling.jobs_api import catalog_features
     from . import plots
@@ -214,61 +198,6 @@ def _edges(ctx: Any, item: Any) -> Any:
                     "each edge is kept once, by the chunk whose core holds its midpoint."],
     )
     return _with_overview(res, runs[0], f"{name}: chunks")
-
-
-def _heights(ctx: Any, item: Any) -> Any:
-    from ..io.vector import PointSet
-    from ..tiling.jobs_api import catalog_heights
-    from . import plots
-    from ._context import SectionResult
-    from ._context import import_module as _import
-    from ._context import write_vector as _write_vector_safe
-
-    opts = item.options
-    name, m, r = opts["cloud"], opts["map"], opts["reference"]
-    if not isinstance(m, str) or not isinstance(r, str):  # points derived from the cloud
-        from .analyses.heights import run_heights
-
-        return run_heights(ctx, item)  # on the catalog in memory (one region)
-    mod = _import("lidarqa.accuracy.heights", "heights")
-    mp_in = mod.read_map_points(ctx.config.inputs[m].path, spacing=opts["map_spacing"])
-    ref_xyz = ctx.points(r).xyz
-    with ctx.step(f"Heights of {len(mp_in):,} map points on the catalog {name}"):
-        run = catalog_heights(ctx.config.inputs[name].path, mp_in.xyz[:, :2], ref_xyz,
-                              classes=opts["classes"], source_id=opts.get("source_ids"),
-                              options=dict(item.params), skip_failed=True)
-    rep = run.value
-    res = rep.to_dict()
-    mpts = rep.map_points
-    res.update(n_reference=int(len(ref_xyz)), n_reference_outside=int(rep.n_outside),
-               flags=list(rep.flags))
-    notes: list[str] = []
-    mp_set = PointSet(ids=np.arange(len(mpts)), xyz=np.column_stack([mpts.xy, mpts.height]),
-                      crs=ctx.crs, attributes={"sigma": mpts.sigma, "failed": mpts.failed})
-    _write_vector_safe(ctx, item, mp_set.subset(~mpts.failed), "map_points", opts["format"],
-                       notes)
-    ref_set = PointSet(ids=np.arange(len(ref_xyz)), xyz=ref_xyz, crs=ctx.crs,
-                       attributes={"dh": rep.dh, "sigma_dh": rep.sigma_dh, "w": rep.w_values,
-                                   "outlier": rep.outlier, "inside": rep.inside})
-    _write_vector_safe(ctx, item, ref_set, "reference_points", opts["format"], notes)
-    with ctx.step("Plotting heights"):
-        figs = [Figure("w-tests", plots.plot_w_histogram(rep.w_values, critical=rep.w.critical),
-                       "w = Δh / σ_Δh; the red curve is the standard normal density")]
-    c, w = res["comparison"], res["w"]
-    out = SectionResult(
-        results=res,
-        headline=(f"RMS Δh {c['rms']:.3f} m over {c['n']} reference points, "
-                  f"{w['n_outliers']} w-test outlier(s) (catalog)"),
-        figures=figs,
-        tables=[Table("Comparison with the reference", ["quantity", "value"],
-                      [[k, v] for k, v in c.items() if not isinstance(v, list | dict)]),
-                Table("w-tests", ["quantity", "value"], [[k, v] for k, v in w.items()])],
-        notes=notes,
-        paragraphs=[f"{name} is a catalog: each map point is fitted, and each reference point "
-                    "compared, in the chunk whose core holds it; the figures are those of one "
-                    "run over the whole area."],
-    )
-    return _with_overview(out, run, f"{name}: chunks")
 
 
 def _swaths(ctx: Any, item: Any) -> Any:
@@ -373,5 +302,4 @@ _CATALOG_ANALYSES: dict[str, Callable[[Any, Any], Any]] = {
     "lines": _lines,
     "swaths": _swaths,
     "edges": _edges,
-    "heights": _heights,
 }

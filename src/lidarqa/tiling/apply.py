@@ -25,11 +25,86 @@ from __future__ import annotations
 
 import contextlib
 from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-__all__ = ["apply", "engine_for", "owned", "region_chunks"]
+__all__ = ["CatalogRun", "apply", "chunk_status", "engine_for", "open_sources", "owned",
+           "region_chunks"]
+
+
+@dataclass(frozen=True, eq=False)
+class CatalogRun:
+    """A merged catalog job: its ``value`` and how every chunk went.
+
+    Attributes
+    ----------
+    value : object
+        The merged result (Segments/PointSet, VerticalCheckReport, HeightReport,
+        list of repeatability rows).
+    catalog : Catalog
+    chunks : tuple of Chunk
+        The chunks that were run.
+    outcomes : tuple of ChunkOutcome
+        In chunk order.
+    extra : dict
+        Job-specific details (e.g. the strips' edge sets, the fixed parameters).
+    """
+
+    value: Any
+    catalog: Any
+    chunks: tuple[Any, ...]
+    outcomes: tuple[Any, ...]
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def failed(self) -> list[str]:
+        """Ids of the chunks that failed after their retries."""
+        return [o.chunk.id for o in self.outcomes if not o.ok and not getattr(o, "skipped", False)]
+
+    def chunk_status(self) -> list[dict[str, Any]]:
+        """``[{"chunk", "status", "attempts", "error"}]``; status ok, retried, failed or skipped."""
+        return [chunk_status(o) for o in self.outcomes]
+
+    def to_dict(self) -> dict[str, Any]:
+        st = self.chunk_status()
+        counts = {k: sum(1 for s in st if s["status"] == k)
+                  for k in ("ok", "retried", "failed", "skipped")}
+        return {"n_tiles": len(self.catalog.tiles), "n_chunks": len(self.chunks),
+                "chunk_status": counts, "failed_chunks": self.failed}
+
+
+def chunk_status(outcome: Any) -> dict[str, Any]:
+    """One outcome's status: ``ok``, ``retried`` (ok after > 1 attempt), ``failed``, ``skipped``."""
+    attempts = int(getattr(outcome, "attempts", 1) or 1)
+    if getattr(outcome, "skipped", False):
+        status = "skipped"
+    elif outcome.ok:
+        status = "retried" if attempts > 1 else "ok"
+    else:
+        status = "failed"
+    return {"chunk": outcome.chunk.id, "status": status, "attempts": attempts,
+            "error": outcome.error}
+
+
+def open_sources(sources: Any, *, skip_bad: bool = False, crs: Any = None,
+                 classes: Any = None, source_id: Any = None, z_to_metres: bool = True) -> Any:
+    """A :class:`~lidarqa.tiling.source.Source` (see :func:`~lidarqa.tiling.source.open_source`).
+
+    A Source given keeps its CRS and units and takes the selection given here when
+    one is given.
+    """
+    from .source import Source, open_source
+
+    if isinstance(sources, Source):
+        if classes is None and source_id is None:
+            return sources
+        return sources.select(classes=classes, source_id=source_id)
+    return open_source(sources, skip_bad=skip_bad, crs=crs, classes=classes,
+                       source_id=source_id, z_to_metres=z_to_metres)
+
+
 
 
 def owned(xy: Any, chunk: Any) -> np.ndarray:
@@ -134,7 +209,6 @@ def apply(
         ``value`` (the merged result), the source, the chunks and their outcomes.
     """
     from .engine import run_chunks
-    from .jobs_api import CatalogRun, open_sources
 
     source = open_sources(source)
     if chunks is None:

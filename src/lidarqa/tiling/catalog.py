@@ -25,15 +25,11 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import CRSMismatchError, ReadError, TilingError
+from ..errors import CatalogError, CRSMismatchError, ReadError  # noqa: F401
 
 __all__ = ["Catalog", "TileInfo", "open_catalog", "CatalogError", "expand_sources"]
 
 _SUFFIXES = {".las", ".laz"}
-
-
-class CatalogError(TilingError, ReadError):
-    """A catalog cannot be built: missing/corrupt/duplicate files, empty folder, mixed CRSs."""
 
 
 @dataclass(frozen=True)

@@ -31,13 +31,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from ..errors import OptionError
 from ..io.vector import PointSet
+from .apply import CatalogRun, chunk_status, open_sources, region_chunks  # noqa: F401
 
 __all__ = [
     "CatalogRun",
@@ -47,84 +47,6 @@ __all__ = [
     "catalog_vertical_check",
     "open_sources",
 ]
-
-
-@dataclass(frozen=True, eq=False)
-class CatalogRun:
-    """A merged catalog job: its ``value`` and how every chunk went.
-
-    Attributes
-    ----------
-    value : object
-        The merged result (Segments/PointSet, VerticalCheckReport, HeightReport,
-        list of repeatability rows).
-    catalog : Catalog
-    chunks : tuple of Chunk
-        The chunks that were run.
-    outcomes : tuple of ChunkOutcome
-        In chunk order.
-    extra : dict
-        Job-specific details (e.g. the strips' edge sets, the fixed parameters).
-    """
-
-    value: Any
-    catalog: Any
-    chunks: tuple[Any, ...]
-    outcomes: tuple[Any, ...]
-    extra: dict[str, Any] = field(default_factory=dict)
-
-    @property
-    def failed(self) -> list[str]:
-        """Ids of the chunks that failed after their retries."""
-        return [o.chunk.id for o in self.outcomes if not o.ok and not getattr(o, "skipped", False)]
-
-    def chunk_status(self) -> list[dict[str, Any]]:
-        """``[{"chunk", "status", "attempts", "error"}]``; status ok, retried, failed or skipped."""
-        return [chunk_status(o) for o in self.outcomes]
-
-    def to_dict(self) -> dict[str, Any]:
-        st = self.chunk_status()
-        counts = {k: sum(1 for s in st if s["status"] == k)
-                  for k in ("ok", "retried", "failed", "skipped")}
-        return {"n_tiles": len(self.catalog.tiles), "n_chunks": len(self.chunks),
-                "chunk_status": counts, "failed_chunks": self.failed}
-
-
-def chunk_status(outcome: Any) -> dict[str, Any]:
-    """One outcome's status: ``ok``, ``retried`` (ok after > 1 attempt), ``failed``, ``skipped``."""
-    attempts = int(getattr(outcome, "attempts", 1) or 1)
-    if getattr(outcome, "skipped", False):
-        status = "skipped"
-    elif outcome.ok:
-        status = "retried" if attempts > 1 else "ok"
-    else:
-        status = "failed"
-    return {"chunk": outcome.chunk.id, "status": status, "attempts": attempts,
-            "error": outcome.error}
-
-
-def open_sources(sources: Any, *, skip_bad: bool = False, crs: Any = None,
-                 classes: Any = None, source_id: Any = None, z_to_metres: bool = True) -> Any:
-    """A :class:`~lidarqa.tiling.source.Source` (see :func:`~lidarqa.tiling.source.open_source`).
-
-    A Source given keeps its CRS and units and takes the selection given here when
-    one is given.
-    """
-    from .source import Source, open_source
-
-    if isinstance(sources, Source):
-        if classes is None and source_id is None:
-            return sources
-        return sources.select(classes=classes, source_id=source_id)
-    return open_source(sources, skip_bad=skip_bad, crs=crs, classes=classes,
-                       source_id=source_id, z_to_metres=z_to_metres)
-
-
-def region_chunks(source: Any, **chunk_opts: Any) -> list[Any]:
-    """One whole-area region for a single file, else the chunk grid (see :mod:`.apply`)."""
-    from .apply import region_chunks as _regions
-
-    return _regions(source, **chunk_opts)
 
 
 def _run(catalog: Any, chunks: Sequence[Any], task: Any, run_opts: dict[str, Any],
@@ -192,7 +114,6 @@ def catalog_features(
         ``retries``, ``skip_failed``, ``order_seed`` (shuffled submission, for
         tests), ``skip_bad``, ``crs``.
     """
-    from . import make_chunks
     from .jobs_vector import VectorTask, fixed_auto_options, merge_vector_parts
 
     open_opts, chunk_opts, run_opts = _split(dict(common))
@@ -237,7 +158,6 @@ def catalog_vertical_check(
         No check point could be compared (as for one file).
     """
     from ..accuracy.checkpoints import _as_pointset
-    from . import make_chunks
     from .jobs_accuracy import (
         CheckSpacingTask,
         VerticalCheckTask,
@@ -294,7 +214,6 @@ def catalog_heights(
     default buffer is :func:`heights_buffer`. The w-tests and data snooping run
     once over all reference points.
     """
-    from . import make_chunks
     from .jobs_accuracy import HeightsTask, merge_heights
 
     open_opts, chunk_opts, run_opts = _split(dict(common))
@@ -353,7 +272,6 @@ def catalog_repeatability(
     ``extra["strips"]`` the whole-block edges of each strip and
     ``extra["strip_chunks"]`` the chunks where each strip gave edges.
     """
-    from . import make_chunks
     from .jobs_lines import StripEdgesTask, merge_strip_edges, strip_pairs
     from .jobs_vector import fixed_auto_options
 

@@ -170,15 +170,16 @@ class Source:
     @property
     def crs(self) -> Any:
         """The CRS of the points as read (the horizontal part when heights were converted)."""
-        crs = self.catalog.crs if self.catalog is not None else self.cloud.crs
+        crs = self.native_crs
         if self.z_factor != 1.0 and crs is not None and crs.is_compound:
             return crs.sub_crs_list[0]
         return crs
 
     @property
     def native_crs(self) -> Any:
-        """The files' CRS (with its vertical part)."""
-        return self.catalog.crs if self.catalog is not None else self.cloud.crs
+        """The files' CRS (with its vertical part); the given one when they declare none."""
+        crs = self.catalog.crs if self.catalog is not None else self.cloud.crs
+        return crs if crs is not None else self.given_crs
 
     @property
     def is_catalog(self) -> bool:
@@ -448,13 +449,16 @@ def open_source(
             catalog = open_catalog(list(names), skip_bad=skip_bad, crs=given)
             cloud = None
     native = catalog.crs if catalog is not None else cloud.crs
-    if catalog is not None and given is not None and native is not None:
+    if native is None:
+        native = given
+    elif catalog is not None and given is not None:
         resolve_crs(native, given, ", ".join(names) or "the catalog")
     xy_factor = 1.0
     if native is not None:
         from ..io.crs import horizontal_unit
 
-        xy_factor = float(horizontal_unit(native)[1] or 1.0)
+        # degrees are not scaled to metres (a job needing metres refuses a geographic CRS)
+        xy_factor = 1.0 if native.is_geographic else float(horizontal_unit(native)[1] or 1.0)
     z_factor = z_to_metres_factor(native) if z_to_metres else 1.0
     return Source(catalog=catalog, selection=sel, z_factor=float(z_factor),
                   xy_factor=xy_factor, paths=names, cloud=cloud, given_crs=given)

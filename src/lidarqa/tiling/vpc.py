@@ -102,7 +102,7 @@ def write_vpc(catalog: Any, path: str | os.PathLike, *, overwrite: bool = False)
 
 def read_vpc_hrefs(path: str | os.PathLike) -> list[str]:
     """Absolute paths of the files a ``.vpc`` lists (its ``data`` assets, else the first asset)."""
-    from .catalog import CatalogError
+    from ..errors import CatalogError
 
     p = Path(path)
     try:

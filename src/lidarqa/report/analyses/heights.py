@@ -121,17 +121,19 @@ def _resolve(opts: dict, ctx: ResolveContext) -> None:
 )
 def run_heights(ctx: RunContext, item: AnalysisItem) -> SectionResult:
     """Height quality (Oude Elberink & Vosselman): predicted map-point σ, w-tests."""
-    from ...io.vector import PointSet
-    from .. import plots
+    from ...tiling.source import is_catalog_input
 
     mod = import_module("lidarqa.accuracy.heights", "heights")
     opts = item.options
     notes: list[str] = []
     paragraphs: list[str] = []
-    sel = ctx.select(opts["cloud"], opts["classes"], opts["source_ids"])
     label = selection_label(opts["cloud"], opts["classes"], opts["source_ids"])
+    r, m = opts["reference"], opts["map"]
+    spec = ctx.config.inputs[opts["cloud"]]
+    if isinstance(r, str) and isinstance(m, str) and is_catalog_input(str(spec.path)):
+        return _heights_on_catalog(ctx, item, mod, label)
+    sel = ctx.select(opts["cloud"], opts["classes"], opts["source_ids"])
     laser = sel.xyz
-    r = opts["reference"]
     if isinstance(r, str):
         ref_xyz = ctx.points(r).xyz
         ref_label = r
@@ -148,7 +150,6 @@ def run_heights(ctx: RunContext, item: AnalysisItem) -> SectionResult:
             f"{len(ref_xyz):,} points held apart from {label} (fraction {r['fraction']}, "
             f"seed {r['seed']}); the planes use the other {len(laser):,}"
         )
-    m = opts["map"]
     if isinstance(m, str):
         mp = mod.read_map_points(ctx.config.inputs[m].path, spacing=opts["map_spacing"])
         map_xy = mp.xyz[:, :2]
@@ -158,6 +159,41 @@ def run_heights(ctx: RunContext, item: AnalysisItem) -> SectionResult:
         map_label = f"{len(map_xy)} map points on a {m['grid']:g} m grid where laser points exist"
     with ctx.step(f"Heights of {len(map_xy):,} map points, {len(ref_xyz):,} reference points"):
         rep = mod.assess_heights(laser, map_xy, ref_xyz, **item.params)
+    return _heights_section(ctx, item, rep, laser, ref_xyz, notes, paragraphs,
+                            f"Laser points: {label}. Map points: {map_label}. "
+                            f"Reference: {ref_label}.")
+
+
+def _heights_on_catalog(ctx: RunContext, item: AnalysisItem, mod: Any, label: str) -> Any:
+    """The compute half on a catalog: chunk by chunk, each map and reference point owned by
+    one chunk (the figures of one in-memory run); the section is the file's."""
+    from ...tiling.jobs_api import catalog_heights
+    from ...tiling.source import open_source
+    from ..catalog_overview import with_overview
+
+    opts = item.options
+    source = open_source(str(ctx.config.inputs[opts["cloud"]].path), z_to_metres=False)
+    mp = mod.read_map_points(ctx.config.inputs[opts["map"]].path, spacing=opts["map_spacing"])
+    ref_xyz = ctx.points(opts["reference"]).xyz
+    with ctx.step(f"Heights of {len(mp):,} map points on the catalog {opts['cloud']}"):
+        run = catalog_heights(source, mp.xyz[:, :2], ref_xyz, classes=opts["classes"],
+                              source_id=opts["source_ids"], options=dict(item.params),
+                              skip_failed=True)
+    out = _heights_section(
+        ctx, item, run.value, None, ref_xyz, [], [],
+        f"Laser points: {label} (a catalog: each map point is fitted, and each reference point "
+        f"compared, in the chunk whose core holds it). Map points: {len(mp)} from "
+        f"{opts['map']}. Reference: {opts['reference']}.")
+    return with_overview(out, run, f"{opts['cloud']}: chunks")
+
+
+def _heights_section(ctx: RunContext, item: AnalysisItem, rep: Any, laser: Any, ref_xyz: Any,
+                     notes: list[str], paragraphs: list[str], what: str) -> SectionResult:
+    """The section half: tables, figures and outputs of a HeightReport (file or catalog)."""
+    from ...io.vector import PointSet
+    from .. import plots
+
+    opts = item.options
     res = rep.to_dict()
     mpts = rep.map_points
     sig_cls = plots.sigma_class(np.where(mpts.failed, np.nan, mpts.sigma))
@@ -165,12 +201,12 @@ def run_heights(ctx: RunContext, item: AnalysisItem) -> SectionResult:
         lab: int(np.sum(sig_cls == k)) for k, (_, lab, _) in enumerate(plots.SIGMA_CLASSES)
     }
     res.update(
-        n_laser_points=int(len(laser)),
+        n_laser_points=None if laser is None else int(len(laser)),
         n_reference=int(len(ref_xyz)),
         n_reference_outside=int(rep.n_outside),
         flags=list(rep.flags),
     )
-    paragraphs.append(f"Laser points: {label}. Map points: {map_label}. Reference: {ref_label}.")
+    paragraphs.append(what)
     # Outputs.
     mp_set = PointSet(
         ids=np.arange(len(mpts)),
@@ -215,7 +251,8 @@ def run_heights(ctx: RunContext, item: AnalysisItem) -> SectionResult:
             Figure(
                 "Map-point σ",
                 plots.plot_sigma_classes(
-                    mpts.xy, np.where(mpts.failed, np.nan, mpts.sigma), background=laser[:, :2]
+                    mpts.xy, np.where(mpts.failed, np.nan, mpts.sigma),
+                    background=None if laser is None else laser[:, :2],
                 ),
                 "predicted σ of the map-point heights in the three classes of "
                 "Oude Elberink & Vosselman "
