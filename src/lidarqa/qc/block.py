@@ -3,7 +3,7 @@
 - :func:`relative_accuracy`: the swath analysis of ``lidarqa swaths`` over the catalog
   (:func:`lidarqa.tiling.jobs_swaths.catalog_swaths`, strips by point source id) judged
   with the profile's limits: smooth-surface repeatability (intraswath, the worst strip's
-  median max - min residual), swath-overlap RMSDz and largest |dz| (the worst pair).
+  median max - min residual), swath-overlap RMSDz and largest absolute dz (the worst pair).
 - :func:`ground_consistency`: the delivery's class 2 against lidarqa's own ground filter
   (:func:`lidarqa.ground.classify_ground`) on buffered chunks, as a raster of the share of
   points on which the two disagree, and polygons of the cells where most points disagree.
