@@ -305,9 +305,11 @@ def point_checks(stats: PointStats, facts: dict[str, Any], spec: Any, *,
     out["header"] = Check(FAIL if problems else PASS, round(max(off, 0.0), 6), 0.0,
                           "; ".join(problems) if problems else
                           "point count, bounds and points by return match the data")
+    key = ("X, Y, Z and GPS time" if facts["point_format"] not in (0, 2)
+           else "X, Y and Z; the format stores no GPS time")
     out["duplicates"] = Check(
         FAIL if duplicates > spec.max_duplicates else PASS, duplicates, spec.max_duplicates,
-        f"{duplicates:,} duplicate record(s) (same X, Y, Z and GPS time)" if duplicates else
+        f"{duplicates:,} duplicate record(s) (same {key})" if duplicates else
         "no duplicate record")
     zero = stats.source_ids.get(0, 0)
     ids = sorted(stats.source_ids)
