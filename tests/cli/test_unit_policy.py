@@ -95,7 +95,8 @@ def documents(tmp_path_factory) -> dict[str, dict]:
         "heights": ["heights", laz, d / "map.csv", d / "check.csv", "--classes", "2"],
         "swaths": ["swaths", laz, "--by-source-id", "-o", d / "swaths"],
         "roads": ["roads", laz, d / "roads.gpkg", "-o", d / "roads3d.gpkg", "--classes", "2"],
-        "qc": ["qc", laz, "-o", d / "qc", "--checkpoints", d / "check.csv"],
+        "qc": ["qc", laz, "-o", d / "qc", "--checkpoints", d / "check.csv",
+               "--relative-accuracy", "--ground-consistency"],
     }  # fmt: skip
     docs = {}
     for name, args in runs.items():

@@ -33,12 +33,19 @@ from ._common import Steps, common_options, crs_option, echo, finish, prepare_ou
               help="Local worker processes (default 1 = serial, no Dask).")
 @click.option("--scheduler", default=None,
               help="Dask scheduler address (tcp://host:port) or 'serial'.")
+@click.option("--relative-accuracy", is_flag=True, default=False,
+              help="Also judge relative accuracy: the swath analysis (strips by point source "
+                   "id) against the spec's smooth-surface and swath-overlap limits.")
+@click.option("--ground-consistency", is_flag=True, default=False,
+              help="Also map where lidarqa's ground filter disagrees with the delivery's "
+                   "class 2 (information, not judged; slow: filters every point).")
 @crs_option
 @common_options
 def qc(paths: tuple[str, ...], out: str, spec: str, checkpoints: str | None,
        land_cover: str | None, checkpoint_rmse_v: float, reference: str | None,
        reference_tolerance: float, exclude: str | None, workers: int | None,
-       scheduler: str | None, crs: str | None) -> None:
+       scheduler: str | None, relative_accuracy: bool, ground_consistency: bool,
+       crs: str | None) -> None:
     """Check a delivery (PATHS: files, folders, globs, a .vpc) against an acceptance spec.
 
     Per tile: LAS version and point format, CRS as WKT, GPS time type, return
@@ -67,7 +74,9 @@ def qc(paths: tuple[str, ...], out: str, spec: str, checkpoints: str | None,
                         checkpoints=checkpoints, land_cover=land_cover,
                         checkpoint_rmse_v=checkpoint_rmse_v, reference=reference,
                         reference_tolerance=reference_tolerance, exclude=exclude,
-                        engine=engine, progress=not s.quiet, crs=crs)
+                        engine=engine, progress=not s.quiet, crs=crs,
+                        relative_accuracy=relative_accuracy,
+                        ground_consistency=ground_consistency)
     summ = result.summary()
     echo(f"{sp.title}: {summ['n_tiles']} tile(s), {summ['n_pass']} pass, {summ['n_warn']} warn, "
          f"{summ['n_fail']} fail")
@@ -81,7 +90,9 @@ def qc(paths: tuple[str, ...], out: str, spec: str, checkpoints: str | None,
                          "reference": reference, "exclude": exclude},
            parameters={"spec": sp.name, "land_cover": land_cover,
                        "checkpoint_rmse_v": checkpoint_rmse_v,
-                       "reference_tolerance": reference_tolerance, "out": out, "crs": crs},
+                       "reference_tolerance": reference_tolerance, "out": out, "crs": crs,
+                       "relative_accuracy": relative_accuracy,
+                       "ground_consistency": ground_consistency},
            results=doc)
     if result.status == "fail":
         from ..errors import TargetNotMetError

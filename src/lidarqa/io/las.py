@@ -131,13 +131,22 @@ def _cloud_from_points(
     path: Path,
     raw_header: bytes = b"",
     is_subset: bool = False,
+    fields: Any = None,
 ) -> PointCloud:
-    names = [n for n in points.point_format.dimension_names if n not in _XYZ]
+    have = list(points.point_format.dimension_names)
+    if fields is None:
+        names = [n for n in have if n not in _XYZ]
+    else:  # only the dimensions asked for (raw "X", "Y", "Z" integers included on request)
+        names = [n for n in fields if n in have]
     xyz = np.empty((len(points), 3), dtype=np.float64)
     xyz[:, 0] = points.x
     xyz[:, 1] = points.y
     xyz[:, 2] = points.z
-    fields = {name: np.array(points[name]) for name in names}
+    if fields is None:
+        arrays = {name: np.array(points[name]) for name in names}
+    else:  # views where laspy gives one (a chunk's records are not reused)
+        arrays = {name: np.asarray(points[name]) for name in names}
+    fields = arrays
     source = LasSource(
         header=header,
         records=points.array,
@@ -195,11 +204,14 @@ class LasReader:
                 ...
     """
 
-    def __init__(self, path: str | os.PathLike) -> None:
+    def __init__(self, path: str | os.PathLike, *, dimensions: Any = None) -> None:
         laspy = _laspy()
         self.path = _check_input(path)
+        kw = {}
+        if dimensions is not None:
+            kw["decompression_selection"] = _selection(laspy, dimensions)
         try:
-            self._reader = laspy.open(str(self.path))
+            self._reader = laspy.open(str(self.path), **kw)
         except Exception as exc:
             raise LasReadError(f"cannot read {self.path} as LAS/LAZ: {_reason(exc)}") from exc
         self.header = self._reader.header
@@ -222,15 +234,25 @@ class LasReader:
         """Names of the point dimensions in the file."""
         return list(self.header.point_format.dimension_names)
 
-    def chunks(self, chunk_size: int = 5_000_000) -> Iterator[PointCloud]:
-        """Yield successive clouds of at most `chunk_size` points."""
+    def chunks(self, chunk_size: int = 5_000_000, *, fields: Any = None) -> Iterator[PointCloud]:
+        """Yield successive clouds of at most `chunk_size` points.
+
+        Parameters
+        ----------
+        chunk_size : int
+        fields : list of str, optional
+            Only these dimensions in each cloud's ``fields`` (names the file lacks are
+            skipped; ``"X"``, ``"Y"``, ``"Z"`` give the stored integers). Default: every
+            dimension, copied.
+        """
         if chunk_size <= 0:
             raise InvalidPointsError(f"chunk_size must be > 0, got {chunk_size}")
         seen = 0
         try:
             for points in self._reader.chunk_iterator(int(chunk_size)):
                 seen += len(points)
-                yield _cloud_from_points(points, self.header, None, self.path, is_subset=True)
+                yield _cloud_from_points(points, self.header, None, self.path, is_subset=True,
+                                         fields=fields)
         except Exception as exc:
             if isinstance(exc, LasReadError | GeneratorExit):
                 raise
@@ -380,6 +402,34 @@ def read_copc_box(
 def open_las(path: str | os.PathLike) -> LasReader:
     """Open a LAS/LAZ file for streaming (see :class:`LasReader`)."""
     return LasReader(path)
+
+
+# LAZ layers (LAS 1.4 PDRF 6-10) holding each dimension; XY, return numbers and the
+# scanner channel are always decompressed.
+_LAYER_OF = {"Z": "Z", "z": "Z", "classification": "CLASSIFICATION", "withheld": "FLAGS",
+             "overlap": "FLAGS", "synthetic": "FLAGS", "key_point": "FLAGS",
+             "scan_direction_flag": "FLAGS", "edge_of_flight_line": "FLAGS",
+             "intensity": "INTENSITY", "scan_angle": "SCAN_ANGLE", "user_data": "USER_DATA",
+             "point_source_id": "POINT_SOURCE_ID", "gps_time": "GPS_TIME", "red": "RGB",
+             "green": "RGB", "blue": "RGB", "nir": "NIR"}
+
+
+def _selection(laspy: Any, dimensions: Any) -> Any:
+    """The laspy DecompressionSelection decompressing only `dimensions` (layered LAZ).
+
+    Unknown names (extra bytes, wave packets) select their layers too, so a dimension
+    asked for is never left undecompressed; files that are not layered LAZ ignore it.
+    """
+    sel = laspy.DecompressionSelection
+    out = sel.XY_RETURNS_CHANNEL
+    for name in dimensions:
+        layer = _LAYER_OF.get(name)
+        if layer is not None:
+            out |= getattr(sel, layer)
+        elif name not in ("X", "Y", "x", "y", "return_number", "number_of_returns",
+                          "scanner_channel"):
+            out |= sel.WAVEPACKET | sel.ALL_EXTRA_BYTES
+    return out
 
 
 def _new_las(

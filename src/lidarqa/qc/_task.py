@@ -29,6 +29,12 @@ __all__ = ["TileQC", "TileTask", "READ_STEP"]
 #: Points read from a tile at a time (memory per worker: one piece plus the grids).
 READ_STEP = 1_000_000
 
+#: The dimensions qc reads (a layered LAZ tile decompresses only these; no copy of the
+#: others is made). "X", "Y", "Z" are the stored integers, for the duplicate keys.
+QC_FIELDS = ("X", "Y", "Z", "return_number", "number_of_returns", "classification",
+             "withheld", "overlap", "synthetic", "key_point", "scan_angle", "scan_angle_rank",
+             "point_source_id", "gps_time")
+
 
 @dataclass(frozen=True)
 class TileQC:
@@ -70,7 +76,7 @@ class TileTask:
         from ..io.las import LasReader, las_header_facts
 
         spec = self.spec
-        with LasReader(tile.path) as r:
+        with LasReader(tile.path, dimensions=QC_FIELDS) as r:
             facts = las_header_facts(r)
             crs = r.crs
             pf = facts["point_format"]
@@ -81,12 +87,13 @@ class TileTask:
             stats = PointStats()
             keys = []
             has_returns = True
-            for piece in r.chunks(self.read_step):
+            for piece in r.chunks(self.read_step, fields=QC_FIELDS):
                 xyz, f = piece.xyz, piece.fields
                 n = len(xyz)
                 stats = stats + point_stats(xyz, f, max_returns=15 if pf >= 6 else 5)
+                ints = (f.pop("X"), f.pop("Y"), f.pop("Z")) if "X" in f else None
                 keys.append(duplicate_keys(xyz, f.get("gps_time"), scales=facts["scales"],
-                                           offsets=facts["offsets"]))
+                                           offsets=facts["offsets"], ints=ints))
                 first, has = first_return_mask(f, n)
                 has_returns = has_returns and has
                 grids.add(xyz, first=first, counted=counted_mask(f, n, point_format=pf),

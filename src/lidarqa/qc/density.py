@@ -158,7 +158,8 @@ class DensityGrids:
         sid = (np.zeros(int(sel.sum()), dtype=np.int64) if source_id is None
                else np.asarray(source_id)[sel].astype(np.int64))
         cells = fi[sel]
-        for s in np.unique(sid).tolist():
+        present = np.flatnonzero(np.bincount(sid)) if len(sid) else np.zeros(0, np.int64)
+        for s in present.tolist():  # ids are 16-bit: a bincount beats a hashed unique
             if s not in self.slots:
                 self.slots[s] = len(self.counts)
                 self.counts.append(np.zeros(self.fine.nx * self.fine.ny, dtype=np.int32))

@@ -15,7 +15,7 @@ __all__ = ["OUTPUT_NAMES", "check_outputs", "write_outputs", "block_map_png"]
 
 #: Output name -> file name in the output folder.
 OUTPUT_NAMES = {"json": "qc.json", "gpkg": "qc.gpkg", "density": "density.tif",
-                "html": "qc.html"}
+                "html": "qc.html", "ground": "ground_consistency.tif"}
 _COLOURS = {"pass": "#3a9a4a", "warn": "#e0a526", "fail": "#c8352b"}
 
 
@@ -60,6 +60,14 @@ def write_outputs(result: Any, out: str | os.PathLike, *, overwrite: bool = Fals
         write_geotiff(tif, r["array"], x0=r["x0"], y1=r["y1"], cell_size=r["cell"],
                       crs=result.crs, overwrite=overwrite)
         paths["density"] = str(tif)
+    if result.ground is not None:
+        from ..io.raster import write_geotiff
+
+        r = result.ground["raster"]
+        tif = d / OUTPUT_NAMES["ground"]
+        write_geotiff(tif, r["array"], x0=r["x0"], y1=r["y1"], cell_size=r["cell"],
+                      crs=result.crs, overwrite=overwrite)
+        paths["ground"] = str(tif)
     if html:
         page = d / OUTPUT_NAMES["html"]
         _write_html(result, page, overwrite=overwrite)
@@ -115,15 +123,20 @@ def _write_gpkg(result: Any, path: Path, *, overwrite: bool) -> None:
     vgeoms = np.array([shapely.to_wkb(g) for _, g, _ in result.voids], dtype=object)
     vfields = {"path": np.array([p for p, _, _ in result.voids], dtype=object),
                "area_m2": np.array([a for _, _, a in result.voids], dtype=np.float64)}
+    layers = [("tiles", "Polygon", geoms, fields), ("voids", "MultiPolygon", vgeoms, vfields)]
+    if result.ground is not None:
+        gp = result.ground["polygons"]
+        layers.append(("ground_disagreement", "MultiPolygon",
+                       np.array([shapely.to_wkb(g) for g, _ in gp], dtype=object),
+                       {"kind": np.array([k for _, k in gp], dtype=object),
+                        "area_m2": np.array([g.area for g, _ in gp], dtype=np.float64)}))
     crs_wkt = result.crs.to_wkt() if result.crs is not None else None
     import warnings
 
     with atomic_output(path, overwrite=overwrite) as tmp:
         target = tmp.with_suffix(".gpkg")
         try:
-            for i, (layer, gtype, g, f) in enumerate((("tiles", "Polygon", geoms, fields),
-                                                       ("voids", "MultiPolygon", vgeoms,
-                                                        vfields))):
+            for i, (layer, gtype, g, f) in enumerate(layers):
                 if gtype == "MultiPolygon" and len(g):
                     g = np.array([shapely.to_wkb(shapely.multipolygons(
                         shapely.get_parts(shapely.from_wkb(w)))) for w in g], dtype=object)
@@ -145,7 +158,8 @@ def _write_gpkg(result: Any, path: Path, *, overwrite: bool) -> None:
 
 def block_map_png(result: Any) -> bytes:
     """The block map: tile footprints coloured by status, voids outlined (PNG bytes)."""
-    from matplotlib.patches import Patch, Rectangle
+    from matplotlib.collections import PolyCollection
+    from matplotlib.patches import Patch
 
     from ..report.plots import _plt, _png
 
@@ -156,20 +170,27 @@ def block_map_png(result: Any) -> bytes:
         b = np.array([t.footprint for t in tiles])
         x0 = float(np.floor(b[:, 0].min() / 10) * 10)
         y0 = float(np.floor(b[:, 1].min() / 10) * 10)
-        for t in tiles:
+        # one collection for every tile (a patch per tile is slow for thousands of tiles)
+        xa, ya, xb, yb = (b[:, 0] - x0, b[:, 1] - y0, b[:, 2] - x0, b[:, 3] - y0)
+        boxes = np.stack([np.c_[xa, ya], np.c_[xb, ya], np.c_[xb, yb], np.c_[xa, yb]], axis=1)
+        ax.add_collection(PolyCollection(
+            boxes, facecolors=[_COLOURS.get(t.status, "#999") for t in tiles], alpha=0.75,
+            edgecolors="black", linewidths=0.6))
+        for t in tiles if len(tiles) <= 60 else ():
             xa, ya, xb, yb = t.footprint
-            ax.add_patch(Rectangle((xa - x0, ya - y0), xb - xa, yb - ya,
-                                   facecolor=_COLOURS.get(t.status, "#999"), alpha=0.75,
-                                   edgecolor="black", linewidth=0.6))
             bad = [k for k, c in t.checks.items() if c.status == "fail"]
-            if bad and len(tiles) <= 60:
+            if bad:
                 ax.text((xa + xb) / 2 - x0, (ya + yb) / 2 - y0, "\n".join(bad[:3]),
                         ha="center", va="center", fontsize=6)
-        for _, g, _ in result.voids:
-            for part in getattr(g, "geoms", [g]):
-                xs, ys = part.exterior.xy
-                ax.fill(np.asarray(xs) - x0, np.asarray(ys) - y0, facecolor="none",
-                        edgecolor="#1b4f9c", linewidth=1.0)
+        outline = _void_path([g for _, g, _ in result.voids], x0, y0)
+        if outline is not None:  # one artist for every void: thousands stay fast to draw
+            from matplotlib.collections import PathCollection
+
+            # autolim=False: the limits are the tiles'; matplotlib's limit update walks
+            # every segment in Python (seconds for a large block)
+            ax.add_collection(PathCollection([outline], facecolors="none",
+                                             edgecolors="#1b4f9c", linewidths=0.8),
+                              autolim=False)
         ax.set_xlim(b[:, 0].min() - x0, b[:, 2].max() - x0)
         ax.set_ylim(b[:, 1].min() - y0, b[:, 3].max() - y0)
         ax.set_xlabel(f"x − {x0:,.0f} (m)")
@@ -183,6 +204,49 @@ def block_map_png(result: Any) -> bytes:
               loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
     ax.set_title(f"{result.spec.title}: {n['n_tiles']} tile(s)")
     return _png(fig)
+
+
+def _share_png(r: dict[str, Any]) -> bytes:
+    """A 0-1 share raster (row 0 north) as a PNG."""
+    from ..report.plots import _plt, _png
+
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(7.0, 5.5))
+    a = r["array"]
+    h, w = a.shape
+    im = ax.imshow(a, vmin=0.0, vmax=1.0, cmap="magma_r", interpolation="nearest",
+                   extent=(0.0, w * r["cell"], 0.0, h * r["cell"]))
+    fig.colorbar(im, ax=ax, label="share of points disagreeing")
+    ax.set_xlabel(f"x − {r['x0']:,.0f} (m)")
+    ax.set_ylabel(f"y − {r['y1'] - h * r['cell']:,.0f} (m)")
+    return _png(fig)
+
+
+def _void_path(geoms: list[Any], x0: float, y0: float) -> Any:
+    """Every ring (outer and holes) of `geoms` as one compound matplotlib Path, or None.
+
+    Built from flat coordinate arrays (linear in the vertices): one patch per void made
+    a block with ten thousand voids take minutes to draw.
+    """
+    if not geoms:
+        return None
+    import shapely
+    from matplotlib.path import Path as MplPath
+
+    parts = shapely.get_parts(np.asarray(geoms, dtype=object))
+    parts = parts[shapely.get_type_id(parts) == 3]  # polygons
+    if not len(parts):
+        return None
+    rings = shapely.get_rings(parts)
+    xy, ring = shapely.get_coordinates(rings, return_index=True)
+    if not len(xy):
+        return None
+    codes = np.full(len(xy), MplPath.LINETO, dtype=np.uint8)
+    start = np.r_[True, ring[1:] != ring[:-1]]
+    end = np.r_[ring[1:] != ring[:-1], True]
+    codes[start] = MplPath.MOVETO
+    codes[end] = MplPath.CLOSEPOLY
+    return MplPath(xy - np.array([x0, y0]), codes)
 
 
 def _write_html(result: Any, path: Path, *, overwrite: bool) -> None:
@@ -215,14 +279,23 @@ def _write_html(result: Any, path: Path, *, overwrite: bool) -> None:
                                       t.checks[k].message] for t in failing]))
         sections.append(sec)
     for k, b in result.block.items():
-        rows.append(SummaryRow(k.upper(), f"block-{k}", b.get("message", ""),
+        rows.append(SummaryRow(k.upper().replace("_", " "), f"block-{k}", b.get("message", ""),
                                b.get("status", "n/a") if b.get("status") != "warn" else "n/a",
-                               spec.source("max_nva_rmse_m") if k == "nva" else ""))
-        sec = Section(id=f"block-{k}", title=k.upper(), kind="qc",
+                               spec.source(_BLOCK_KEY[k]) if k in _BLOCK_KEY else ""))
+        sec = Section(id=f"block-{k}", title=k.upper().replace("_", " "), kind="qc",
                       headline=b.get("message", ""), verdict=b.get("status", "n/a"))
         scalar = [[kk, _cell(v)] for kk, v in b.items()
                   if not isinstance(v, dict | list) and kk not in ("message",)]
+        scalar += [[f"limit {kk}", _cell(v)] for kk, v in (b.get("limits") or {}).items()]
         sec.tables.append(Table("", ["item", "value"], scalar))
+        if k == "ground_consistency" and result.ground is not None:
+            try:
+                sec.figures.append(Figure(
+                    "Ground disagreement", _share_png(result.ground["raster"]),
+                    "share of the last returns on which the delivery's class 2 and lidarqa's "
+                    "ground filter disagree, per cell (information, not judged)"))
+            except Exception:  # noqa: BLE001 - no matplotlib: the table alone
+                pass
         if isinstance(b.get("matrix"), list):
             codes = b.get("codes", [])
             sec.tables.append(Table("Confusion matrix (rows: reference, columns: delivery)",
@@ -248,6 +321,7 @@ def _write_html(result: Any, path: Path, *, overwrite: bool) -> None:
         tmp.write_text(render_html(report), encoding="utf-8")
 
 
+_BLOCK_KEY = {"nva": "max_nva_rmse_m", "relative_accuracy": "max_swath_rmsdz_m"}
 _LIMIT_KEY = {"las_version": "las_versions", "point_format": "point_formats", "crs": "require_wkt",
               "gps_time": "gps_time_type", "classes": "allowed_classes",
               "duplicates": "max_duplicates", "density": "min_anpd",

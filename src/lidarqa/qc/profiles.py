@@ -13,9 +13,12 @@ own limits starts from a built-in profile (``base = "usgs-ql2"``) and overrides 
     [sources]
     min_anpd = "County RFP 2025, section 3.2"
 
-The LBS section titles are those of the LBS online edition (Collection Requirements;
-Data Processing and Handling Requirements; Tables 1-5); check them against the edition
-your contract names.
+The section and table titles are those of the LBS online table of contents (Collection;
+Data Processing and Handling; Tables 1-5, absolute vertical accuracy being Table 4 and
+land cover Table 3). A citation marked "value not checked" names a section that exists
+but whose number was not verified against the 2024 rev. A text; one marked "not
+verified" could not be located. Check the limits against the edition your contract names
+(the online edition is revised yearly).
 """
 
 from __future__ import annotations
@@ -106,9 +109,9 @@ class QCSpec:
     max_swath_rmsdz_m : float
         Swath overlap difference, RMSDz (m).
     max_swath_abs_dz_m : float
-        Swath overlap difference, largest |dz| of the per-cell differences (m).
+        Swath overlap difference, largest absolute dz of the per-cell differences (m).
     max_scan_angle_deg : float or None
-        Largest |scan angle| (degrees); None: only the LAS range is checked.
+        Largest absolute scan angle (degrees); None: only the LAS range is checked.
     density_cell_m : float or None
         Cell of the density raster and of the ANPD sum (m); default 8 x ANPS.
     sources : dict
@@ -187,40 +190,58 @@ def _ranges(codes: tuple[int, ...]) -> str:
     return ", ".join(out)
 
 
+#: Appended to a citation whose section was found in the LBS online table of contents but
+#: whose wording or value was not checked against the 2024 rev. A text.
+_UNCHECKED = " [section verified; value not checked against the 2024 rev. A text]"
+#: Appended to a citation whose section could not be located either.
+_UNVERIFIED = " [not verified against the LBS text]"
+
+
 def _lbs_sources() -> dict[str, str]:
+    # Section and table titles checked (Nov 2026) against the LBS online table of contents
+    # (usgs.gov "Lidar Base Specification Online: Table of Contents": Collection; Data
+    # Processing and Handling; Tables 1 aggregate nominal pulse spacing and density,
+    # 2 relative vertical accuracy for swath data, 3 land cover classes, 4 absolute
+    # vertical accuracy, 5 minimum classification scheme) and the v2.1 section list
+    # (Nominal Pulse Spacing, Data Voids, Spatial Distribution and Regularity, LAS File
+    # Format, Time of GPS Data, Coordinate Reference System / Well-Known Text, Relative
+    # Vertical Accuracy, Absolute Vertical Accuracy, Point Classification, Point
+    # Duplication). The numbers in the tables were not readable there: see _UNCHECKED.
     return {
-        "las_versions": f"{_LBS}, Data Processing and Handling Requirements: LAS Specification "
-        "version 1.4-R15",
-        "point_formats": f"{_LBS}, Data Processing and Handling Requirements: point data record "
-        "format 6, 7, 8, 9 or 10",
-        "require_wkt": f"{_LBS}, Data Processing and Handling Requirements: horizontal and "
-        "vertical CRS as OGC WKT in the LAS header",
-        "require_vertical_crs": f"{_LBS}, Data Processing and Handling Requirements: horizontal "
-        "and vertical CRS as OGC WKT in the LAS header",
-        "gps_time_type": f"{_LBS}, Data Processing and Handling Requirements: GPS times as "
-        "Adjusted GPS Time (Adjusted Standard GPS Time)",
-        "min_anpd": f"{_LBS}, Collection Requirements: Nominal Pulse Spacing and Density, "
-        "Table 1 (single swath, first returns)",
-        "min_spatial_distribution": f"{_LBS}, Collection Requirements: Spatial Distribution and "
-        "Regularity (2 x ANPS grid, at least 90 % of cells with a first return)",
-        "void_factor": f"{_LBS}, Collection Requirements: Data Voids (areas of (4 x ANPS)² or "
-        "more without first returns, water excepted)",
-        "max_void_area_m2": f"{_LBS}, Collection Requirements: Data Voids",
-        "allowed_classes": f"{_LBS}, Data Processing and Handling Requirements: Point "
-        "Classification, Table 5 (minimum scheme 1, 2, 7, 9, 17, 18, 20, 21, 22; no class 0; "
-        "overage by the overlap flag, not a class)",
-        "max_duplicates": "LAS 1.4 R15 (a point record is one return; duplicated records are "
-        "an export defect)",
-        "max_nva_rmse_m": f"{_LBS}, Absolute Vertical Accuracy, Table 3 (NVA RMSEz); "
-        f"{_ASPRS}, section 7.8",
-        "min_checkpoints": f"{_ASPRS}, section 7.6 (at least 30 check points for a vertical "
-        "accuracy test)",
-        "max_intraswath_m": f"{_LBS}, Relative Vertical Accuracy, Table 2 (smooth surface "
-        "precision)",
-        "max_swath_rmsdz_m": f"{_LBS}, Relative Vertical Accuracy, Table 2 (swath overlap "
-        "difference, RMSDz)",
-        "max_swath_abs_dz_m": f"{_LBS}, Relative Vertical Accuracy, Table 2 (swath overlap "
-        "difference, maximum)",
+        "las_versions": f"{_LBS}, Data Processing and Handling: ASPRS LAS File Format "
+        "(LAS 1.4-R15)",
+        "point_formats": f"{_LBS}, Data Processing and Handling: ASPRS LAS File Format "
+        "(point data record format 6-10)" + _UNCHECKED,
+        "require_wkt": f"{_LBS}, Data Processing and Handling: Coordinate Reference System, "
+        "Well-Known Text (horizontal and vertical CRS as OGC WKT)",
+        "require_vertical_crs": f"{_LBS}, Data Processing and Handling: Coordinate Reference "
+        "System, Well-Known Text",
+        "gps_time_type": f"{_LBS}, Data Processing and Handling: Time of Global Positioning "
+        "System Data (Adjusted Standard GPS time)" + _UNCHECKED,
+        "min_anpd": f"{_LBS}, Collection: Nominal Pulse Spacing, Table 1 (ANPD assessed on "
+        "single swath, first return data)",
+        "min_spatial_distribution": f"{_LBS}, Collection: Spatial Distribution and Regularity "
+        "(2 x ANPS grid, 90 % of cells with a first return)" + _UNCHECKED,
+        "void_factor": f"{_LBS}, Collection: Data Voids ((4 x ANPS)² without first returns, "
+        "water excepted)" + _UNCHECKED,
+        "max_void_area_m2": f"{_LBS}, Collection: Data Voids" + _UNCHECKED,
+        "allowed_classes": f"{_LBS}, Data Processing and Handling: Point Classification, "
+        "Table 5 (minimum classification scheme; overage by the overlap bit flag, not a "
+        "class code)" + _UNCHECKED,
+        "max_duplicates": f"{_LBS}, Data Processing and Handling: Point Duplication"
+        + _UNCHECKED,
+        "max_nva_rmse_m": f"{_LBS}, Data Processing and Handling: Absolute Vertical Accuracy, "
+        f"Table 4 (NVA RMSEz){_UNCHECKED}; {_ASPRS}" + _UNVERIFIED,
+        "min_checkpoints": f"{_ASPRS} (at least 30 check points for a vertical accuracy "
+        "test)" + _UNVERIFIED,
+        "max_intraswath_m": f"{_LBS}, Data Processing and Handling: Relative Vertical "
+        "Accuracy, Intraswath Precision, Table 2 (smooth surface repeatability)" + _UNCHECKED,
+        "max_swath_rmsdz_m": f"{_LBS}, Data Processing and Handling: Relative Vertical "
+        "Accuracy, Interswath (Overlap) Consistency, Table 2 (swath overlap difference, "
+        "RMSDz)" + _UNCHECKED,
+        "max_swath_abs_dz_m": f"{_LBS}, Data Processing and Handling: Relative Vertical "
+        "Accuracy, Interswath (Overlap) Consistency, Table 2 (swath overlap difference, "
+        "maximum)" + _UNCHECKED,
     }
 
 

@@ -77,6 +77,9 @@ class QCResult:
         limit, message, ...}``.
     outputs : dict
         Output name -> path (when written).
+    ground : dict or None
+        With ``ground_consistency``: ``raster`` (share of disagreeing points per cell,
+        as `density`) and ``polygons`` (list of (geometry, kind)).
     """
 
     spec: QCSpec
@@ -86,6 +89,7 @@ class QCResult:
     crs: Any = None
     block: dict[str, dict[str, Any]] = field(default_factory=dict)
     outputs: dict[str, str] = field(default_factory=dict)
+    ground: dict[str, Any] | None = None
 
     @property
     def status(self) -> str:
@@ -212,6 +216,8 @@ def run_qc(
     progress: bool = False,
     html: bool = True,
     crs: Any = None,
+    relative_accuracy: bool = False,
+    ground_consistency: bool = False,
 ) -> QCResult:
     """Check a delivery against an acceptance profile, tile by tile.
 
@@ -246,6 +252,15 @@ def run_qc(
     crs : optional
         CRS assumed for tiles that declare none (they still fail the ``crs`` check: the
         spec wants it in the header).
+    relative_accuracy : bool, default False
+        Also run the swath analysis (strips by point source id; another pass over the
+        points) and judge it with the profile's relative-accuracy limits: the block
+        check ``relative_accuracy`` (:func:`lidarqa.qc.block.relative_accuracy`).
+    ground_consistency : bool, default False
+        Also filter the ground with lidarqa's filter and map where it disagrees with
+        the delivery's class 2 (information, not pass/fail; the costliest option):
+        block entry ``ground_consistency``, ``ground_consistency.tif`` and the
+        ``ground_disagreement`` layer (:func:`lidarqa.qc.block.ground_consistency`).
 
     Returns
     -------
@@ -324,14 +339,25 @@ def run_qc(
                                              progress=progress)
         block["confusion"] = conf
         reports = [_with_check(t, "classification", per_tile.get(t.path)) for t in reports]
+    if relative_accuracy:
+        from .block import relative_accuracy as _relative
+
+        block["relative_accuracy"] = _relative(catalog, spec, engine=engine, progress=progress)
+    ground = None
+    if ground_consistency:
+        from .block import ground_consistency as _ground
+
+        check, raster, polys = _ground(catalog, engine=engine, progress=progress)
+        block["ground_consistency"] = check
+        ground = {"raster": raster, "polygons": polys}
     result = QCResult(spec, tuple(reports), tuple(voids), _block_raster(dens_parts),
-                      catalog.crs, block)
+                      catalog.crs, block, ground=ground)
     if out is not None:
         from .outputs import write_outputs
 
         outputs = write_outputs(result, out, overwrite=overwrite, html=html)
         result = QCResult(result.spec, result.tiles, result.voids, result.density, result.crs,
-                          result.block, outputs)
+                          result.block, outputs, ground)
     return result
 
 

@@ -101,20 +101,23 @@ def find_voids(occupied: np.ndarray, *, x0: float, y0: float, cell: float,
     import shapely
 
     geoms = _label_polygons(labels, n, x0, y0, cell)
-    polys, areas, n_water = [], [], 0
-    for lab in range(1, n + 1):
-        if wet[lab]:
-            n_water += 1
-            continue
-        geom = geoms[lab]
-        if exclude is not None:
-            geom = shapely.difference(geom, exclude)
-            if geom.is_empty or geom.area < min_side * min_side * 0.999:
-                n_water += 1
-                continue
-        polys.append(geom)
-        areas.append(float(geom.area))
-    return VoidResult(tuple(polys), tuple(areas), n_water)
+    keep = [lab for lab in range(1, n + 1) if not wet[lab]]
+    n_water = n - len(keep)
+    arr = np.empty(len(keep), dtype=object)
+    arr[:] = [geoms[lab] for lab in keep]
+    if exclude is not None and len(arr):
+        # vectorised: only voids whose box meets an excluded polygon are cut (an STRtree
+        # query), so the cost is linear in the voids, not voids x exclude polygons
+        tree = shapely.STRtree(shapely.get_parts(exclude))
+        hit = np.unique(tree.query(arr, predicate="intersects")[0])
+        if len(hit):
+            arr[hit] = shapely.difference(arr[hit], exclude)
+        area = shapely.area(arr)
+        gone = shapely.is_empty(arr) | (area < min_side * min_side * 0.999)
+        n_water += int(gone.sum())
+        arr = arr[~gone]
+    areas = shapely.area(arr) if len(arr) else np.zeros(0)
+    return VoidResult(tuple(arr.tolist()), tuple(float(a) for a in areas), n_water)
 
 
 def _label_polygons(labels: np.ndarray, n: int, x0: float, y0: float, cell: float
