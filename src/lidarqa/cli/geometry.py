@@ -112,8 +112,11 @@ def _load(path: str, classes: list[int] | None, source_id: list[int] | None, ste
 
 
 def _auto(path: str, sub: Any, kind: str, opts: dict, options: dict) -> tuple[dict, dict]:
-    """Data-driven defaults (growing radius, support distance) measured on the central sample
-    window the catalog run uses, so a file and a folder of its tiles get the same ones."""
+    """Data-driven defaults (growing radius, support distance) of the central sample window.
+
+    The catalog run measures them there too, so a file and a folder of its tiles get the
+    same ones.
+    """
     from ..tiling.jobs_vector import fixed_auto_options
     from ..tiling.source import open_source, sample_points
 

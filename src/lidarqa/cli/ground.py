@@ -139,7 +139,8 @@ if TYPE_CHECKING:
     "--buffer",
     type=float,
     default=None,
-    help="Catalog: margin read around each chunk, m (default: the seed cell, see docs/catalogs.md).",
+    help="Catalog: margin read around each chunk, m "
+    "(default: the seed cell, see docs/catalogs.md).",
 )
 @click.option(
     "--workers",
@@ -406,6 +407,7 @@ def ground_on_catalog(
     resume: bool,
     skip_bad: bool,
 ) -> None:
+    """`lidarqa ground` on a catalog: the catalog ground job, then the summary."""
     from ..tiling import open_catalog
     from ..tiling.ground import ground_catalog
 

@@ -228,8 +228,11 @@ def lines(
 
 def _side_segments(side: str, path: str, label: str, classes: Any, source_id: Any, given: Any,
                    steps: Steps, cat_opts: dict[str, Any]) -> Any:
-    """One side's segments: a segment file, a cloud's edges, or a catalog's edges (chunked,
-    each edge once) read through a source with this side's selection."""
+    """One side's segments: a segment file, a cloud's edges, or a catalog's edges.
+
+    A catalog is read chunk by chunk (each edge once) through a source with this side's
+    selection.
+    """
     import numpy as np
 
     from ..accuracy._lines_io import load_segments

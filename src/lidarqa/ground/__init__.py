@@ -392,7 +392,7 @@ def classify_ground(
         k: ("given" if k in given else sources.get(k, "default")) for k in filt.to_dict()
     }
     reason = None
-    if measures is not None:
+    if measures is not None and regime is not None:
         notes = parameter_notes(measures, sources, regime, sensor=sensor)
         reason = regime_reason(measures, regime, sensor=sensor)
     else:

@@ -486,7 +486,7 @@ def terrain_scores(
     p = p - np.append(shift, 0.0)
     pg = p[pred & ev]
     rg = p[ref & ev]
-    settings = {
+    settings: dict[str, Any] = {
         "cell": cell,
         "off_limit": off_limit,
         "above_limit": above_limit,

@@ -109,6 +109,7 @@ class GroundConsistencyTask:
     cell: float
 
     def __call__(self, data: Any) -> GroundCells | None:
+        """The ground cells of one chunk (None when it holds no points)."""
         from ..ground import classify_ground
 
         core = data.core
@@ -199,9 +200,9 @@ def ground_consistency(catalog: Any, *, engine: Any = None, progress: bool = Fal
     polys: list[tuple[Any, str]] = []
     bad = (np.nan_to_num(share) > 0.5)
     if bad.any():
+        import shapely
         from rasterio import features
         from rasterio.transform import Affine
-        import shapely
 
         kind = np.where(od.reshape(ny, nx) >= of.reshape(ny, nx), 1, 2).astype(np.int32)
         lab = np.where(bad, kind, 0).astype(np.int32)

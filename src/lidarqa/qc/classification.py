@@ -39,10 +39,12 @@ class ConfusionMatrix:
 
     @property
     def n(self) -> int:
+        """Number of points compared."""
         return int(self.matrix.sum())
 
     @property
     def overall(self) -> float:
+        """Overall accuracy (share of points on the diagonal)."""
         return float(np.trace(self.matrix) / self.n) if self.n else float("nan")
 
     @property
@@ -70,6 +72,7 @@ class ConfusionMatrix:
         return float((po - pe) / (1 - pe)) if pe < 1 else float("nan")
 
     def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dictionary of the matrix and its accuracies."""
         return {"codes": list(self.codes), "matrix": self.matrix.tolist(), "n": self.n,
                 "n_unmatched": self.n_unmatched, "overall_accuracy": self.overall,
                 "kappa_coefficient": self.kappa,
@@ -115,10 +118,11 @@ class ReferenceTask:
     """Per tile: read the tile and the reference points over it, match, count."""
 
     reference_paths: tuple[str, ...]
-    reference_bounds: tuple[tuple[float, float, float, float], ...]
+    reference_bounds: tuple[tuple[float, ...], ...]
     tolerance: float
 
     def __call__(self, tile: Any) -> ConfusionMatrix:
+        """The confusion matrix of one tile against its reference."""
         from ..io.las import read_las
 
         cloud = read_las(tile.path)

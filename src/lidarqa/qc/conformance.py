@@ -42,6 +42,7 @@ class Check:
     message: str = ""
 
     def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dictionary of the conformance facts."""
         return {"status": self.status, "value": self.value, "limit": self.limit,
                 "message": self.message}
 
@@ -60,8 +61,8 @@ class PointStats:
     """Mergeable statistics of a tile's points (``a + b`` is the statistics of both)."""
 
     n: int = 0
-    mins: tuple[float, float, float] = (np.inf, np.inf, np.inf)
-    maxs: tuple[float, float, float] = (-np.inf, -np.inf, -np.inf)
+    mins: tuple[float, ...] = (np.inf, np.inf, np.inf)
+    maxs: tuple[float, ...] = (-np.inf, -np.inf, -np.inf)
     by_return: tuple[int, ...] = (0,) * 15
     invalid_returns: int = 0
     has_returns: bool = True
@@ -241,9 +242,8 @@ def header_checks(facts: dict[str, Any], spec: Any, *, crs: Any = None) -> dict[
     if spec.gps_time_type:
         t = facts["gps_time_type"]
         ok = t == spec.gps_time_type
-        out["gps_time"] = Check(PASS if ok else FAIL, t, spec.gps_time_type,
-                                f"GPS time type: {t}" + ("" if ok else
-                                                         f", the spec requires {spec.gps_time_type}"))
+        msg = f"GPS time type: {t}" + ("" if ok else f", the spec requires {spec.gps_time_type}")
+        out["gps_time"] = Check(PASS if ok else FAIL, t, spec.gps_time_type, msg)
     return out
 
 

@@ -8,7 +8,8 @@ ways, in this order:
 
 1. the LAS 1.4 *overlap* flag (PDRF 6-10), which the LBS requires for overage points;
 2. class 12 in PDRF 0-5 (the legacy "overlap points" class);
-3. when a tile flags no overage at all, unflagged overlap, detected per cell of the spatial-distribution grid (2 x ANPS):
+3. when a tile flags no overage at all, unflagged overlap, detected per cell of the
+   spatial-distribution grid (2 x ANPS):
    in a cell that holds first returns of several point source ids, only one source id
    counts -- the one with the most first returns over the whole tile (not per cell: a
    per-cell maximum of two swaths' counts is biased upwards). A swath border through a
@@ -55,6 +56,7 @@ class Grid:
 
     @classmethod
     def covering(cls, bounds: tuple[float, float, float, float], cell: float) -> Grid:
+        """A grid of `cell` m aligned on multiples of the cell that covers `bounds`."""
         xmin, ymin, xmax, ymax = bounds
         x0 = math.floor(xmin / cell) * cell
         y0 = math.floor(ymin / cell) * cell
@@ -221,6 +223,7 @@ class DensityResult:
     cell: float
 
     def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dictionary of the density figures."""
         return {"anpd_per_m2": self.anpd, "distribution": self.distribution,
                 "n_cells": self.n_cells, "n_distribution_cells": self.n_distribution_cells,
                 "n_multi_swath_cells": self.n_multi_swath_cells}

@@ -174,7 +174,7 @@ def block_map_png(result: Any) -> bytes:
         xa, ya, xb, yb = (b[:, 0] - x0, b[:, 1] - y0, b[:, 2] - x0, b[:, 3] - y0)
         boxes = np.stack([np.c_[xa, ya], np.c_[xb, ya], np.c_[xb, yb], np.c_[xa, yb]], axis=1)
         ax.add_collection(PolyCollection(
-            boxes, facecolors=[_COLOURS.get(t.status, "#999") for t in tiles], alpha=0.75,
+            list(boxes), facecolors=[_COLOURS.get(t.status, "#999") for t in tiles], alpha=0.75,
             edgecolors="black", linewidths=0.6))
         for t in tiles if len(tiles) <= 60 else ():
             xa, ya, xb, yb = t.footprint
@@ -265,7 +265,7 @@ def _write_html(result: Any, path: Path, *, overwrite: bool) -> None:
         verdict = "fail" if n_fail else "pass"
         src = spec.source(_LIMIT_KEY.get(k, k))
         head = (f"{n_fail} of {len(result.tiles)} tile(s) fail" if n_fail else
-                f"every tile passes" + (f" ({len(failing)} warn)" if failing else ""))
+                "every tile passes" + (f" ({len(failing)} warn)" if failing else ""))
         rows.append(SummaryRow(k.replace("_", " "), f"check-{k}", head, verdict, src))
         sec = Section(id=f"check-{k}", title=k.replace("_", " "), kind="qc", headline=head,
                       verdict=verdict)

@@ -165,6 +165,7 @@ class QCSpec:
         return self.sources.get(key, "")
 
     def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dictionary of the limits and their sources."""
         d = asdict(self)
         d["las_versions"] = list(self.las_versions)
         d["point_formats"] = list(self.point_formats)
@@ -349,7 +350,7 @@ def load_spec(path: str | os.PathLike) -> QCSpec:
             raise ConfigError(f"spec file {p}: {k} must be {exc}") from None
     if changes.get("min_anpd", base.min_anpd) <= 0:
         raise ConfigError(f"spec file {p}: min_anpd must be > 0")
-    own = data.get("sources") if isinstance(data.get("sources"), dict) else {}
+    own: dict[str, Any] = data["sources"] if isinstance(data.get("sources"), dict) else {}
     srcs = {**base.sources, **{str(a): str(b) for a, b in own.items()}}
     for k in data:
         if k not in ("sources", "name", "title") and k not in own:

@@ -43,15 +43,17 @@ class TileReport:
 
     path: str
     checks: dict[str, Check]
-    footprint: tuple[float, float, float, float] | None = None
+    footprint: tuple[float, ...] | None = None
     n_points: int = 0
     classes: dict[str, int] = field(default_factory=dict)
 
     @property
     def status(self) -> str:
+        """Worst status of the checks: ``fail``, ``warn`` or ``pass``."""
         return worst(c.status for c in self.checks.values())
 
     def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dictionary ``{path, status, checks}``."""
         names = [k for k in CHECK_ORDER if k in self.checks] + sorted(
             k for k in self.checks if k not in CHECK_ORDER)
         return {"path": self.path, "status": self.status, "n_points": self.n_points,
@@ -93,14 +95,17 @@ class QCResult:
 
     @property
     def status(self) -> str:
+        """Worst status over the tiles and the block checks."""
         return worst([t.status for t in self.tiles]
                      + [b.get("status", PASS) for b in self.block.values()])
 
     @property
     def failed_tiles(self) -> list[str]:
+        """Paths of the tiles that failed a check."""
         return [t.path for t in self.tiles if t.status == FAIL]
 
     def summary(self) -> dict[str, Any]:
+        """Counts of tiles by status and the failing checks."""
         n = {s: sum(1 for t in self.tiles if t.status == s) for s in (PASS, WARN, FAIL)}
         by_check: dict[str, int] = {}
         for t in self.tiles:
@@ -121,6 +126,7 @@ class QCResult:
         }
 
     def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dictionary ``{spec, tiles, block, summary}``."""
         return {"spec": self.spec.to_dict(), "summary": self.summary(),
                 "tiles": [t.to_dict() for t in self.tiles], "block": self.block,
                 "outputs": dict(self.outputs)}
@@ -279,7 +285,8 @@ def run_qc(
     cps = _checkpoints(checkpoints, land_cover) if checkpoints is not None else None
     if land_cover is not None and checkpoints is None:
         raise OptionError("land_cover (VVA) needs check points")
-    catalog = source if isinstance(source, Catalog) else open_catalog(source, skip_bad=True, crs=crs)
+    catalog = (source if isinstance(source, Catalog)
+               else open_catalog(source, skip_bad=True, crs=crs))
     exclude_wkb = _read_exclude(exclude, catalog.crs)
     # tiles in another CRS than the block's are checked too, and fail their crs check
     other: list[Any] = []

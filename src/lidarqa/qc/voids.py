@@ -47,9 +47,11 @@ class VoidResult:
 
     @property
     def total_area(self) -> float:
+        """Total void area in m²."""
         return float(sum(self.areas))
 
     def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dictionary of the voids."""
         return {"n_voids": len(self.areas), "void_area_m2": self.total_area,
                 "n_water": self.n_water}
 

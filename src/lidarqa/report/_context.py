@@ -278,8 +278,8 @@ def _catalog_edges(path: Any, classes: Any, source_id: Any, options: dict[str, A
     from ..tiling.jobs_api import catalog_features
 
     params = dict(options)
-    seg_opts = {k: params.pop(k) for k in ("grow_radius", "grow_dist", "seed_method",
-                                            "min_segment_size", "max_rmse") if k in params}
+    keys = ("grow_radius", "grow_dist", "seed_method", "min_segment_size", "max_rmse")
+    seg_opts: dict[str, Any] = {k: params.pop(k) for k in keys if k in params}
     run = catalog_features(str(path), kind="edges", classes=classes, source_id=source_id,
                            segment_options=seg_opts, options=params)
     if run.failed:

@@ -158,7 +158,7 @@ def make_delivery(
     for (i, j) in tiles:
         x0, y0 = ox + i * tile_size, oy + j * tile_size
         x1, y1 = x0 + tile_size, y0 + tile_size
-        d = planted.get((i, j))
+        d = planted.get((i, j), "")
         dens = sparse_density if d == "sparse" else density
         parts = []
         # swath 1 covers x < mid + w/2, swath 2 x >= mid - w/2
@@ -197,7 +197,7 @@ def make_delivery(
         xyz[:, 0] = np.clip(xyz[:, 0], x0, x1 - 0.001)
         xyz[:, 1] = np.clip(xyz[:, 1], y0, y1 - 0.001)
         xyz = np.round(xyz, 3)
-        f = {
+        f: dict[str, np.ndarray] = {
             "return_number": np.concatenate(rn),
             "number_of_returns": np.concatenate(nr),
             "classification": np.concatenate(cls),

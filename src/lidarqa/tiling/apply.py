@@ -122,8 +122,11 @@ def owned(xy: Any, chunk: Any) -> np.ndarray:
 @contextlib.contextmanager
 def engine_for(engine: Any = None, *, workers: int | None = None,
                scheduler: str | None = None) -> Iterator[Any]:
-    """The engine to run on: `engine` as is, else serial (``workers=1`` or nothing given)
-    or a Dask LocalCluster / scheduler address, started and closed around the block."""
+    """The engine to run on, started and closed around the block.
+
+    `engine` as is; else serial (``workers=1`` or nothing given) or a Dask LocalCluster or
+    scheduler address.
+    """
     from .engine import Engine
 
     if engine is not None:

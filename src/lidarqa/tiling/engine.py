@@ -242,7 +242,7 @@ class TileRef:
     id: str
     index: int
     tiles: tuple[int, ...]
-    buffered: tuple[float, float, float, float]
+    buffered: tuple[float, ...]
 
 
 def run_tile_task(catalog: Any, ref: TileRef, task: Callable[[Any], Any]) -> Any:

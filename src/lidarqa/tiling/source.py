@@ -305,7 +305,7 @@ class Source:
         """A region reading exactly `box` ``(xmin, ymin, xmax, ymax)`` (e.g. a sample)."""
         from .chunks import Chunk
 
-        b = tuple(float(v) for v in box[:4])
+        b = _box4(box)
         if self.catalog is None:
             tiles: tuple[int, ...] = (0,)
         else:
@@ -320,7 +320,7 @@ class Source:
     def area_bounds(self) -> tuple[float, float, float, float]:
         """``(xmin, ymin, xmax, ymax)``: the tiles' header bounds (an in-memory cloud's extent)."""
         if self.catalog is not None:
-            return tuple(float(v) for v in self.catalog.bounds)
+            return _box4(self.catalog.bounds)
         xyz = self.cloud.xyz
         if not len(xyz):
             return (0.0, 0.0, 0.0, 0.0)
@@ -435,7 +435,7 @@ def open_source(
         return replace(src, selection=sel) if sel else src
     given = parse_crs(crs)
     if isinstance(paths, Catalog):
-        catalog, names, cloud = paths, (), None
+        catalog, names, cloud = paths, tuple[str, ...](), None
     else:
         names = tuple(_as_list(paths))
         if not names:
@@ -448,7 +448,7 @@ def open_source(
         else:
             catalog = open_catalog(list(names), skip_bad=skip_bad, crs=given)
             cloud = None
-    native = catalog.crs if catalog is not None else cloud.crs
+    native = catalog.crs if catalog is not None else (cloud.crs if cloud is not None else None)
     if native is None:
         native = given
     elif catalog is not None and given is not None:
@@ -462,3 +462,8 @@ def open_source(
     z_factor = z_to_metres_factor(native) if z_to_metres else 1.0
     return Source(catalog=catalog, selection=sel, z_factor=float(z_factor),
                   xy_factor=xy_factor, paths=names, cloud=cloud, given_crs=given)
+
+
+def _box4(v: Sequence[float]) -> tuple[float, float, float, float]:
+    """``(xmin, ymin, xmax, ymax)`` as floats from the first four values of `v`."""
+    return float(v[0]), float(v[1]), float(v[2]), float(v[3])

@@ -143,10 +143,9 @@ def _title(opts: dict) -> str:
     order=50,
 )
 def run_checkpoints(ctx: RunContext, item: AnalysisItem) -> SectionResult:
-    from ...tiling.source import is_catalog_input
-
     """Check points: residuals, RMSE and ASPRS/NSSDA figures (or the vertical check of a cloud)."""
     from ...io.vector import PointSet
+    from ...tiling.source import is_catalog_input
     from .. import plots
 
     mod = import_module("lidarqa.accuracy.checkpoints", "checkpoints")

@@ -165,8 +165,11 @@ def run_heights(ctx: RunContext, item: AnalysisItem) -> SectionResult:
 
 
 def _heights_on_catalog(ctx: RunContext, item: AnalysisItem, mod: Any, label: str) -> Any:
-    """The compute half on a catalog: chunk by chunk, each map and reference point owned by
-    one chunk (the figures of one in-memory run); the section is the file's."""
+    """The compute half on a catalog, chunk by chunk; the section is the file's.
+
+    Each map and reference point is owned by one chunk, so the figures are those of one
+    in-memory run.
+    """
     from ...tiling.jobs_api import catalog_heights
     from ...tiling.source import open_source
     from ..catalog_overview import with_overview
