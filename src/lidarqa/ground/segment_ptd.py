@@ -225,6 +225,19 @@ class SegmentPTD(TINParameters):
         feet of walls that stand higher.
     join_distance : float, default 0.15
         See `filter_density` (m).
+    terrain_density : float, default 0.0
+        Terrain first (points/m²; 0 = off; only with `filter_density`): the filter
+        first runs, thinned the same way, at this lower density, where a cell is
+        large enough to hold a ground return even under a closed canopy; its ground
+        is the terrain model. The ground of the run at `filter_density` is then
+        kept only up to `terrain_distance` m above the TIN of that terrain, and the
+        terrain's own ground points are added. Under forest the lowest point of a
+        small cell is often a branch or the understorey, and the small cells let the
+        densification climb onto it; the large cells see the ground. In the open the
+        small cells keep their detail (curbs, narrow paths). The automatic
+        parameters of dense airborne clouds set 0.5 (1.4 m cells).
+    terrain_distance : float, default 0.3
+        See `terrain_density` (m).
     facade_distance : float, default 0.0
         Façade segments on trial (m; 0 = off, Lin & Zhang's rule: every point of a
         façade segment is an object). Points of segments flagged as façades by
@@ -296,6 +309,8 @@ class SegmentPTD(TINParameters):
     perched_radius: float = 8.0
     filter_density: float = 0.0
     join_distance: float = 0.15
+    terrain_density: float = 0.0
+    terrain_distance: float = 0.3
     facade_distance: float = 0.0
     roof_ratio: float = 0.0
 
@@ -329,6 +344,8 @@ class SegmentPTD(TINParameters):
         check_positive(self.perched_radius, "perched_radius")
         check_range(self.filter_density, "filter_density", 0.0, MAX_FILTER_DENSITY)
         check_positive(self.join_distance, "join_distance", allow_zero=True)
+        check_range(self.terrain_density, "terrain_density", 0.0, MAX_FILTER_DENSITY)
+        check_positive(self.terrain_distance, "terrain_distance", allow_zero=True)
         check_positive(self.facade_distance, "facade_distance", allow_zero=True)
         check_range(self.roof_ratio, "roof_ratio", 0.0, 1.0)
         if int(self.connect_min_size) != self.connect_min_size or self.connect_min_size < 0:
@@ -440,19 +457,33 @@ class SegmentPTD(TINParameters):
         """`filter_density`: filter the lowest point per cell, then join the others."""
         n = pts.shape[0]
         ci = np.flatnonzero(cand)
-        inner = replace(self, filter_density=0.0)
+        inner = replace(self, filter_density=0.0, terrain_density=0.0)
         if ci.size == 0:
             return inner.run(pts, candidates=cand, progress=progress)
+        terrain = None
+        fine = (0.0, 0.97)
+        if 0 < self.terrain_density < self.filter_density:
+            # a given growing radius is the fine cells'; the coarse cells are wider
+            gr = self.grow_radius
+            if gr is not None:
+                gr = gr * math.sqrt(self.filter_density / self.terrain_density)
+            coarse = replace(
+                self, filter_density=self.terrain_density, terrain_density=0.0, grow_radius=gr
+            )
+            terrain = coarse.run(pts, candidates=cand, progress=stage(progress, 0.0, 0.3))
+            fine = (0.3, 0.97)
         p = pts[ci]
         win, inv, cells = thin_lowest(p, 1.0 / math.sqrt(self.filter_density))
         wp = np.ascontiguousarray(p[win])
-        res = inner.run(wp, progress=stage(progress, 0.0, 0.97))
+        res = inner.run(wp, progress=stage(progress, *fine))
         wg = np.ascontiguousarray(res.ground_mask)
         planes = _cell_planes(cells, wp, wg)
         ok = _join(p, inv, wp, wg, planes, float(self.join_distance))
         ok[win[wg]] = True  # a ground lowest point stays ground whatever its plane says
         ground = np.zeros(n, dtype=bool)
         ground[ci[ok]] = True
+        if terrain is not None:
+            ground = _on_terrain(pts, ground, terrain.ground_mask, self.terrain_distance)
         lab = np.full(n, -1, dtype=np.int64)
         lab[ci] = res.labels[inv]
         report(progress, 1.0)
@@ -696,6 +727,34 @@ def _join(p, inv, wp, wg, planes, tol):  # pragma: no cover - numba
             )
             ok[k] = abs(h) <= tol
     return ok
+
+
+def _on_terrain(
+    pts: np.ndarray, ground: np.ndarray, terrain: np.ndarray, distance: float
+) -> np.ndarray:
+    """`ground` up to `distance` m above the TIN of `terrain`, plus `terrain` itself.
+
+    Points outside the terrain TIN (or on its virtual facets) keep their label.
+    """
+    ti = np.flatnonzero(terrain)
+    if ti.size < 3:
+        return ground
+    from scipy.interpolate import LinearNDInterpolator
+    from scipy.spatial import QhullError
+
+    xyz = pts - colmin(pts)
+    gi = np.flatnonzero(ground & ~terrain)
+    # the TIN of the terrain points alone (Delaunay of their canonical order): no
+    # virtual corners, whose facets would reach past the terrain's hull
+    ts = ti[np.lexsort((ti, xyz[ti, 2], xyz[ti, 1], xyz[ti, 0]))]
+    try:
+        f = LinearNDInterpolator(xyz[ts, :2], xyz[ts, 2])
+    except QhullError:  # terrain points on a line: no surface to test against
+        return ground
+    h = xyz[gi, 2] - f(xyz[gi, :2])
+    out = terrain.copy()
+    out[gi[~(h > distance)]] = True
+    return out
 
 
 def _mask(m: Any, n: int, name: str) -> np.ndarray:
