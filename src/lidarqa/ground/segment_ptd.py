@@ -25,7 +25,7 @@ from .._validate import as_points, check_choice, check_positive, check_range
 from ..errors import DegenerateGeometryWarning, InvalidPointsError, OptionError
 from ..geometry._kernels import centred_moments, grid_keys
 from ._perched import perched_mask
-from ._tin import TIN, tree_workers
+from ._tin import TIN, tree_workers, virtual_hull
 from .features import (
     _segment_planes,
     detect_object_segments,
@@ -483,7 +483,13 @@ class SegmentPTD(TINParameters):
         ground = np.zeros(n, dtype=bool)
         ground[ci[ok]] = True
         if terrain is not None:
-            ground = _on_terrain(pts, ground, terrain.ground_mask, self.terrain_distance)
+            ground = _on_terrain(
+                pts,
+                ground,
+                terrain.ground_mask,
+                self.terrain_distance,
+                1.0 / math.sqrt(self.terrain_density),
+            )
         lab = np.full(n, -1, dtype=np.int64)
         lab[ci] = res.labels[inv]
         report(progress, 1.0)
@@ -730,28 +736,37 @@ def _join(p, inv, wp, wg, planes, tol):  # pragma: no cover - numba
 
 
 def _on_terrain(
-    pts: np.ndarray, ground: np.ndarray, terrain: np.ndarray, distance: float
+    pts: np.ndarray, ground: np.ndarray, terrain: np.ndarray, distance: float, cell: float
 ) -> np.ndarray:
     """`ground` up to `distance` m above the TIN of `terrain`, plus `terrain` itself.
 
-    Points outside the terrain TIN (or on its virtual facets) keep their label.
+    The TIN holds the lowest terrain point per `cell` m (the terrain filter's own
+    cells: the points it decided on, not the ones joined to them, a TIN of a few
+    per cent of the points). Points outside the terrain's convex hull keep their label.
     """
-    ti = np.flatnonzero(terrain)
-    if ti.size < 3:
-        return ground
     from scipy.interpolate import LinearNDInterpolator
     from scipy.spatial import QhullError
 
+    ti = np.flatnonzero(terrain)
+    if ti.size < 3:
+        return ground
     xyz = pts - colmin(pts)
     gi = np.flatnonzero(ground & ~terrain)
-    # the TIN of the terrain points alone (Delaunay of their canonical order): no
-    # virtual corners, whose facets would reach past the terrain's hull
-    ts = ti[np.lexsort((ti, xyz[ti, 2], xyz[ti, 1], xyz[ti, 0]))]
-    try:
-        f = LinearNDInterpolator(xyz[ts, :2], xyz[ts, 2])
-    except QhullError:  # terrain points on a line: no surface to test against
-        return ground
-    h = xyz[gi, 2] - f(xyz[gi, :2])
+    ti = _thin(pts, ti, cell)  # absolute coordinates: the filter's cells
+    if ti.size < 3:
+        return ground | terrain
+    virtual = virtual_hull(xyz, ti, 1.0, colmin(xyz[ti]), colmax(xyz[ti]))
+    h = _height_above_tin(TIN(xyz, ti, virtual), xyz[gi])
+    # facets with a virtual corner reach past the hull of the terrain points: there
+    # the TIN of the terrain points alone (no virtual corners) decides, nan outside
+    rest = np.flatnonzero(np.isnan(h))
+    if rest.size:
+        ts = ti[np.lexsort((ti, xyz[ti, 2], xyz[ti, 1], xyz[ti, 0]))]
+        try:
+            f = LinearNDInterpolator(xyz[ts, :2], xyz[ts, 2])
+            h[rest] = xyz[gi[rest], 2] - f(xyz[gi[rest], :2])
+        except QhullError:  # pragma: no cover - terrain points on a line
+            pass
     out = terrain.copy()
     out[gi[~(h > distance)]] = True
     return out
