@@ -33,8 +33,8 @@ The rules, in short:
   return under a closed canopy); its ground is the terrain model, and the ground of
   the run at :data:`FILTER_DENSITY` is kept only up to 0.3 m above it
   (segment-PTD's `terrain_density`). A preset value, checked on two families: the
-  BC forest tiles (DTM RMSE 0.69/2.62 m to 0.19/0.3x m) and the six IGN 50 m
-  tiles (mean total error 1.18 % to 1.10 %).
+  BC forest tiles (DTM RMSE 0.69/2.62 m to 0.19/0.33 m) and the six IGN 50 m
+  tiles (mean total error 1.18 % to 1.08 %).
 - **Seed cell.** The largest object footprint (the diameter of the largest disc
   inside a raised region of the lowest-point raster) is measured and reported, but
   the seed cell stays at its default (60 m): on small extracts the footprint
