@@ -742,11 +742,9 @@ def _on_terrain(
 
     The TIN holds the lowest terrain point per `cell` m (the terrain filter's own
     cells: the points it decided on, not the ones joined to them, a TIN of a few
-    per cent of the points). Points outside the terrain's convex hull keep their label.
+    per cent of the points). Beyond the TIN's real facets the nearest terrain point
+    is the terrain.
     """
-    from scipy.interpolate import LinearNDInterpolator
-    from scipy.spatial import QhullError
-
     ti = np.flatnonzero(terrain)
     if ti.size < 3:
         return ground
@@ -758,15 +756,13 @@ def _on_terrain(
     virtual = virtual_hull(xyz, ti, 1.0, colmin(xyz[ti]), colmax(xyz[ti]))
     h = _height_above_tin(TIN(xyz, ti, virtual), xyz[gi])
     # facets with a virtual corner reach past the hull of the terrain points: there
-    # the TIN of the terrain points alone (no virtual corners) decides, nan outside
+    # the nearest terrain point (XY) is the terrain (a level extension)
     rest = np.flatnonzero(np.isnan(h))
     if rest.size:
-        ts = ti[np.lexsort((ti, xyz[ti, 2], xyz[ti, 1], xyz[ti, 0]))]
-        try:
-            f = LinearNDInterpolator(xyz[ts, :2], xyz[ts, 2])
-            h[rest] = xyz[gi[rest], 2] - f(xyz[gi[rest], :2])
-        except QhullError:  # pragma: no cover - terrain points on a line
-            pass
+        from scipy.spatial import cKDTree
+
+        _, j = cKDTree(xyz[ti, :2]).query(xyz[gi[rest], :2], workers=tree_workers())
+        h[rest] = xyz[gi[rest], 2] - xyz[ti[j], 2]
     out = terrain.copy()
     out[gi[~(h > distance)]] = True
     return out
