@@ -97,7 +97,7 @@ KEY_UNITS: dict[str, str] = {
         cell_size spacing point_spacing mean_spacing ground_spacing min_spacing
         iter_distance final_distance below_distance connect_distance min_edge_length
         grow_dist grow_radius seed_dist seed_dz seed_radius raised_radius raised_step
-        perched_step perched_radius join_distance facade_distance
+        perched_step perched_radius join_distance terrain_distance facade_distance
         adjacency_dist near_dist max_dist min_length max_rmse instrument_height
         distance length rho rms rmse buffer tolerance cutoff gao_leung_tm gao_leung_mt
         hausdorff_tm hausdorff_mt grid map_spacing median_length median_sigma_line
@@ -157,6 +157,7 @@ KEY_UNITS: dict[str, str] = {
     # per volume/area densities and curvature
     "max_segment_density": "1/m²",
     "filter_density": "1/m²",
+    "terrain_density": "1/m²",
     # the cloud figures of the automatic ground-filter preset (parameters.measured)
     "density": "1/m²",
     "occupied_area": "m²",

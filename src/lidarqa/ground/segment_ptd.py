@@ -25,7 +25,7 @@ from .._validate import as_points, check_choice, check_positive, check_range
 from ..errors import DegenerateGeometryWarning, InvalidPointsError, OptionError
 from ..geometry._kernels import centred_moments, grid_keys
 from ._perched import perched_mask
-from ._tin import TIN, tree_workers
+from ._tin import TIN, tree_workers, virtual_hull
 from .features import (
     _segment_planes,
     detect_object_segments,
@@ -226,6 +226,19 @@ class SegmentPTD(TINParameters):
         feet of walls that stand higher.
     join_distance : float, default 0.15
         See `filter_density` (m).
+    terrain_density : float, default 0.0
+        Terrain first (points/m²; 0 = off; only with `filter_density`): the filter
+        first runs, thinned the same way, at this lower density, where a cell is
+        large enough to hold a ground return even under a closed canopy; its ground
+        is the terrain model. The ground of the run at `filter_density` is then
+        kept only up to `terrain_distance` m above the TIN of that terrain, and the
+        terrain's own ground points are added. Under forest the lowest point of a
+        small cell is often a branch or the understorey, and the small cells let the
+        densification climb onto it; the large cells see the ground. In the open the
+        small cells keep their detail (curbs, narrow paths). The automatic
+        parameters of dense airborne clouds set 0.5 (1.4 m cells).
+    terrain_distance : float, default 0.3
+        See `terrain_density` (m).
     facade_distance : float, default 0.0
         Façade segments on trial (m; 0 = off, Lin & Zhang's rule: every point of a
         façade segment is an object). Points of segments flagged as façades by
@@ -297,6 +310,8 @@ class SegmentPTD(TINParameters):
     perched_radius: float = 8.0
     filter_density: float = 0.0
     join_distance: float = 0.15
+    terrain_density: float = 0.0
+    terrain_distance: float = 0.3
     facade_distance: float = 0.0
     roof_ratio: float = 0.0
 
@@ -330,6 +345,8 @@ class SegmentPTD(TINParameters):
         check_positive(self.perched_radius, "perched_radius")
         check_range(self.filter_density, "filter_density", 0.0, MAX_FILTER_DENSITY)
         check_positive(self.join_distance, "join_distance", allow_zero=True)
+        check_range(self.terrain_density, "terrain_density", 0.0, MAX_FILTER_DENSITY)
+        check_positive(self.terrain_distance, "terrain_distance", allow_zero=True)
         check_positive(self.facade_distance, "facade_distance", allow_zero=True)
         check_range(self.roof_ratio, "roof_ratio", 0.0, 1.0)
         if int(self.connect_min_size) != self.connect_min_size or self.connect_min_size < 0:
@@ -441,19 +458,39 @@ class SegmentPTD(TINParameters):
         """`filter_density`: filter the lowest point per cell, then join the others."""
         n = pts.shape[0]
         ci = np.flatnonzero(cand)
-        inner = replace(self, filter_density=0.0)
+        inner = replace(self, filter_density=0.0, terrain_density=0.0)
         if ci.size == 0:
             return inner.run(pts, candidates=cand, progress=progress)
+        terrain = None
+        fine = (0.0, 0.97)
+        if 0 < self.terrain_density < self.filter_density:
+            # a given growing radius is the fine cells'; the coarse cells are wider
+            gr = self.grow_radius
+            if gr is not None:
+                gr = gr * math.sqrt(self.filter_density / self.terrain_density)
+            coarse = replace(
+                self, filter_density=self.terrain_density, terrain_density=0.0, grow_radius=gr
+            )
+            terrain = coarse.run(pts, candidates=cand, progress=stage(progress, 0.0, 0.3))
+            fine = (0.3, 0.97)
         p = pts[ci]
         win, inv, cells = thin_lowest(p, 1.0 / math.sqrt(self.filter_density))
         wp = np.ascontiguousarray(p[win])
-        res = inner.run(wp, progress=stage(progress, 0.0, 0.97))
+        res = inner.run(wp, progress=stage(progress, *fine))
         wg = np.ascontiguousarray(res.ground_mask)
         planes = _cell_planes(cells, wp, wg)
         ok = _join(p, inv, wp, wg, planes, float(self.join_distance))
         ok[win[wg]] = True  # a ground lowest point stays ground whatever its plane says
         ground = np.zeros(n, dtype=bool)
         ground[ci[ok]] = True
+        if terrain is not None:
+            ground = _on_terrain(
+                pts,
+                ground,
+                terrain.ground_mask,
+                self.terrain_distance,
+                1.0 / math.sqrt(self.terrain_density),
+            )
         lab = np.full(n, -1, dtype=np.int64)
         lab[ci] = res.labels[inv]
         report(progress, 1.0)
@@ -697,6 +734,39 @@ def _join(p, inv, wp, wg, planes, tol):  # pragma: no cover - numba
             )
             ok[k] = abs(h) <= tol
     return ok
+
+
+def _on_terrain(
+    pts: np.ndarray, ground: np.ndarray, terrain: np.ndarray, distance: float, cell: float
+) -> np.ndarray:
+    """`ground` up to `distance` m above the TIN of `terrain`, plus `terrain` itself.
+
+    The TIN holds the lowest terrain point per `cell` m (the terrain filter's own
+    cells: the points it decided on, not the ones joined to them, a TIN of a few
+    per cent of the points). Beyond the TIN's real facets the nearest terrain point
+    is the terrain.
+    """
+    ti = np.flatnonzero(terrain)
+    if ti.size < 3:
+        return ground
+    xyz = pts - colmin(pts)
+    gi = np.flatnonzero(ground & ~terrain)
+    ti = _thin(pts, ti, cell)  # absolute coordinates: the filter's cells
+    if ti.size < 3:
+        return ground | terrain
+    virtual = virtual_hull(xyz, ti, 1.0, colmin(xyz[ti]), colmax(xyz[ti]))
+    h = _height_above_tin(TIN(xyz, ti, virtual), xyz[gi])
+    # facets with a virtual corner reach past the hull of the terrain points: there
+    # the nearest terrain point (XY) is the terrain (a level extension)
+    rest = np.flatnonzero(np.isnan(h))
+    if rest.size:
+        from scipy.spatial import cKDTree
+
+        _, j = cKDTree(xyz[ti, :2]).query(xyz[gi[rest], :2], workers=tree_workers())
+        h[rest] = xyz[gi[rest], 2] - xyz[ti[j], 2]
+    out = terrain.copy()
+    out[gi[~(h > distance)]] = True
+    return out
 
 
 def _mask(m: Any, n: int, name: str) -> np.ndarray:
