@@ -83,7 +83,7 @@ def test_parameters_validated_and_chosen_for_airborne_clouds():
     dense = np.column_stack([rng.uniform(0, 60, (36000, 2)), rng.normal(0, 0.02, 36000)])
     params, src, regime = auto_parameters(measure_cloud(dense), "segment-ptd")
     assert regime == "als-dense" and params["perched_step"] == 2.0
-    assert src["perched_step"] == "default"
+    assert src["perched_step"] == "preset"  # a constant of the dense preset, not measured
     assert ALS_SEGMENT_PARAMS["perched_step"] == 2.0
 
 

@@ -242,7 +242,7 @@ def make_delivery(
             _lie_about_bounds(path, 30.0)
         paths.append(path)
         counts[name] = len(xyz)
-        if d is not None:
+        if d:
             where[d] = path
     return Delivery(tuple(sorted(paths)), where, float(density), float(sparse_density),
                     void_box, crs, float(tile_size), counts)
