@@ -37,7 +37,7 @@ Standards for Digital Geospatial Data, Edition 2 (2023) repeats for lidar
 =====  ===============================  ==================  =================
 level  smooth-surface repeatability     swath-overlap RMSDz  swath-overlap max
 =====  ===============================  ==================  =================
-QL0    ≤ 0.04 m (max difference)        ≤ 0.05 m             ≤ ±0.10 m
+QL0    ≤ 0.03 m (max difference)        ≤ 0.04 m             ≤ ±0.08 m
 QL1    ≤ 0.06 m                         ≤ 0.08 m             ≤ ±0.16 m
 QL2    ≤ 0.06 m                         ≤ 0.08 m             ≤ ±0.16 m
 QL3    ≤ 0.12 m                         ≤ 0.16 m             ≤ ±0.32 m
@@ -80,9 +80,11 @@ __all__ = [
 ]
 
 #: Relative vertical accuracy (m): (intraswath max difference, interswath RMSDz,
-#: interswath max |dz|), USGS Lidar Base Specification 2023 rev. / ASPRS Ed. 2 (2023).
+#: interswath max |dz|), USGS Lidar Base Specification 2023 rev. / ASPRS Ed. 2 (2023). The one
+#: table of these limits: ``lidarqa qc``'s profiles read it too. QL0 is half of QL1 as in the
+#: LBS table; not re-checked against the 2024 rev. A text.
 QUALITY_LEVELS: dict[str, tuple[float, float, float]] = {
-    "QL0": (0.04, 0.05, 0.10),
+    "QL0": (0.03, 0.04, 0.08),
     "QL1": (0.06, 0.08, 0.16),
     "QL2": (0.06, 0.08, 0.16),
     "QL3": (0.12, 0.16, 0.32),

@@ -29,6 +29,7 @@ from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
+from ..accuracy.swaths import QUALITY_LEVELS
 from ..errors import ConfigError, OptionError
 
 __all__ = ["QCSpec", "PROFILES", "get_spec", "load_spec", "spec_names", "LAS_CLASS_NAMES"]
@@ -262,10 +263,10 @@ def _ql(name: str, level: str, anpd: float, nva: float, intra: float, rmsdz: flo
 
 #: The built-in profiles by name.
 PROFILES: dict[str, QCSpec] = {
-    "usgs-ql0": _ql("usgs-ql0", "QL0", 8.0, 0.05, 0.03, 0.04, 0.08),
-    "usgs-ql1": _ql("usgs-ql1", "QL1", 8.0, 0.10, 0.06, 0.08, 0.16),
-    "usgs-ql2": _ql("usgs-ql2", "QL2", 2.0, 0.10, 0.06, 0.08, 0.16),
-    "usgs-ql3": _ql("usgs-ql3", "QL3", 0.5, 0.20, 0.12, 0.16, 0.32),
+    "usgs-ql0": _ql("usgs-ql0", "QL0", 8.0, 0.05, *QUALITY_LEVELS["QL0"]),
+    "usgs-ql1": _ql("usgs-ql1", "QL1", 8.0, 0.10, *QUALITY_LEVELS["QL1"]),
+    "usgs-ql2": _ql("usgs-ql2", "QL2", 2.0, 0.10, *QUALITY_LEVELS["QL2"]),
+    "usgs-ql3": _ql("usgs-ql3", "QL3", 0.5, 0.20, *QUALITY_LEVELS["QL3"]),
 }
 
 
