@@ -15,6 +15,7 @@ from lidarqa.units import undefined_units
 def test_warmup_caches_the_demo_kernels_and_names_the_folder(tmp_path):
     from lidarqa.geometry import _kernels
     from lidarqa.ground import _tin
+    from lidarqa.qc import _kernels as qc_kernels
 
     js = tmp_path / "warmup.json"
     r = CliRunner().invoke(cli, ["-q", "warmup", "--json", str(js)])
@@ -29,6 +30,8 @@ def test_warmup_caches_the_demo_kernels_and_names_the_folder(tmp_path):
     # the ground filter's TIN kernel (the demo's slowest compile) has its index there
     assert any(d.glob("_tin._judge_kernel-*.nbi") for d in dirs), dirs
     assert kernels_cached(_tin._judge_kernel, _kernels.knn_grid, _kernels.surface_growing_kernel)
+    # and qc's tile pass (lidarqa qc is the other long job)
+    assert kernels_cached(qc_kernels.scan_piece, qc_kernels.open_square)
     assert f"Cache: {res['cache_dir']}" in r.output
 
 

@@ -44,6 +44,8 @@ def warmup() -> None:
         with steps("Checking the demo configuration"):
             cfg = load_config(demo_config_path(), skip_unavailable=True)
         run = run_assessment(cfg, Path(tmp) / "demo", steps=steps, command="demo")
+        with steps("Running qc's tile pass on a small synthetic tile"):
+            _warm_qc(Path(tmp) / "qc")
     seconds = time.perf_counter() - t0
     stats = kernel_stats().since(before)
     if run.errors:
@@ -72,3 +74,15 @@ def warmup() -> None:
             "elapsed_s": round(seconds, 3),
         },
     )
+
+
+def _warm_qc(folder: Path) -> None:
+    """Compile qc's per-tile kernels on one small synthetic delivery tile."""
+    from types import SimpleNamespace
+
+    from ..qc import get_spec
+    from ..qc._task import TileTask
+    from ..testing import make_delivery
+
+    d = make_delivery(folder, nx=1, ny=1, tile_size=40.0)
+    TileTask(get_spec("usgs-ql2"))(SimpleNamespace(path=d.paths[0]))

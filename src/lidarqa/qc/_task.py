@@ -18,10 +18,9 @@ from .conformance import (
     duplicate_keys,
     header_checks,
     point_checks,
-    point_stats,
     worst,
 )
-from .density import DensityGrids, DensityResult, counted_mask, density_result, first_return_mask
+from .density import DensityGrids, DensityResult, density_result
 from .voids import VOID_CELLS, VoidResult, find_voids
 
 __all__ = ["TileQC", "TileTask", "READ_STEP"]
@@ -84,21 +83,15 @@ class TileTask:
             cell = spec.distribution_cell_m
             grids = DensityGrids(hb, cell=cell, void_cell=spec.void_side_m / VOID_CELLS,
                                  coarse_factor=max(int(round(spec.density_cell / cell)), 1))
-            stats = PointStats()
             keys = []
-            has_returns = True
             for piece in r.chunks(self.read_step, fields=QC_FIELDS):
                 xyz, f = piece.xyz, piece.fields
-                n = len(xyz)
-                stats = stats + point_stats(xyz, f, max_returns=15 if pf >= 6 else 5)
+                grids.scan(xyz, f, point_format=pf)
                 ints = (f.pop("X"), f.pop("Y"), f.pop("Z")) if "X" in f else None
                 keys.append(duplicate_keys(xyz, f.get("gps_time"), scales=facts["scales"],
                                            offsets=facts["offsets"], ints=ints))
-                first, has = first_return_mask(f, n)
-                has_returns = has_returns and has
-                grids.add(xyz, first=first, counted=counted_mask(f, n, point_format=pf),
-                          withheld=f.get("withheld"), classification=f.get("classification"),
-                          source_id=f.get("point_source_id"))
+        stats = grids.stats()
+        has_returns = grids.has_returns
         dup = count_duplicates(np.concatenate(keys)) if keys else 0
         del keys
         checks = header_checks(facts, spec, crs=crs)

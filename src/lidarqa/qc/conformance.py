@@ -1,7 +1,7 @@
 """Conformance of a tile to a profile: its header and its points, in one streaming pass.
 
-Pure functions: :func:`point_stats` summarises one piece of points (mergeable with
-``+``, so a tile is streamed piece by piece and the result does not depend on the
+:class:`PointStats` summarises a tile's points (filled piece by piece by the one pass
+of :meth:`lidarqa.qc.density.DensityGrids.scan`, so the result does not depend on the
 piece size); :func:`header_checks` and :func:`point_checks` turn a header's facts
 (:func:`lidarqa.io.las.las_header_facts`) and the merged statistics into
 :class:`Check` verdicts.
@@ -17,7 +17,6 @@ import numpy as np
 __all__ = [
     "Check",
     "PointStats",
-    "point_stats",
     "duplicate_keys",
     "count_duplicates",
     "header_checks",
@@ -108,75 +107,6 @@ def scan_angle_deg(fields: dict[str, np.ndarray]) -> np.ndarray | None:
     if "scan_angle_rank" in fields:
         return np.asarray(fields["scan_angle_rank"], dtype=np.float64)
     return None
-
-
-def point_stats(points: np.ndarray, fields: dict[str, np.ndarray], *,
-                max_returns: int = 15) -> PointStats:
-    """Statistics of one piece of points.
-
-    Parameters
-    ----------
-    points : ndarray of shape (N, 3)
-    fields : dict of str to ndarray
-        LAS dimensions (``return_number``, ``number_of_returns``, ``classification``,
-        flags, ``scan_angle``/``scan_angle_rank``, ``point_source_id``).
-    max_returns : int, default 15
-        Largest valid number of returns (5 for PDRF 0-5).
-
-    Returns
-    -------
-    PointStats
-    """
-    n = len(points)
-    if n == 0:
-        return PointStats()
-    rn = fields.get("return_number")
-    nr = fields.get("number_of_returns")
-    by_return = [0] * 15
-    invalid = 0
-    has = rn is not None and nr is not None
-    if has:
-        rn = np.asarray(rn, dtype=np.int64)
-        nr = np.asarray(nr, dtype=np.int64)
-        bad = (rn < 1) | (rn > nr) | (nr > max_returns)
-        invalid = int(bad.sum())
-        cnt = np.bincount(np.clip(rn, 0, 15), minlength=16)
-        by_return = [int(c) for c in cnt[1:16]]
-    cls = fields.get("classification")
-    classes = (np.bincount(np.asarray(cls, dtype=np.int64), minlength=256)[:256]
-               if cls is not None else np.zeros(256, dtype=np.int64))
-    if cls is None:
-        classes = classes.copy()
-        classes[0] = n
-    sid = fields.get("point_source_id")
-    sids: dict[int, int] = {}
-    if sid is not None:
-        cnt = np.bincount(np.asarray(sid, dtype=np.int64))
-        nz = np.nonzero(cnt)[0]
-        sids = {int(k): int(cnt[k]) for k in nz}
-    ang = scan_angle_deg(fields)
-
-    def flag(name: str) -> int:
-        v = fields.get(name)
-        return int(np.count_nonzero(v)) if v is not None else 0
-
-    return PointStats(
-        n=n,
-        # per column: a reduction over a strided (N, 3) axis is 5x slower
-        mins=tuple(float(points[:, i].min()) for i in range(3)),
-        maxs=tuple(float(points[:, i].max()) for i in range(3)),
-        by_return=tuple(by_return),
-        invalid_returns=invalid,
-        has_returns=has,
-        classes=tuple(int(c) for c in classes),
-        withheld=flag("withheld"),
-        overlap=flag("overlap"),
-        synthetic=flag("synthetic"),
-        key_point=flag("key_point"),
-        source_ids=sids,
-        scan_angle_min=float(ang.min()) if ang is not None else np.inf,
-        scan_angle_max=float(ang.max()) if ang is not None else -np.inf,
-    )
 
 
 _P1, _P2, _P3, _P4 = (np.uint64(0x9E3779B97F4A7C15), np.uint64(0xC2B2AE3D27D4EB4F),

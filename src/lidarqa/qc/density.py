@@ -36,9 +36,9 @@ from typing import Any
 import numpy as np
 
 from ..errors import TilingError
+from .conformance import PointStats, scan_angle_deg
 
-__all__ = ["Grid", "DensityGrids", "DensityResult", "first_return_mask", "counted_mask",
-           "density_result"]
+__all__ = ["Grid", "DensityGrids", "DensityResult", "density_result"]
 
 #: Largest grid (cells) a tile may need; a header whose bounds span more is not a tile.
 MAX_CELLS = 400_000_000
@@ -85,27 +85,22 @@ class Grid:
         return cy[:, None] & cx[None, :]
 
 
-def first_return_mask(fields: dict[str, np.ndarray], n: int) -> tuple[np.ndarray, bool]:
-    """(first-return mask, has return numbers). Without return numbers every point counts."""
-    rn = fields.get("return_number")
-    if rn is None or not np.any(rn):
-        return np.ones(n, dtype=bool), False
-    return np.asarray(rn) == 1, True
+class _Acc:
+    """Running point statistics of a tile (filled in place by the scan kernel)."""
 
-
-def counted_mask(fields: dict[str, np.ndarray], n: int, *, point_format: int) -> np.ndarray:
-    """Points that may count for density: not withheld, not flagged or classed as overlap."""
-    keep = np.ones(n, dtype=bool)
-    w = fields.get("withheld")
-    if w is not None:
-        keep &= np.asarray(w) == 0
-    ov = fields.get("overlap")
-    if ov is not None:
-        keep &= np.asarray(ov) == 0
-    cls = fields.get("classification")
-    if point_format < 6 and cls is not None:
-        keep &= np.asarray(cls) != 12
-    return keep
+    def __init__(self) -> None:
+        self.n = 0
+        self.invalid = 0
+        self.has_returns = True
+        self.has_sid = False
+        self.has_angle = False
+        self.mins = np.full(3, np.inf)
+        self.maxs = np.full(3, -np.inf)
+        self.by_return = np.zeros(16, dtype=np.int64)
+        self.classes = np.zeros(256, dtype=np.int64)
+        self.sid_hist = np.zeros(65536, dtype=np.int64)
+        self.flags = np.zeros(4, dtype=np.int64)
+        self.angle = np.array([np.inf, -np.inf])
 
 
 class DensityGrids:
@@ -124,50 +119,97 @@ class DensityGrids:
                          self.coarse.ny * k)
         self.k = k
         self.void = Grid.covering(bounds2d, void_cell)
-        self.counts: list[np.ndarray] = []  # one flat int32 array per source id slot
+        ncells = self.fine.nx * self.fine.ny
+        self._counts = np.zeros((0, ncells), dtype=np.int32)  # one row per source-id slot
+        self._slot_of = np.full(65536, -1, dtype=np.int64)
         self.slots: dict[int, int] = {}
-        self.water = np.zeros(self.fine.nx * self.fine.ny, dtype=np.int32)
-        self.firsts = np.zeros(self.fine.nx * self.fine.ny, dtype=np.int32)
+        self.water = np.zeros(ncells, dtype=np.int32)
+        self.firsts = np.zeros(ncells, dtype=np.int32)
         self.occupied = np.zeros(self.void.nx * self.void.ny, dtype=bool)
         self.water_void = np.zeros(self.void.nx * self.void.ny, dtype=bool)
         self.outside = 0
         self.flagged = 0  # first returns left out as overage (overlap flag, legacy class 12)
+        self.has_returns = True  # False once a piece has no (or only zero) return numbers
+        self._stats = _Acc()
 
-    def add(self, xy: np.ndarray, *, first: np.ndarray, counted: np.ndarray,
-            withheld: np.ndarray | None, classification: np.ndarray | None,
-            source_id: np.ndarray | None) -> None:
-        """Add one piece of points (`xy` (N, 2+) and per-point masks/fields)."""
-        n = len(xy)
+    @property
+    def counts(self) -> list[np.ndarray]:
+        """Single-swath first returns per 2 x ANPS cell, one flat array per source id."""
+        return [row for row in self._counts if row.any()]
+
+    def scan(self, points: np.ndarray, fields: dict[str, np.ndarray], *,
+             point_format: int) -> None:
+        """Add one piece of points (`points` (N, 3), `fields` the LAS dimensions).
+
+        One pass (a numba kernel) updates the grids and the tile's point statistics
+        (:meth:`stats`): which points count is described in the module's docstring.
+        """
+        from ._kernels import scan_piece
+
+        n = len(points)
         if n == 0:
             return
-        usable = first if withheld is None else first & (np.asarray(withheld) == 0)
-        # voids: any usable first return fills a cell (another swath's too)
-        vi, vin = self.void.index(xy)
-        self.occupied[vi[usable & vin]] = True
-        fi, fin = self.fine.index(xy)
-        self.outside += int(np.count_nonzero(~fin))
-        if classification is not None:
-            wat = np.asarray(classification) == 9
-            if wat.any():
-                self.water_void[vi[wat & vin]] = True
-                self.water += np.bincount(fi[wat & first & fin], minlength=len(self.water)
-                                          ).astype(np.int32)
-        self.firsts += np.bincount(fi[usable & fin], minlength=len(self.firsts)).astype(np.int32)
-        self.flagged += int(np.count_nonzero(usable & ~counted))
-        sel = first & counted & fin
-        if not sel.any():
-            return
-        sid = (np.zeros(int(sel.sum()), dtype=np.int64) if source_id is None
-               else np.asarray(source_id)[sel].astype(np.int64))
-        cells = fi[sel]
-        present = np.flatnonzero(np.bincount(sid)) if len(sid) else np.zeros(0, np.int64)
-        for s in present.tolist():  # ids are 16-bit: a bincount beats a hashed unique
-            if s not in self.slots:
-                self.slots[s] = len(self.counts)
-                self.counts.append(np.zeros(self.fine.nx * self.fine.ny, dtype=np.int32))
-            m = sid == s
-            self.counts[self.slots[s]] += np.bincount(cells[m], minlength=len(self.water)
-                                                      ).astype(np.int32)
+        none = np.zeros(0, dtype=np.uint8)
+
+        def get(name: str) -> np.ndarray:
+            v = fields.get(name)
+            return none if v is None else np.asarray(v)
+
+        rn, nr = get("return_number"), get("number_of_returns")
+        has_fields = len(rn) > 0 and len(nr) > 0
+        all_first = not (len(rn) and rn.any())
+        self.has_returns = self.has_returns and not all_first
+        sid = get("point_source_id")
+        if len(sid):
+            sid = sid.astype(np.uint16, copy=False)
+            ids = np.flatnonzero(np.bincount(sid))
+            new = [int(i) for i in ids if int(i) not in self.slots]
+        else:
+            new = [0] if 0 not in self.slots else []
+        for i in new:
+            self._slot_of[i] = self.slots[i] = len(self.slots)
+        if new:
+            grown = np.zeros((len(self.slots), self._counts.shape[1]), dtype=np.int32)
+            grown[: len(self._counts)] = self._counts
+            self._counts = grown
+        angle = scan_angle_deg(fields)
+        a = self._stats
+        v, f = self.void, self.fine
+        invalid, outside, flagged = scan_piece(
+            points[:, 0], points[:, 1], points[:, 2], rn, nr, get("classification"),
+            get("withheld"), get("overlap"), get("synthetic"), get("key_point"), sid,
+            none.astype(np.float64) if angle is None else angle,
+            all_first, 15 if point_format >= 6 else 5, point_format < 6,
+            np.array([v.x0, v.y0, v.cell, v.nx, v.ny], dtype=np.float64),
+            np.array([f.x0, f.y0, f.cell, f.nx, f.ny], dtype=np.float64),
+            self.occupied, self.water_void, self.water, self.firsts, self._counts,
+            self._slot_of, a.mins, a.maxs, a.by_return, a.classes, a.sid_hist, a.flags,
+            a.angle)
+        a.n += n
+        a.invalid += int(invalid)
+        a.has_returns = a.has_returns and has_fields
+        a.has_angle = a.has_angle or angle is not None
+        a.has_sid = a.has_sid or len(sid) > 0
+        self.outside += int(outside)
+        self.flagged += int(flagged)
+
+    def stats(self) -> PointStats:
+        """Statistics of the points scanned so far."""
+        a = self._stats
+        if a.n == 0:
+            return PointStats()
+        nz = np.flatnonzero(a.sid_hist)
+        return PointStats(
+            n=a.n, mins=tuple(float(v) for v in a.mins), maxs=tuple(float(v) for v in a.maxs),
+            by_return=tuple(int(c) for c in a.by_return[1:16]) if a.has_returns else (0,) * 15,
+            invalid_returns=a.invalid if a.has_returns else 0, has_returns=a.has_returns,
+            classes=tuple(int(c) for c in a.classes),
+            withheld=int(a.flags[0]), overlap=int(a.flags[1]), synthetic=int(a.flags[2]),
+            key_point=int(a.flags[3]),
+            source_ids={int(k): int(a.sid_hist[k]) for k in nz} if a.has_sid else {},
+            scan_angle_min=float(a.angle[0]) if a.has_angle else np.inf,
+            scan_angle_max=float(a.angle[1]) if a.has_angle else -np.inf,
+        )
 
     def single_swath(self) -> np.ndarray:
         """(ny, nx) first returns of one swath per 2 x ANPS cell.

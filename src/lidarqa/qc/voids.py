@@ -88,11 +88,21 @@ def find_voids(occupied: np.ndarray, *, x0: float, y0: float, cell: float,
         empty &= inside
     if not empty.any():
         return VoidResult((), ())
-    # opening = erosion then dilation with a k x k square (separable min/max filters)
-    e = ndimage.minimum_filter(empty.astype(np.uint8), size=k, mode="constant", cval=0)
-    if not e.any():
+    from ._kernels import open_square
+
+    # opening: the union of the k x k squares of empty cells (linear in the cells)
+    opened = open_square(empty, k)
+    rows = np.flatnonzero(opened.any(axis=1))
+    if len(rows) == 0:
         return VoidResult((), ())
-    opened = ndimage.maximum_filter(e, size=k, mode="constant", cval=0).astype(bool) & empty
+    # label and polygonise only the window holding the voids (grown by the water margin)
+    cols = np.flatnonzero(opened[rows[0]:rows[-1] + 1].any(axis=0))
+    r0, r1 = max(rows[0] - 2, 0), rows[-1] + 3
+    c0, c1 = max(cols[0] - 2, 0), cols[-1] + 3
+    opened = opened[r0:r1, c0:c1]
+    x0, y0 = x0 + c0 * cell, y0 + r0 * cell
+    if water is not None:
+        water = water[r0:r1, c0:c1]
     labels, n = ndimage.label(opened, structure=np.ones((3, 3), dtype=bool))
     if n == 0:
         return VoidResult((), ())
