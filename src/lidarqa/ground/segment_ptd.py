@@ -741,17 +741,19 @@ def _on_terrain(
 ) -> np.ndarray:
     """`ground` up to `distance` m above the TIN of `terrain`, plus `terrain` itself.
 
-    The TIN holds the lowest terrain point per `cell` m (the terrain filter's own
-    cells: the points it decided on, not the ones joined to them, a TIN of a few
-    per cent of the points). Beyond the TIN's real facets the nearest terrain point
-    is the terrain.
+    The TIN holds the median-height terrain point per `cell` m (the terrain filter's
+    own cells, a TIN of a few per cent of the points). Beyond the TIN's real facets
+    the nearest terrain point is the terrain.
     """
     ti = np.flatnonzero(terrain)
     if ti.size < 3:
         return ground
     xyz = pts - colmin(pts)
     gi = np.flatnonzero(ground & ~terrain)
-    ti = _thin(pts, ti, cell)  # absolute coordinates: the filter's cells
+    # the median-height terrain point per cell (the filter's cells, absolute
+    # coordinates): a low outlier the terrain run accepted (multipath below a road, a
+    # noise return) does not pull the terrain model down
+    ti = _thin_median(pts, ti, cell)
     if ti.size < 3:
         return ground | terrain
     virtual = virtual_hull(xyz, ti, 1.0, colmin(xyz[ti]), colmax(xyz[ti]))
@@ -774,6 +776,19 @@ def _mask(m: Any, n: int, name: str) -> np.ndarray:
     if a.shape != (n,):
         raise InvalidPointsError(f"{name} must have shape ({n},), got {a.shape}")
     return a.astype(bool)
+
+
+def _thin_median(xyz: np.ndarray, idx: np.ndarray, cell: float) -> np.ndarray:
+    """Median-height point per `cell` x `cell` XY cell (ties by coordinates), sorted indices."""
+    if cell <= 0 or idx.size == 0:
+        return idx
+    p = xyz[idx]
+    _, inv, _ = thin_lowest(p, cell)
+    order = np.lexsort((p[:, 1], p[:, 0], p[:, 2], inv))
+    g = inv[order]
+    starts = np.flatnonzero(np.r_[True, g[1:] != g[:-1]])
+    ends = np.r_[starts[1:], g.size]
+    return np.sort(idx[order[(starts + ends - 1) // 2]])
 
 
 def _thin(xyz: np.ndarray, idx: np.ndarray, cell: float) -> np.ndarray:
