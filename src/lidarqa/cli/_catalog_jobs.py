@@ -28,11 +28,11 @@ __all__ = [
     "wants_catalog",
 ]
 
-_OPTION_NAMES = ("chunk_size", "buffer", "workers", "scheduler", "skip_bad")
+_OPTION_NAMES = ("chunk_size", "buffer", "workers", "scheduler", "skip_bad", "resume")
 
 
 def catalog_options(func: Callable[..., Any]) -> Callable[..., Any]:
-    """``--chunk-size --buffer --workers --scheduler --skip-bad`` (as ``lidarqa ground``)."""
+    """``--chunk-size --buffer --workers --scheduler --skip-bad --resume`` (as ``lidarqa ground``)."""
     opts = [
         click.option("--chunk-size", type=float, default=None,
                      help="Catalog: chunk side, m (default: from the point density, aligned "
@@ -47,6 +47,10 @@ def catalog_options(func: Callable[..., Any]) -> Callable[..., Any]:
                      help="Catalog: Dask scheduler address (tcp://host:port) or 'serial'."),
         click.option("--skip-bad", is_flag=True,
                      help="Catalog: leave out bad tiles (listed) instead of failing."),
+        click.option("--resume", is_flag=True,
+                     help="Catalog: re-use the chunks finished by an interrupted or failed run "
+                          "(kept in $LIDARQA_WORK_DIR, default ~/.cache/lidarqa/chunks, until "
+                          "a run ends with no failed chunk)."),
     ]
     for opt in reversed(opts):
         func = opt(func)
@@ -103,9 +107,21 @@ def _open(paths: Sequence[str], skip_bad: bool | None, steps: Steps, *, crs: Any
     return source
 
 
-def _common(cat_opts: dict[str, Any], eng: Any) -> dict[str, Any]:
+def job_options(cat_opts: dict[str, Any]) -> dict[str, Any]:
+    """The engine options every catalog job takes from the command's catalog options.
+
+    Finished chunks are always kept in the work folder until the job ends with no
+    failed chunk; ``--resume`` re-uses them.
+    """
+    from ..tiling.apply import default_work_dir
+
     return {"chunk_size": cat_opts.get("chunk_size"), "buffer": cat_opts.get("buffer"),
-            "engine": eng, "progress": not settings().quiet, "skip_failed": True}
+            "progress": not settings().quiet, "skip_failed": True,
+            "work_dir": default_work_dir(), "resume": bool(cat_opts.get("resume"))}
+
+
+def _common(cat_opts: dict[str, Any], eng: Any) -> dict[str, Any]:
+    return {**job_options(cat_opts), "engine": eng}
 
 
 def _run_summary(run: Any) -> dict[str, Any]:

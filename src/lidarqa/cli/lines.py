@@ -250,14 +250,13 @@ def _side_segments(side: str, path: str, label: str, classes: Any, source_id: An
             extract_segments(np.empty((0, 3)))  # raises the clear "not available" error
 
         from ..tiling.apply import engine_for
+        from ._catalog_jobs import job_options
 
         with steps(f"Extracting the edges of {side} {label}"), engine_for(
                 workers=cat_opts.get("workers"), scheduler=cat_opts.get("scheduler")) as eng:
             run = catalog_features(path, kind="edges", classes=classes, source_id=source_id,
-                                   crs=given, progress=not settings().quiet, engine=eng,
-                                   chunk_size=cat_opts.get("chunk_size"),
-                                   buffer=cat_opts.get("buffer"),
-                                   skip_bad=bool(cat_opts.get("skip_bad")), skip_failed=True)
+                                   crs=given, engine=eng, skip_bad=bool(cat_opts.get("skip_bad")),
+                                   **job_options(cat_opts))
         if run.failed:
             from ..errors import TilingError
 

@@ -245,7 +245,7 @@ def swaths(
     )
     catalog_run = None
     if on_catalog:
-        from ._catalog_jobs import _engine, _open
+        from ._catalog_jobs import _engine, _open, job_options
 
         # heights are converted by the chunk task (as load_strips does for files)
         catalog = _open(files, cat_opts.get("skip_bad"), steps, z_to_metres=False)
@@ -258,11 +258,8 @@ def swaths(
                 by_source_id=by_source_id,
                 classes=classes,
                 all_returns=all_returns,
-                chunk_size=cat_opts.get("chunk_size"),
-                buffer=cat_opts.get("buffer"),
                 engine=eng,
-                progress=not s.quiet,
-                skip_failed=True,
+                **job_options(cat_opts),
                 **options,
             )
         rep, labels = catalog_run.value, catalog_run.extra["labels"]

@@ -51,12 +51,11 @@ __all__ = [
 
 def _run(catalog: Any, chunks: Sequence[Any], task: Any, run_opts: dict[str, Any],
          description: str) -> tuple[list[Any], list[Any | None]]:
-    from . import run_chunks
+    """Run `task` on `chunks` through :func:`~lidarqa.tiling.apply.apply` (retries, resume)."""
+    from .apply import apply
 
-    if not chunks:
-        return [], []
-    outcomes = run_chunks(catalog, list(chunks), task, description=description, **run_opts)
-    return outcomes, [o.result if o.ok else None for o in outcomes]
+    run = apply(catalog, task, chunks=chunks, description=description, **run_opts)
+    return list(run.outcomes), run.value
 
 
 def _split(kw: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any], dict[str, Any]]:
@@ -64,7 +63,8 @@ def _split(kw: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any], dict[str
     open_opts = {"skip_bad": kw.pop("skip_bad", False), "crs": kw.pop("crs", None)}
     chunk_opts = {"chunk_size": kw.pop("chunk_size", None), "buffer": kw.pop("buffer", None),
                   "origin": kw.pop("origin", (0.0, 0.0))}
-    run_keys = ("engine", "progress", "retries", "skip_failed", "order_seed")
+    run_keys = ("engine", "progress", "retries", "skip_failed", "order_seed", "work_dir",
+                "resume")
     run_opts: dict[str, Any] = {k: kw.pop(k) for k in run_keys if k in kw}
     run_opts.setdefault("progress", False)
     if kw:
@@ -112,7 +112,8 @@ def catalog_features(
     **common
         ``chunk_size``, ``buffer``, ``origin``, ``engine``, ``progress``,
         ``retries``, ``skip_failed``, ``order_seed`` (shuffled submission, for
-        tests), ``skip_bad``, ``crs``.
+        tests), ``skip_bad``, ``crs``, ``work_dir`` and ``resume`` (see
+        :func:`~lidarqa.tiling.apply.apply`).
     """
     from .jobs_vector import VectorTask, fixed_auto_options, merge_vector_parts
 
