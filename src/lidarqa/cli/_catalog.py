@@ -73,11 +73,20 @@ def _strip_counts(catalog: Any) -> tuple[dict[int, int], dict[str, list[int]]]:
     return dict(sorted(total.items())), per_tile
 
 
-def info_on_catalog(paths: Sequence[str], *, skip_bad: bool = False, strips: bool = False) -> None:
-    from ..tiling import make_chunks, open_catalog
+def open_catalog_checked(paths: Sequence[str], *, skip_bad: bool = False, crs: Any = None) -> Any:
+    """The catalog of `paths` with `crs` (``--crs``) for tiles that declare none; a tile whose
+    own CRS contradicts it is an error naming both (as for one file)."""
+    from ..tiling.source import open_source
 
     with Steps()(f"Reading the headers of {', '.join(paths)}"):
-        catalog = open_catalog(list(paths), skip_bad=skip_bad)
+        return open_source(list(paths), skip_bad=skip_bad, crs=crs, z_to_metres=False).catalog
+
+
+def info_on_catalog(paths: Sequence[str], *, skip_bad: bool = False, strips: bool = False,
+                    crs: Any = None) -> None:
+    from ..tiling import make_chunks
+
+    catalog = open_catalog_checked(paths, skip_bad=skip_bad, crs=crs)
     bad_lines(catalog.bad)
     d = catalog.to_dict()
     chunks = make_chunks(catalog)

@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
-from ._catalog import bad_lines, is_catalog, sigterm_as_interrupt
+from ._catalog import bad_lines, is_catalog, open_catalog_checked, sigterm_as_interrupt
 from ._common import (
     INT_LIST,
     Steps,
@@ -261,6 +261,7 @@ def ground(
             scheduler=scheduler,
             resume=resume,
             skip_bad=skip_bad,
+            crs=given_crs,
         )
         return
     path = paths[0]
@@ -406,9 +407,9 @@ def ground_on_catalog(
     scheduler: str | None,
     resume: bool,
     skip_bad: bool,
+    crs: Any = None,
 ) -> None:
     """`lidarqa ground` on a catalog: the catalog ground job, then the summary."""
-    from ..tiling import open_catalog
     from ..tiling.ground import ground_catalog
 
     s = settings()
@@ -416,9 +417,7 @@ def ground_on_catalog(
         from ..io import check_output
 
         check_output(s.json_path, overwrite=s.overwrite)
-    steps = Steps()
-    with steps(f"Reading the headers of {', '.join(paths)}"):
-        catalog = open_catalog(list(paths), skip_bad=skip_bad)
+    catalog = open_catalog_checked(paths, skip_bad=skip_bad, crs=crs)
     bad_lines(catalog.bad)
     with sigterm_as_interrupt():
         result = ground_catalog(
