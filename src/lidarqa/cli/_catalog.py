@@ -74,8 +74,10 @@ def _strip_counts(catalog: Any) -> tuple[dict[int, int], dict[str, list[int]]]:
 
 
 def open_catalog_checked(paths: Sequence[str], *, skip_bad: bool = False, crs: Any = None) -> Any:
-    """The catalog of `paths` with `crs` (``--crs``) for tiles that declare none; a tile whose
-    own CRS contradicts it is an error naming both (as for one file)."""
+    """The catalog of `paths` with `crs` (``--crs``) for tiles that declare none.
+
+    A tile whose own CRS contradicts it is an error naming both (as for one file).
+    """
     from ..tiling.source import open_source
 
     with Steps()(f"Reading the headers of {', '.join(paths)}"):

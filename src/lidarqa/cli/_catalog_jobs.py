@@ -32,7 +32,7 @@ _OPTION_NAMES = ("chunk_size", "buffer", "workers", "scheduler", "skip_bad", "re
 
 
 def catalog_options(func: Callable[..., Any]) -> Callable[..., Any]:
-    """``--chunk-size --buffer --workers --scheduler --skip-bad --resume`` (as ``lidarqa ground``)."""
+    """``--chunk-size --buffer --workers --scheduler --skip-bad --resume`` (as ``ground``)."""
     opts = [
         click.option("--chunk-size", type=float, default=None,
                      help="Catalog: chunk side, m (default: from the point density, aligned "

@@ -35,8 +35,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["CatalogRun", "ChunkStore", "apply", "default_work_dir", "chunk_status", "engine_for", "open_sources", "owned",
-           "region_chunks"]
+__all__ = ["CatalogRun", "ChunkStore", "apply", "chunk_status", "default_work_dir", "engine_for",
+           "open_sources", "owned", "region_chunks"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -74,8 +74,7 @@ class CatalogRun:
         return [o.chunk.id for o in self.outcomes if getattr(o, "resumed", False)]
 
     def chunk_status(self) -> list[dict[str, Any]]:
-        """``[{"chunk", "status", "attempts", "error"}]``; status ok, retried, failed, skipped
-        or resumed."""
+        """``[{"chunk", "status", "attempts", "error"}]``; ok, retried, failed, skipped, resumed."""
         return [chunk_status(o) for o in self.outcomes]
 
     def to_dict(self) -> dict[str, Any]:
@@ -89,8 +88,7 @@ class CatalogRun:
 
 
 def chunk_status(outcome: Any) -> dict[str, Any]:
-    """One outcome's status: ``ok``, ``retried`` (ok after > 1 attempt), ``failed``, ``skipped``,
-    ``resumed`` (re-used from an interrupted run)."""
+    """One outcome's status: ok, retried (ok after > 1 attempt), failed, skipped or resumed."""
     attempts = int(getattr(outcome, "attempts", 1) or 1)
     if getattr(outcome, "resumed", False):
         status = "resumed"
@@ -105,8 +103,11 @@ def chunk_status(outcome: Any) -> dict[str, Any]:
 
 
 def default_work_dir() -> Path:
-    """Where catalog commands keep finished chunks' parts: ``$LIDARQA_WORK_DIR``, else
-    ``lidarqa/chunks`` in the user cache folder (``$XDG_CACHE_HOME`` or ``~/.cache``)."""
+    """Where catalog commands keep finished chunks' parts (for ``--resume``).
+
+    ``$LIDARQA_WORK_DIR``, else ``lidarqa/chunks`` in the user cache folder
+    (``$XDG_CACHE_HOME`` or ``~/.cache``).
+    """
     env = os.environ.get("LIDARQA_WORK_DIR")
     if env:
         return Path(env)
