@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
-from ._catalog import bad_lines, is_catalog, open_catalog_checked, sigterm_as_interrupt
+from ._catalog import is_catalog, open_catalog_source, sigterm_as_interrupt
 from ._common import (
     INT_LIST,
     Steps,
@@ -417,8 +417,7 @@ def ground_on_catalog(
         from ..io import check_output
 
         check_output(s.json_path, overwrite=s.overwrite)
-    catalog = open_catalog_checked(paths, skip_bad=skip_bad, crs=crs)
-    bad_lines(catalog.bad)
+    catalog = open_catalog_source(paths, {"skip_bad": skip_bad}, crs=crs, z_to_metres=False).catalog
     with sigterm_as_interrupt():
         result = ground_catalog(
             catalog,

@@ -20,7 +20,18 @@ from ..accuracy.heights import (
     SIGMA_REF,
     SIGMA_STRIP,
 )
-from ._catalog_jobs import catalog_options, option_given, wants_catalog
+from ._catalog import (
+    catalog_engine,
+    catalog_options,
+    echo_run,
+    failed_exit,
+    job_options,
+    open_catalog_source,
+    option_given,
+    reproducible_vectors,
+    run_summary,
+    wants_catalog,
+)
 from ._common import (
     INT_LIST,
     Steps,
@@ -329,8 +340,6 @@ def heights(
     on_catalog = wants_catalog((cloud,), cat_opts)
     sigma_strip_source = "given"
     if on_catalog:
-        from ..tiling.source import open_source
-
         if largest_segment:
             raise OptionError("--largest-segment is not available on a catalog")
         if sigma_strip == "auto":
@@ -338,9 +347,8 @@ def heights(
                 "--sigma-strip auto measures the strip offsets of one file; on a catalog give "
                 "the value (e.g. from `lidarqa swaths`)"
             )
-        with steps("Reading the headers of " + cloud):
-            cat = open_source([cloud], skip_bad=bool(cat_opts.get("skip_bad")), crs=given,
-                              classes=classes, source_id=source_id)
+        cat = open_catalog_source([cloud], cat_opts, crs=given, classes=classes,
+                                  source_id=source_id)
         require_metric_xy(cat.native_crs, cloud, "the search radius and the plane fits need")
         pc: Any = type("Header", (), {"crs": cat.native_crs})()
     else:
@@ -397,10 +405,12 @@ def heights(
     )
     catalog_run = None
     if on_catalog:
-        from ._catalog_jobs import heights_on_catalog
+        from ..tiling.jobs_api import catalog_heights
 
-        report, catalog_run = heights_on_catalog(cat, mp.xyz[:, :2], ref_xyz, classes=None,
-                                                 options=options, cat_opts=cat_opts)
+        with catalog_engine(cat_opts) as eng:
+            catalog_run = catalog_heights(cat, mp.xyz[:, :2], ref_xyz, options=options,
+                                          **job_options(cat_opts, eng))
+        report = catalog_run.value
     else:
         with steps(f"Fitting {len(mp):,} map points, testing {len(ref):,} reference points"):
             report = assess_heights(xyz, mp.xyz[:, :2], ref_xyz, largest_segment=largest_segment,
@@ -421,8 +431,6 @@ def heights(
         )
     if output is not None:
         from ..io.vector import write_points
-        from ._catalog_jobs import reproducible_vectors
-
         stamp = reproducible_vectors() if on_catalog else contextlib.nullcontext()
         with steps("Writing " + output), stamp:
             rows = _output_rows(report, mp.ids, ref.ids, pc.crs or mp.crs or ref.crs)
@@ -454,10 +462,8 @@ def heights(
         sigma_strip_source=sigma_strip_source,
     )
     if catalog_run is not None:
-        from ._catalog_jobs import _echo_run, _run_summary
-
-        _echo_run(catalog_run)
-        res["catalog"] = _run_summary(catalog_run)
+        echo_run(catalog_run)
+        res["catalog"] = run_summary(catalog_run)
         params.update({k: v for k, v in cat_opts.items() if option_given(v)})
     finish(
         "heights",
@@ -466,9 +472,7 @@ def heights(
         results=res,
     )
     if catalog_run is not None:
-        from ._catalog_jobs import _failed_exit
-
-        _failed_exit(catalog_run)
+        failed_exit(catalog_run)
 
 
 def _is_polygon_map(path: str) -> bool:

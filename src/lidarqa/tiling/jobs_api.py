@@ -58,14 +58,18 @@ def _run(catalog: Any, chunks: Sequence[Any], task: Any, run_opts: dict[str, Any
     return list(run.outcomes), run.value
 
 
+#: The engine options of every job (see :func:`~lidarqa.tiling.apply.apply`).
+RUN_KEYS = ("engine", "progress", "retries", "skip_failed", "order_seed", "work_dir", "resume")
+#: Every common keyword argument of a job: how to open the source, chunk it and run it.
+COMMON_KEYS = ("skip_bad", "crs", "chunk_size", "buffer", "origin", *RUN_KEYS)
+
+
 def _split(kw: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any], dict[str, Any]]:
     """(open options, chunk options, run options) from the common keyword arguments."""
     open_opts = {"skip_bad": kw.pop("skip_bad", False), "crs": kw.pop("crs", None)}
     chunk_opts = {"chunk_size": kw.pop("chunk_size", None), "buffer": kw.pop("buffer", None),
                   "origin": kw.pop("origin", (0.0, 0.0))}
-    run_keys = ("engine", "progress", "retries", "skip_failed", "order_seed", "work_dir",
-                "resume")
-    run_opts: dict[str, Any] = {k: kw.pop(k) for k in run_keys if k in kw}
+    run_opts: dict[str, Any] = {k: kw.pop(k) for k in RUN_KEYS if k in kw}
     run_opts.setdefault("progress", False)
     if kw:
         raise OptionError(f"unknown option(s): {', '.join(sorted(kw))}")
