@@ -23,8 +23,7 @@ statistics here: the merge puts them back in the reference order and computes
 every figure (RMSE, mean, std, NSSDA/ASPRS, w-tests and data snooping, even
 with an estimated common offset) with the same functions as the in-memory
 run, so the figures are those of one run over the whole area whatever the
-chunking and the completion order. Per-chunk figures (the report's per-chunk
-table) are merged exactly with :mod:`lidarqa.tiling.jobs_stats`.
+chunking and the completion order.
 
 A default that depends on all check points (the vertical check's ``max_edge``
 from the median ground spacing) is found in a first light pass over the
@@ -43,7 +42,6 @@ import numpy as np
 
 from ..errors import DegenerateGeometryError, InvalidPointsError, OptionError
 from ..io.vector import PointSet
-from .jobs_stats import ResidualMoments, WStatistics
 from .jobs_vector import in_core, owned
 
 __all__ = [
@@ -135,7 +133,6 @@ class VerticalPart:
     flag: np.ndarray
     longest_edge: np.ndarray
     n_ground: int
-    moments: ResidualMoments
 
 
 @dataclass(frozen=True, eq=False)
@@ -191,11 +188,8 @@ class VerticalCheckTask:
             except DegenerateGeometryError:
                 pass  # < 3 ground points in the chunk: every check point stays outside_tin
         dz = tin_z - self.check.xyz[idx, 2]
-        ok = flag == "ok"
-        res = np.column_stack([np.full(ok.sum(), np.nan), np.full(ok.sum(), np.nan), dz[ok]])
         return VerticalPart(chunk=chunk_data.chunk.id, index=idx, tin_z=tin_z, dz=dz, flag=flag,
-                            longest_edge=longest, n_ground=n_ground,
-                            moments=ResidualMoments.of(res))
+                            longest_edge=longest, n_ground=n_ground)
 
 
 def merge_vertical(
@@ -252,7 +246,6 @@ class HeightsPart:
     height: np.ndarray
     sigma: np.ndarray
     inside: np.ndarray
-    w: WStatistics
 
 
 _MAP_FIELDS = ("height", "sigma", "sigma_plane", "sigma_block", "sigma_model", "n_points",
@@ -329,17 +322,8 @@ class HeightsTask:
                               self.reference_xyz[ri, :2], **tin_opts)
         self._check_delaunay(chunk.id, xy[vert], tin, mi[trusted], self.reference_xyz[ri, :2])
         rows = {k: np.asarray(getattr(mp, k))[mine] for k in _MAP_FIELDS}
-        from ..accuracy.heights import compare_heights, w_test
-
-        comp = compare_heights(tin.height, tin.sigma, self.reference_xyz[ri, 2],
-                               **({"sigma_ref": self.options["sigma_ref"]}
-                                  if "sigma_ref" in self.options else {}))
-        wt = w_test(comp.dh, comp.sigma_dh, alpha=self.options.get("alpha", 0.001))
-        return HeightsPart(
-            chunk=chunk.id, map_index=mi[mine], map_rows=rows, ref_index=ri,
-            height=tin.height, sigma=tin.sigma, inside=tin.inside,
-            w=WStatistics.of(wt.w, wt.outlier, critical=wt.critical),
-        )
+        return HeightsPart(chunk=chunk.id, map_index=mi[mine], map_rows=rows, ref_index=ri,
+                           height=tin.height, sigma=tin.sigma, inside=tin.inside)
 
     def _check_delaunay(self, chunk_id: str, vxy: np.ndarray, tin: Any, used: np.ndarray,
                         ref_xy: np.ndarray) -> None:
