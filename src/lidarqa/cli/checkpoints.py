@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
 from typing import Any
 
@@ -251,22 +252,14 @@ def checkpoints(
 
     run = None
     if vertical:
-        if on_catalog:  # heights in metres through the source, as for one file
-            cloud: Any = open_catalog_source(measured, cat_opts, crs=given)
-            native = cloud.native_crs
-            if native is None and chk.crs is not None:  # the check points' CRS for both
-                cloud = open_catalog_source(measured, cat_opts, crs=chk.crs)
-        else:
-            from .. import read
+        from ..tiling.jobs_api import catalog_vertical_check
 
-            with steps("Reading " + measured_path):
-                cloud = read(measured_path, crs=given)
-            if source_id is not None:
-                cloud = cloud.select(source_id=source_id)
-                if len(cloud) == 0:
-                    raise OptionError(f"{measured_path} has no points with --source-id "
-                                      f"{source_id}")
-            native = cloud.crs
+        # one job for a file (one region: the in-memory check) and a catalog (only the chunks
+        # holding check points are read); heights in metres through the source
+        source = open_catalog_source(measured, cat_opts, crs=given)
+        if source.native_crs is None and chk.crs is not None:  # the check points' CRS for both
+            source = open_catalog_source(measured, cat_opts, crs=chk.crs)
+        native = source.native_crs
         ensure_same_crs(native, chk.crs, what=("MEASURED", "CHECK"))
         crs_used = native if native is not None else chk.crs
         fh, fv, hname, vname = _unit_factors(crs_used,
@@ -278,32 +271,19 @@ def checkpoints(
             )
             if chk.crs is None or native is None:
                 notes.append("one input has no CRS and is taken to share the other's CRS and units")
-        cls_arg = tuple(classes) if classes else (2,)
-        if on_catalog:
-            from ..tiling.jobs_api import catalog_vertical_check
-
-            fh, fv = cloud.xy_factor, cloud.z_factor
-            with catalog_engine(cat_opts) as eng:
-                run = catalog_vertical_check(cloud, chk, classes=cls_arg, source_id=source_id,
-                                             max_edge=max_edge,
-                                             checkpoint_rmse_v=checkpoint_rmse_v,
-                                             **job_options(cat_opts, eng))
-            report: Any = run.value
-        else:
-            from ..accuracy.checkpoints import vertical_check
-
-            cls = cloud.classification
-            if cls is None and classes is not None:
+        fh, fv = source.xy_factor, source.z_factor
+        cls_arg: tuple[int, ...] | None = tuple(classes) if classes else (2,)
+        if source.cloud is not None and source.cloud.classification is None:  # a point file
+            if classes is not None:
                 raise OptionError(f"{measured_path} has no classification, so --classes "
                                   "cannot select ground points")
-            if cls is None:
-                notes.append("the cloud has no classification: all its points form the TIN")
-            with steps("Comparing heights with the ground TIN"):
-                report = vertical_check(
-                    _scaled(cloud.xyz, fh, fv), PointSet(chk.ids, _scaled(chk.xyz, fh, fv)),
-                    classification=cls, classes=cls_arg, max_edge=max_edge,
-                    checkpoint_rmse_v=checkpoint_rmse_v,
-                )
+            notes.append("the cloud has no classification: all its points form the TIN")
+            cls_arg = None
+        with catalog_engine(cat_opts) if on_catalog else contextlib.nullcontext() as eng:
+            run = catalog_vertical_check(source, chk, classes=cls_arg, source_id=source_id,
+                                         max_edge=max_edge, checkpoint_rmse_v=checkpoint_rmse_v,
+                                         **(job_options(cat_opts, eng) if on_catalog else {}))
+        report: Any = run.value
     else:
         from ..accuracy.checkpoints import assess_checkpoints
         from ..io import CLOUD_SUFFIXES
@@ -353,12 +333,12 @@ def checkpoints(
     results["warnings"] = notes + results["warnings"]
     results["units"] = "m"
     catalog_params = {}
-    if run is not None:
+    if run is not None and on_catalog:
         results["catalog"] = run_summary(run)
         catalog_params = {k: cat_opts.get(k) for k in ("chunk_size", "buffer", "workers",
                                                        "scheduler")}
     _summary(results, vertical)
-    if run is not None:
+    if run is not None and on_catalog:
         echo_run(run)
     finish(
         "checkpoints",

@@ -42,7 +42,7 @@ import numpy as np
 
 from ..errors import DegenerateGeometryError, InvalidPointsError, OptionError
 from ..io.vector import PointSet
-from .jobs_vector import in_core, owned
+from .jobs_vector import in_core, open_box, owned
 
 __all__ = [
     "CheckSpacingTask",
@@ -147,6 +147,11 @@ class VerticalCheckTask:
         Fixed for the whole catalog (m); see :func:`lidarqa.accuracy.checkpoints.vertical_check`.
     classes : tuple of int or None
         Ground classes; None takes every point as ground.
+    xy_factor : float
+        Horizontal unit to metres.
+    bounds : (xmin, ymin, xmax, ymax), optional
+        The source's extent: a buffer side beyond it needs no margin (no points
+        there), so one region holding the whole area is the in-memory check.
     """
 
     check: PointSet
@@ -154,14 +159,16 @@ class VerticalCheckTask:
     search_radius: float | None = None
     classes: tuple[int, ...] | None = (2,)
     xy_factor: float = 1.0
+    bounds: tuple[float, float, float, float] | None = None
 
     def __call__(self, chunk_data: Any) -> VerticalPart:
         from ..accuracy.checkpoints import vertical_check
         from ..errors import TilingError
 
         core = chunk_data.chunk
-        margin = min(core.core[0] - core.buffered[0], core.core[1] - core.buffered[1])
-        margin *= self.xy_factor
+        b = open_box(core.buffered, self.bounds)
+        margin = min(core.core[0] - b[0], core.core[1] - b[1], b[2] - core.core[2],
+                     b[3] - core.core[3]) * self.xy_factor
         if margin < 2.0 * self.max_edge:
             raise TilingError(f"chunk {core.id}: the buffer ({margin:g} m) must be at least "
                               f"2 x max_edge = {2 * self.max_edge:g} m for the vertical check")
@@ -303,13 +310,8 @@ class HeightsTask:
         r_used = np.where(np.isfinite(mp.radius), mp.radius,
                           float(opts.get("max_radius", MAX_RADIUS)))
         xy = self.map_xy[mi]
-        lo_x, lo_y, hi_x, hi_y = box
-        if self.bounds is not None:  # no laser point beyond the catalog: that side is open
-            b = self.bounds
-            lo_x = -np.inf if box[0] <= b[0] else lo_x
-            lo_y = -np.inf if box[1] <= b[1] else lo_y
-            hi_x = np.inf if box[2] >= b[2] else hi_x
-            hi_y = np.inf if box[3] >= b[3] else hi_y
+        # no laser point beyond the catalog: a side there is open
+        lo_x, lo_y, hi_x, hi_y = open_box(box, self.bounds)
         trusted = ((xy[:, 0] - r_used >= lo_x) & (xy[:, 0] + r_used <= hi_x)
                    & (xy[:, 1] - r_used >= lo_y) & (xy[:, 1] + r_used <= hi_y))
         mine = owned(xy, chunk)

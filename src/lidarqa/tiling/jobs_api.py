@@ -76,15 +76,6 @@ def _split(kw: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any], dict[str
     return open_opts, chunk_opts, run_opts
 
 
-def _sample_points(source: Any, chunks: Sequence[Any]) -> np.ndarray:
-    """Selected points of the source's central sample window (to fix data-driven defaults).
-
-    The window does not depend on the chunking, so a file and a folder of its tiles
-    get the same defaults.
-    """
-    return source.sample().xyz
-
-
 # ------------------------------------------------------------------ vector features
 
 
@@ -125,10 +116,10 @@ def catalog_features(
     catalog = open_sources(sources, classes=classes or None, source_id=source_id or None,
                            z_to_metres=False, **open_opts)
     chunks = region_chunks(catalog, **chunk_opts)
-    seg_opts, opts = fixed_auto_options(_sample_points(catalog, chunks), kind=kind,
+    seg_opts, opts = fixed_auto_options(catalog.sample().xyz, kind=kind,
                                         segment_options=segment_options, options=options)
     task = VectorTask(kind=kind, segment_options=seg_opts,
-                      options=opts, bounds=_bounds2d(catalog))
+                      options=opts, bounds=catalog.area_bounds)
     outcomes, parts = _run(catalog, chunks, task, run_opts, f"{kind.capitalize()}")
     value = merge_vector_parts(parts, tolerance=tolerance, crs=catalog.crs)
     return CatalogRun(value, catalog, tuple(chunks), tuple(outcomes),
@@ -187,7 +178,8 @@ def catalog_vertical_check(
                           "Ground spacing")
         max_edge = max_edge_from_spacing(spacing) * catalog.xy_factor
     task = VerticalCheckTask(cp, max_edge=float(max_edge), search_radius=search_radius,
-                             classes=cls, xy_factor=catalog.xy_factor)
+                             classes=cls, xy_factor=catalog.xy_factor,
+                             bounds=catalog.area_bounds)
     outcomes, parts = _run(catalog, chunks, task, run_opts, "Check points")
     if catalog.xy_factor != 1.0:
         xyz = cp.xyz.copy()
@@ -233,7 +225,7 @@ def catalog_heights(
     chunks = tuple(c for c in region_chunks(catalog, **chunk_opts)
                    if owned(mxy, c).any() or owned(ref, c).any())
     task = HeightsTask(mxy, ref, options=dict(options or {}), classes=None,
-                       bounds=_bounds2d(catalog))
+                       bounds=catalog.area_bounds)
     outcomes, parts = _run(catalog, chunks, task, run_opts, "Heights")
     value = merge_heights(parts, mxy, ref, options=options)
     return CatalogRun(value, catalog, tuple(chunks), tuple(outcomes))
@@ -284,7 +276,7 @@ def catalog_repeatability(
     catalog = open_sources(sources, classes=classes or None, source_id=source_id or None,
                            z_to_metres=False, **open_opts)
     chunks = region_chunks(catalog, **chunk_opts)
-    seg_opts, e_opts = fixed_auto_options(_sample_points(catalog, chunks),
+    seg_opts, e_opts = fixed_auto_options(catalog.sample().xyz,
                                           segment_options=segment_options, options=edge_options)
     task = StripEdgesTask(segment_options=seg_opts, edge_options=e_opts)
     outcomes, parts = _run(catalog, chunks, task, run_opts, "Strip edges")
@@ -298,9 +290,3 @@ def catalog_repeatability(
     return CatalogRun(rows, catalog, tuple(chunks), tuple(outcomes),
                       {"strips": strips, "strip_chunks": where,
                        "segment_options": seg_opts, "edge_options": e_opts})
-
-
-def _bounds2d(catalog: Any) -> tuple[float, float, float, float]:
-    """The catalog's (min x, min y, max x, max y)."""
-    b = catalog.bounds
-    return float(b[0]), float(b[1]), float(b[2]), float(b[3])
