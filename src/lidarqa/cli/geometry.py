@@ -23,15 +23,16 @@ from ._catalog import (
     wants_catalog,
 )
 from ._common import (
-    CRS_HELP,
-    INT_LIST,
     Steps,
+    classes_option,
     common_options,
+    crs_option,
     echo,
     finish,
     input_crs,
     prepare_outputs,
     settings,
+    source_id_option,
 )
 
 _OUT_SUFFIXES = (".csv", ".gpkg", ".geojson", ".json")
@@ -42,10 +43,8 @@ def _selection_options(func: Callable[..., Any]) -> Callable[..., Any]:
         click.argument("paths", nargs=-1, required=True, type=click.Path()),
         click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
                      help="Output file: .csv, .gpkg or .geojson (by extension)."),
-        click.option("--classes", type=INT_LIST, default=None,
-                     help="Only these classification codes, e.g. 6 (buildings) or 6,2."),
-        click.option("--source-id", type=INT_LIST, default=None,
-                     help="Only these point_source_id values (flight strips), e.g. 706."),
+        classes_option,
+        source_id_option,
         click.option("--grow-radius", type=float, default=None,
                      help="Surface growing: neighbourhood radius (m) [default: 2x the point "
                           "spacing, 0.5-3 m]."),
@@ -57,7 +56,7 @@ def _selection_options(func: Callable[..., Any]) -> Callable[..., Any]:
                      help="Smallest planar segment kept (points)."),
         click.option("--max-rmse", type=float, default=0.15, show_default=True,
                      help="Drop segments whose plane RMS residual exceeds this (m)."),
-        click.option("--crs", "crs", default=None, metavar="CRS", help=CRS_HELP),
+        crs_option,
     ]
     for opt in reversed(opts):
         func = opt(func)

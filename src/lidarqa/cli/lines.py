@@ -23,10 +23,10 @@ from ._catalog import (
     wants_catalog,
 )
 from ._common import (
-    CRS_HELP,
     INT_LIST,
     Steps,
     common_options,
+    crs_option,
     echo,
     finish,
     fmt_number,
@@ -79,7 +79,7 @@ def _matching_options(func: Callable[..., Any]) -> Callable[..., Any]:
             default=None,
             help="Point-cloud input: classes whose edges are extracted, e.g. 6.",
         ),
-        click.option("--crs", "crs", default=None, metavar="CRS", help=CRS_HELP),
+        crs_option,
     ]
     for opt in reversed(opts):
         func = opt(func)
