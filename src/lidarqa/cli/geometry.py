@@ -39,7 +39,7 @@ _OUT_SUFFIXES = (".csv", ".gpkg", ".geojson", ".json")
 
 
 def _selection_options(func: Callable[..., Any]) -> Callable[..., Any]:
-    opts = [
+    opts: list[Callable[..., Any]] = [
         click.argument("paths", nargs=-1, required=True, type=click.Path()),
         click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
                      help="Output file: .csv, .gpkg or .geojson (by extension)."),

@@ -37,7 +37,7 @@ from ._common import (
 
 
 def _matching_options(func: Callable[..., Any]) -> Callable[..., Any]:
-    opts = [
+    opts: list[Callable[..., Any]] = [
         click.option(
             "--weight",
             default=10.0,
