@@ -70,35 +70,36 @@ def _ids(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.concatenate([a.astype(str), b.astype(str)]).astype(object)
 
 
-def _output_rows(report: Any, map_ids: np.ndarray, ref_ids: np.ndarray, crs: Any) -> Any:
+_ZERO_PADDED = ("n_points", "failed", "outlier", "inside")  # counts and flags (0/1)
+
+
+def _column(name: str, values: Any, before: int, after: int) -> np.ndarray:
+    """`values` with empty rows before and after: NaN, 0 for counts and flags, '' for reasons."""
+    v = np.asarray(values)
+    if name == "reason":
+        return np.concatenate([np.full(before, ""), v.astype(str), np.full(after, "")]).astype(
+            object)
+    if name in _ZERO_PADDED:
+        v = v.astype(np.int64) if v.dtype == bool else v
+        return np.concatenate([np.zeros(before, dtype=np.int64), v,
+                               np.zeros(after, dtype=np.int64)])
+    return np.concatenate([np.full(before, np.nan), v, np.full(after, np.nan)])
+
+
+def _output_rows(mp: Any, map_xy: Any, ref_xyz: Any, ref_cols: dict[str, Any], ids: Any,
+                 crs: Any, map_fields: tuple[str, ...], **first: Any) -> Any:
+    """One row per map point (its fit) then per reference point (its test), as a PointSet."""
     from ..io.vector import PointSet
 
-    mp = report.map_points
-    m, r = len(mp), len(report.reference_xyz)
-    nan_m, nan_r = np.full(m, np.nan), np.full(r, np.nan)
-    zero_m, zero_r = np.zeros(m, dtype=np.int64), np.zeros(r, dtype=np.int64)
-    xyz = np.vstack([np.column_stack([mp.xy, mp.height]), report.reference_xyz]).reshape(-1, 3)
-    attrs = {
-        "kind": np.array(["map"] * m + ["reference"] * r, dtype=object),
-        "height": np.concatenate([mp.height, nan_r]),
-        "sigma": np.concatenate([mp.sigma, nan_r]),
-        "sigma_plane": np.concatenate([mp.sigma_plane, nan_r]),
-        "sigma_block": np.concatenate([mp.sigma_block, nan_r]),
-        "sigma_model": np.concatenate([mp.sigma_model, nan_r]),
-        "n_points": np.concatenate([mp.n_points, zero_r]),
-        "radius": np.concatenate([mp.radius, nan_r]),
-        "distance": np.concatenate([mp.distance, nan_r]),
-        "failed": np.concatenate([mp.failed.astype(np.int64), zero_r]),
-        "reason": np.concatenate([mp.reason.astype(str), np.full(r, "")]).astype(object),
-        "model_height": np.concatenate([nan_m, report.tin.height]),
-        "model_sigma": np.concatenate([nan_m, report.tin.sigma]),
-        "dh": np.concatenate([nan_m, report.dh]),
-        "sigma_dh": np.concatenate([nan_m, report.sigma_dh]),
-        "w": np.concatenate([nan_m, report.w_values]),
-        "outlier": np.concatenate([zero_m, report.outlier.astype(np.int64)]),
-        "inside": np.concatenate([zero_m, report.inside.astype(np.int64)]),
-    }
-    return PointSet(ids=_ids(map_ids, ref_ids), xyz=xyz, attributes=attrs, crs=crs)
+    m, r = len(mp), len(ref_xyz)
+    attrs = {"kind": np.array(["map"] * m + ["reference"] * r, dtype=object), **first}
+    attrs.update({k: _column(k, getattr(mp, k), 0, r) for k in map_fields})
+    attrs.update({k: _column(k, v, m, 0) for k, v in ref_cols.items()})
+    xyz = np.vstack([np.column_stack([map_xy, mp.height]), ref_xyz]).reshape(-1, 3)
+    return PointSet(ids=ids, xyz=xyz, attributes=attrs, crs=crs)
+
+
+_MAP_FIELDS = ("height", "sigma", "sigma_plane", "sigma_block", "sigma_model", "n_points")
 
 
 class _SigmaStrip(click.ParamType):
@@ -433,7 +434,13 @@ def heights(
         from ..io.vector import write_points
         stamp = reproducible_vectors() if on_catalog else contextlib.nullcontext()
         with steps("Writing " + output), stamp:
-            rows = _output_rows(report, mp.ids, ref.ids, pc.crs or mp.crs or ref.crs)
+            rows = _output_rows(
+                report.map_points, report.map_points.xy, report.reference_xyz,
+                {"model_height": report.tin.height, "model_sigma": report.tin.sigma,
+                 "dh": report.dh, "sigma_dh": report.sigma_dh, "w": report.w_values,
+                 "outlier": report.outlier, "inside": report.inside},
+                _ids(mp.ids, ref.ids), pc.crs or mp.crs or ref.crs,
+                (*_MAP_FIELDS, "radius", "distance", "failed", "reason"))
             write_points(rows, output, overwrite=settings().overwrite, layer="heights")
     res = report.to_dict()
     m, c, w = res["map_points"], res["comparison"], res["w"]
@@ -506,7 +513,6 @@ def _heights_by_levels(
     """``lidarqa heights`` with road polygons: test each reference point on its own level."""
     from ..accuracy.roads import compare_road_heights, read_road_polygons, reconstruct_roads
     from ..io.crs import check_map_crs, z_to_metres_factor
-    from ..io.vector import PointSet
 
     with steps("Reading road polygons and reference points"):
         polys, ids, crs = read_road_polygons(map_path)
@@ -525,34 +531,12 @@ def _heights_by_levels(
     if output is not None:
         from ..io.vector import write_points
 
-        m, r = len(mp), len(ref_xyz)
-        nan_m, nan_r = np.full(m, np.nan), np.full(r, np.nan)
-        zero_m, zero_r = np.zeros(m, dtype=np.int64), np.zeros(r, dtype=np.int64)
-        attrs = {
-            "kind": np.array(["map"] * m + ["reference"] * r, dtype=object),
-            "road": np.concatenate([mp.road, comp.road]),
-            "height": np.concatenate([mp.height, nan_r]),
-            "sigma": np.concatenate([mp.sigma, nan_r]),
-            "sigma_plane": np.concatenate([mp.sigma_plane, nan_r]),
-            "sigma_block": np.concatenate([mp.sigma_block, nan_r]),
-            "sigma_model": np.concatenate([mp.sigma_model, nan_r]),
-            "n_points": np.concatenate([mp.n_points, zero_r]),
-            "failed": np.concatenate([mp.failed.astype(np.int64), zero_r]),
-            "reason": np.concatenate([mp.reason.astype(str), np.full(r, "")]).astype(object),
-            "model_height": np.concatenate([nan_m, comp.height]),
-            "model_sigma": np.concatenate([nan_m, comp.sigma]),
-            "dh": np.concatenate([nan_m, comp.comparison.dh]),
-            "sigma_dh": np.concatenate([nan_m, comp.comparison.sigma_dh]),
-            "w": np.concatenate([nan_m, comp.w.w]),
-            "outlier": np.concatenate([zero_m, comp.w.outlier.astype(np.int64)]),
-        }
-        xyz_out = np.vstack([np.column_stack([mp.xy_laser, mp.height]), ref_xyz]).reshape(-1, 3)
-        rows = PointSet(
-            ids=_ids(np.arange(m), ref.ids),
-            xyz=xyz_out,
-            attributes=attrs,
-            crs=pc.crs or crs or ref.crs,
-        )
+        rows = _output_rows(
+            mp, mp.xy_laser, ref_xyz,
+            {"model_height": comp.height, "model_sigma": comp.sigma, "dh": comp.comparison.dh,
+             "sigma_dh": comp.comparison.sigma_dh, "w": comp.w.w, "outlier": comp.w.outlier},
+            _ids(np.arange(len(mp)), ref.ids), pc.crs or crs or ref.crs,
+            (*_MAP_FIELDS, "failed", "reason"), road=np.concatenate([mp.road, comp.road]))
         with steps("Writing " + output):
             write_points(rows, output, overwrite=settings().overwrite, layer="heights")
     res_roads = rec.to_dict()
