@@ -2,10 +2,15 @@
 
 from __future__ import annotations
 
+import os
+import tempfile
 from pathlib import Path
 
 import pytest
 from datapaths import DATA, HAS_SHARED, SHARED
+
+# catalog jobs keep finished chunks for --resume in a work folder: never the user's cache
+os.environ.setdefault("LIDARQA_WORK_DIR", tempfile.mkdtemp(prefix="lidarqa-test-work-"))
 
 
 @pytest.fixture(scope="session")

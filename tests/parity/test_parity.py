@@ -250,45 +250,7 @@ def test_lines_on_the_ign_catalog_and_file(ign, tmp_path):
 
 
 # ------------------------------------------------------------------ options honoured
-
-# Every option of a command that takes a catalog, and how its catalog path treats it: run
-# (honoured, covered above or by tests/tiling) or refused with a clear error. A new option
-# fails this test until its catalog path is written (or it is refused) and listed here.
-_COMMON = {"json_path", "overwrite", "quiet", "verbose", "chunk_size", "buffer", "workers",
-           "scheduler", "skip_bad", "crs"}
-HONOURED = {
-    "checkpoints": {"measured", "check", "vertical", "classes", "source_id", "max_edge",
-                    "checkpoint_rmse_v", "output"},
-    "heights": {"cloud", "map_path", "reference", "output", "classes", "source_id", "spacing",
-                "radius", "max_radius", "min_points", "sigma_point", "sigma_gps", "sigma_ins",
-                "sigma_strip", "sigma_ref", "curvature", "alpha", "estimate_offset",
-                "correlation", "eq8_diagonal", "posterior"},
-    "lines": {"test", "model", "classes", "test_source_id", "model_source_id", "weight",
-              "sensitivity", "threshold", "rotate", "denominator", "ground_truth", "matrix",
-              "pairs_out"},
-    "edges": {"paths", "output", "classes", "source_id", "grow_radius", "grow_dist",
-              "seed_method", "min_segment_size", "max_rmse", "near_dist", "min_angle",
-              "min_length"},
-}
-# options a catalog refuses with a one-line error (they need the whole set in memory)
-REFUSED = {
-    "checkpoints": {"transform", "control_ids", "control_file", "match", "max_distance",
-                    "checkpoint_rmse_h"},
-    "heights": {"largest_segment"},
-    "lines": set(),
-    "edges": set(),
-}
-
-
-@pytest.mark.parametrize("name", sorted(HONOURED))
-def test_every_option_of_a_catalog_command_is_honoured_or_refused(name):
-    from lidarqa.cli.main import COMMANDS  # noqa: F401  (registration)
-
-    cmd = cli.get_command(None, name)
-    params = {p.name for p in cmd.params}
-    target = {p for p in params if p.startswith("target_")}  # checked by finish() on both
-    unknown = params - HONOURED[name] - REFUSED[name] - _COMMON - target
-    assert not unknown, f"{name}: options with no catalog path: {sorted(unknown)}"
+# every option of every command: tests/parity/test_catalog_options.py
 
 
 # ------------------------------------------------------------------ roads

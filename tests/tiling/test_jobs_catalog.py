@@ -412,13 +412,12 @@ def test_an_analysis_without_a_catalog_version_runs_on_the_catalog_in_memory(til
     from types import SimpleNamespace
 
     from lidarqa.report._context import RunContext
-    from lidarqa.report.catalog_analyses import catalog_analysis
 
     _, folder, whole = tiles
     spec = SimpleNamespace(kind="clouds", path=folder, effective_crs=None)
     cfg = SimpleNamespace(inputs={"block": spec}, crs=None)
-    item = SimpleNamespace(kind="roads", options={"cloud": "block"})
-    assert catalog_analysis(SimpleNamespace(config=cfg), item) is None  # the file analysis
-    cloud = RunContext(cfg, tmp_path).cloud("block")
+    ctx = RunContext(cfg, tmp_path)
+    assert ctx.is_catalog("block")
+    cloud = ctx.cloud("block")
     assert len(cloud) == len(whole)
     assert np.array_equal(np.sort(cloud.xyz[:, 2]), np.sort(whole.xyz[:, 2]))

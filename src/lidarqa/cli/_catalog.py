@@ -1,17 +1,27 @@
-"""Catalog inputs of the command line: telling a catalog from one file, and the catalog runs."""
+"""Catalog inputs of the command line: catalog or file, options, engine and summary.
+
+Telling a catalog from one file, the catalog options every command takes, the
+engine around a job and the catalog summary of its --json record.
+
+A command calls its library job (:mod:`lidarqa.tiling.jobs_api`, through
+:func:`~lidarqa.tiling.apply.apply`) with :func:`job_options` inside :func:`catalog_engine`.
+"""
 
 from __future__ import annotations
 
 import contextlib
 import signal
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
 import click
 
-from ._common import Steps, echo, finish
+from ._common import Steps, echo, finish, settings
 
-__all__ = ["bad_lines", "is_catalog", "info_on_catalog", "sigterm_as_interrupt"]
+__all__ = ["bad_lines", "catalog_engine", "catalog_options", "catalog_options_given",
+           "echo_run", "failed_exit", "info_on_catalog", "is_catalog", "job_options",
+           "open_catalog_source", "option_given", "pop_catalog_options", "reproducible_vectors",
+           "run_summary", "sigterm_as_interrupt", "wants_catalog"]
 
 
 def is_catalog(paths: Sequence[str]) -> bool:
@@ -41,6 +51,145 @@ def sigterm_as_interrupt() -> Iterator[None]:
         yield
     finally:
         signal.signal(signal.SIGTERM, old)
+
+
+_OPTION_NAMES = ("chunk_size", "buffer", "workers", "scheduler", "skip_bad", "resume")
+
+
+def catalog_options(func: Callable[..., Any]) -> Callable[..., Any]:
+    """``--chunk-size --buffer --workers --scheduler --skip-bad --resume`` (as ``ground``)."""
+    opts = [
+        click.option("--chunk-size", type=float, default=None,
+                     help="Catalog: chunk side, m (default: from the point density, aligned "
+                          "with the tiles)."),
+        click.option("--buffer", type=float, default=None,
+                     help="Catalog: margin read around each chunk, m (default 60; wider than "
+                          "the largest building)."),
+        click.option("--workers", type=int, default=None,
+                     help="Catalog: local worker processes (default: one per core; 1 = serial, "
+                          "no Dask)."),
+        click.option("--scheduler", default=None,
+                     help="Catalog: Dask scheduler address (tcp://host:port) or 'serial'."),
+        click.option("--skip-bad", is_flag=True,
+                     help="Catalog: leave out bad tiles (listed) instead of failing."),
+        click.option("--resume", is_flag=True,
+                     help="Catalog: re-use the chunks finished by an interrupted or failed run "
+                          "(kept in $LIDARQA_WORK_DIR, default ~/.cache/lidarqa/chunks, until "
+                          "a run ends with no failed chunk)."),
+    ]
+    for opt in reversed(opts):
+        func = opt(func)
+    return func
+
+
+def option_given(value: Any) -> bool:
+    """An option the user gave: not None and not an unset flag (``--buffer 0`` is given)."""
+    return value is not None and value is not False
+
+
+def catalog_options_given(opts: dict[str, Any]) -> bool:
+    """Any catalog option given."""
+    return any(option_given(opts.get(k)) for k in _OPTION_NAMES)
+
+
+def wants_catalog(paths: Sequence[str], opts: dict[str, Any]) -> bool:
+    """A catalog input, or a catalog option given."""
+    return is_catalog(paths) or catalog_options_given(opts)
+
+
+def pop_catalog_options(opts: dict[str, Any]) -> dict[str, Any]:
+    """Remove the catalog options from a command's keyword arguments and return them."""
+    return {k: opts.pop(k, None) for k in _OPTION_NAMES}
+
+
+@contextlib.contextmanager
+def catalog_engine(cat_opts: dict[str, Any]) -> Iterator[Any]:
+    """The engine of ``--workers`` (default one per core; 1 = serial) or ``--scheduler``.
+
+    SIGTERM stops the job as an interrupt does (outputs removed, finished chunks kept).
+    """
+    from ..tiling import Engine
+
+    scheduler, workers = cat_opts.get("scheduler"), cat_opts.get("workers")
+    eng = Engine("serial") if scheduler is None and workers == 1 else \
+        Engine(scheduler, workers=workers)
+    with sigterm_as_interrupt(), eng:
+        if eng.dashboard_link and not settings().quiet:
+            click.echo(f"Dask dashboard: {eng.dashboard_link}", err=True)
+        yield eng
+
+
+def open_catalog_source(paths: Sequence[str], cat_opts: dict[str, Any], *, crs: Any = None,
+                        z_to_metres: bool = True, **selection: Any) -> Any:
+    """The :class:`~lidarqa.tiling.source.Source` of `paths` (bad tiles listed or refused)."""
+    from ..tiling.source import open_source
+
+    with Steps()(f"Reading the headers of {', '.join(paths)}"):
+        source = open_source(list(paths), skip_bad=bool(cat_opts.get("skip_bad")), crs=crs,
+                             z_to_metres=z_to_metres, **selection)
+    bad_lines(source.bad)
+    return source
+
+
+def job_options(cat_opts: dict[str, Any], engine: Any = None) -> dict[str, Any]:
+    """The engine options every catalog job takes from the command's catalog options.
+
+    Finished chunks are always kept in the work folder until the job ends with no
+    failed chunk; ``--resume`` re-uses them.
+    """
+    from ..tiling.apply import default_work_dir
+
+    return {"chunk_size": cat_opts.get("chunk_size"), "buffer": cat_opts.get("buffer"),
+            "progress": not settings().quiet, "skip_failed": True,
+            "work_dir": default_work_dir(), "resume": bool(cat_opts.get("resume")),
+            **({"engine": engine} if engine is not None else {})}
+
+
+def run_summary(run: Any) -> dict[str, Any]:
+    d = run.to_dict()
+    d["chunks"] = run.chunk_status()
+    d["bad_tiles"] = [{"path": str(p), "reason": str(r)} for p, r in run.catalog.bad]
+    return d
+
+
+def echo_run(run: Any) -> None:
+    d = run.to_dict()
+    c = d["chunk_status"]
+    echo(f"  catalog         {d['n_tiles']} tile(s), {d['n_chunks']} chunk(s): "
+         + ", ".join(f"{v} {k}" for k, v in c.items() if v))
+    if run.failed:
+        click.echo("Failed chunks (their area is missing from the results): "
+                   + ", ".join(run.failed), err=True)
+
+
+def failed_exit(run: Any) -> None:
+    if run.failed:
+        from ..errors import TilingError
+
+        raise TilingError(f"{len(run.failed)} chunk(s) failed: {', '.join(run.failed)} "
+                          "(the outputs hold every other chunk)")
+
+
+# The GeoPackage driver stamps the writing time into the file (gpkg_contents.last_change); a
+# catalog run's outputs must be byte-identical for any number of workers and any rerun, so its
+# vector outputs carry this fixed time instead (the run's time is in the --json record).
+FIXED_GPKG_TIME = "2000-01-01T00:00:00.000Z"
+
+
+@contextlib.contextmanager
+def reproducible_vectors() -> Iterator[None]:
+    """Write GeoPackages with :data:`FIXED_GPKG_TIME` inside the block (restored after)."""
+    try:
+        import pyogrio
+    except ImportError:  # no GIS extra: only CSV can be written, which has no time stamp
+        yield
+        return
+    before = pyogrio.get_gdal_config_option("OGR_CURRENT_DATE")
+    pyogrio.set_gdal_config_options({"OGR_CURRENT_DATE": FIXED_GPKG_TIME})
+    try:
+        yield
+    finally:
+        pyogrio.set_gdal_config_options({"OGR_CURRENT_DATE": before})
 
 
 def bad_lines(bad: Sequence[tuple[str, str]]) -> None:
@@ -73,12 +222,12 @@ def _strip_counts(catalog: Any) -> tuple[dict[int, int], dict[str, list[int]]]:
     return dict(sorted(total.items())), per_tile
 
 
-def info_on_catalog(paths: Sequence[str], *, skip_bad: bool = False, strips: bool = False) -> None:
-    from ..tiling import make_chunks, open_catalog
+def info_on_catalog(paths: Sequence[str], *, skip_bad: bool = False, strips: bool = False,
+                    crs: Any = None) -> None:
+    from ..tiling import make_chunks
 
-    with Steps()(f"Reading the headers of {', '.join(paths)}"):
-        catalog = open_catalog(list(paths), skip_bad=skip_bad)
-    bad_lines(catalog.bad)
+    # --crs for tiles that declare none; a tile whose own CRS contradicts it is an error
+    catalog = open_catalog_source(paths, {"skip_bad": skip_bad}, crs=crs, z_to_metres=False).catalog
     d = catalog.to_dict()
     chunks = make_chunks(catalog)
     d["default_chunks"] = {

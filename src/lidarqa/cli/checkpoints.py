@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
 from typing import Any
 
@@ -9,7 +10,17 @@ import click
 
 from ..accuracy.transforms import TRANSFORMS
 from ..units import param_unit
-from ._catalog_jobs import catalog_options, wants_catalog
+from ._catalog import (
+    catalog_engine,
+    catalog_options,
+    echo_run,
+    failed_exit,
+    job_options,
+    open_catalog_source,
+    reproducible_vectors,
+    run_summary,
+    wants_catalog,
+)
 from ._common import (
     INT_LIST,
     Steps,
@@ -224,19 +235,12 @@ def checkpoints(
     if control_ids and control_file:
         raise OptionError("give --control-ids or --control-file, not both")
     given = input_crs(crs)
-    if wants_catalog(measured, cat_opts):
-        if not vertical:
-            raise OptionError("a catalog of clouds (several files, a folder, a glob, a .vpc) "
-                              "needs --vertical")
-        from ._catalog_jobs import vertical_on_catalog
-
-        vertical_on_catalog(measured, check, output, classes=classes, source_id=source_id,
-                            crs=given, max_edge=max_edge,
-                            checkpoint_rmse_v=checkpoint_rmse_v, cat_opts=cat_opts,
-                            summary=_summary)
-        return
+    on_catalog = wants_catalog(measured, cat_opts)
+    if on_catalog and not vertical:
+        raise OptionError("a catalog of clouds (several files, a folder, a glob, a .vpc) "
+                          "needs --vertical")
     measured_path = measured[0]
-    prepare_outputs(output, inputs=(measured_path, check, control_file))
+    prepare_outputs(output, inputs=(*measured, check, control_file))
     steps = Steps()
     notes: list[str] = []
     ctrl = _parse_ids(control_ids)
@@ -246,44 +250,40 @@ def checkpoints(
     with steps("Reading check points"):
         chk = read_points(check, crs=given)
 
+    run = None
     if vertical:
-        from .. import read
-        from ..accuracy.checkpoints import vertical_check
+        from ..tiling.jobs_api import catalog_vertical_check
 
-        with steps("Reading " + measured_path):
-            cloud = read(measured_path, crs=given)
-        if source_id is not None:
-            cloud = cloud.select(source_id=source_id)
-            if len(cloud) == 0:
-                raise OptionError(f"{measured_path} has no points with --source-id {source_id}")
-        ensure_same_crs(cloud.crs, chk.crs, what=("MEASURED", "CHECK"))
-        crs_used = cloud.crs if cloud.crs is not None else chk.crs
-        fh, fv, hname, vname = _unit_factors(
-            crs_used, "MEASURED" if cloud.crs is not None else "CHECK"
-        )
+        # one job for a file (one region: the in-memory check) and a catalog (only the chunks
+        # holding check points are read); heights in metres through the source
+        source = open_catalog_source(measured, cat_opts, crs=given)
+        if source.native_crs is None and chk.crs is not None:  # the check points' CRS for both
+            source = open_catalog_source(measured, cat_opts, crs=chk.crs)
+        native = source.native_crs
+        ensure_same_crs(native, chk.crs, what=("MEASURED", "CHECK"))
+        crs_used = native if native is not None else chk.crs
+        fh, fv, hname, vname = _unit_factors(crs_used,
+                                             "MEASURED" if native is not None else "CHECK")
         if fv != 1.0 or fh != 1.0:
             notes.append(
                 f"coordinates converted to metres (horizontal unit: {hname or 'metre'}, "
                 f"vertical unit: {vname or 'metre'})"
             )
-            if chk.crs is None or cloud.crs is None:
+            if chk.crs is None or native is None:
                 notes.append("one input has no CRS and is taken to share the other's CRS and units")
-        cls = cloud.classification
-        if cls is None and classes is not None:
-            raise OptionError(
-                f"{measured_path} has no classification, so --classes cannot select ground points"
-            )
-        if cls is None:
+        fh, fv = source.xy_factor, source.z_factor
+        cls_arg: tuple[int, ...] | None = tuple(classes) if classes else (2,)
+        if source.cloud is not None and source.cloud.classification is None:  # a point file
+            if classes is not None:
+                raise OptionError(f"{measured_path} has no classification, so --classes "
+                                  "cannot select ground points")
             notes.append("the cloud has no classification: all its points form the TIN")
-        with steps("Comparing heights with the ground TIN"):
-            report: Any = vertical_check(
-                _scaled(cloud.xyz, fh, fv),
-                PointSet(chk.ids, _scaled(chk.xyz, fh, fv)),
-                classification=cls,
-                classes=tuple(classes) if classes else (2,),
-                max_edge=max_edge,
-                checkpoint_rmse_v=checkpoint_rmse_v,
-            )
+            cls_arg = None
+        with catalog_engine(cat_opts) if on_catalog else contextlib.nullcontext() as eng:
+            run = catalog_vertical_check(source, chk, classes=cls_arg, source_id=source_id,
+                                         max_edge=max_edge, checkpoint_rmse_v=checkpoint_rmse_v,
+                                         **(job_options(cat_opts, eng) if on_catalog else {}))
+        report: Any = run.value
     else:
         from ..accuracy.checkpoints import assess_checkpoints
         from ..io import CLOUD_SUFFIXES
@@ -326,16 +326,24 @@ def checkpoints(
         out = PointSet(
             res.ids, _scaled(res.xyz, 1.0 / fh, 1.0 / fv), res.attributes, crs=chk.crs or crs_used
         )
-        with steps("Writing " + output):
+        with steps("Writing " + output), reproducible_vectors():
             write_points(out, output, overwrite=settings().overwrite)
 
     results = report.to_dict()
     results["warnings"] = notes + results["warnings"]
     results["units"] = "m"
+    catalog_params = {}
+    if run is not None and on_catalog:
+        results["catalog"] = run_summary(run)
+        catalog_params = {k: cat_opts.get(k) for k in ("chunk_size", "buffer", "workers",
+                                                       "scheduler")}
     _summary(results, vertical)
+    if run is not None and on_catalog:
+        echo_run(run)
     finish(
         "checkpoints",
-        inputs={"measured": measured_path, "check": check, "control_file": control_file},
+        inputs={"measured": list(measured) if on_catalog else measured_path, "check": check,
+                "control_file": control_file},
         parameters={
             "transform": transform,
             "control_ids": ctrl,
@@ -349,9 +357,12 @@ def checkpoints(
             "checkpoint_rmse_v": checkpoint_rmse_v,
             "output": output,
             "crs": crs_name(crs_used),
+            **catalog_params,
         },
         results=results,
     )
+    if run is not None:
+        failed_exit(run)
 
 
 def _summary(r: dict, vertical: bool) -> None:

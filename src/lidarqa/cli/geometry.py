@@ -10,31 +10,41 @@ from typing import Any
 import click
 import numpy as np
 
-from ._catalog_jobs import catalog_options, pop_catalog_options, wants_catalog
+from ._catalog import (
+    catalog_engine,
+    catalog_options,
+    echo_run,
+    failed_exit,
+    job_options,
+    open_catalog_source,
+    pop_catalog_options,
+    reproducible_vectors,
+    run_summary,
+    wants_catalog,
+)
 from ._common import (
-    CRS_HELP,
-    INT_LIST,
     Steps,
+    classes_option,
     common_options,
+    crs_option,
     echo,
     finish,
     input_crs,
     prepare_outputs,
     settings,
+    source_id_option,
 )
 
 _OUT_SUFFIXES = (".csv", ".gpkg", ".geojson", ".json")
 
 
 def _selection_options(func: Callable[..., Any]) -> Callable[..., Any]:
-    opts = [
+    opts: list[Callable[..., Any]] = [
         click.argument("paths", nargs=-1, required=True, type=click.Path()),
         click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
                      help="Output file: .csv, .gpkg or .geojson (by extension)."),
-        click.option("--classes", type=INT_LIST, default=None,
-                     help="Only these classification codes, e.g. 6 (buildings) or 6,2."),
-        click.option("--source-id", type=INT_LIST, default=None,
-                     help="Only these point_source_id values (flight strips), e.g. 706."),
+        classes_option,
+        source_id_option,
         click.option("--grow-radius", type=float, default=None,
                      help="Surface growing: neighbourhood radius (m) [default: 2x the point "
                           "spacing, 0.5-3 m]."),
@@ -46,7 +56,7 @@ def _selection_options(func: Callable[..., Any]) -> Callable[..., Any]:
                      help="Smallest planar segment kept (points)."),
         click.option("--max-rmse", type=float, default=0.15, show_default=True,
                      help="Drop segments whose plane RMS residual exceeds this (m)."),
-        click.option("--crs", "crs", default=None, metavar="CRS", help=CRS_HELP),
+        crs_option,
     ]
     for opt in reversed(opts):
         func = opt(func)
@@ -58,16 +68,50 @@ _SEGMENT_KEYS = ("grow_radius", "grow_dist", "seed_method", "min_segment_size", 
 
 def _on_catalog(kind: str, paths: tuple[str, ...], output: str, classes: Any, source_id: Any,
                 opts: dict[str, Any], options: dict[str, Any]) -> bool:
-    """Run on a catalog (several files, a folder, a glob, a .vpc); False for one file."""
+    """Run on a catalog (several files, a folder, a glob, a .vpc); False for one file.
+
+    Each feature is kept once, by the chunk whose core holds its anchor.
+    """
+    from ..io.vector import write_points, write_segments
+    from ..tiling.jobs_api import catalog_features
+
     cat = pop_catalog_options(opts)
     if not wants_catalog(paths, cat):
         return False
-    from ._catalog_jobs import features_on_catalog
-
     _check_suffix(output)
-    features_on_catalog(kind, paths, output, classes=classes, source_id=source_id,
-                        segment_options={k: opts[k] for k in _SEGMENT_KEYS if k in opts},
-                        options=options, cat_opts=cat, crs=input_crs(opts.get("crs")))
+    prepare_outputs(output, inputs=tuple(paths))
+    source = open_catalog_source(paths, cat, crs=input_crs(opts.get("crs")), z_to_metres=False)
+    with catalog_engine(cat) as eng:
+        run = catalog_features(source, kind=kind, classes=classes, source_id=source_id,
+                               segment_options={k: opts[k] for k in _SEGMENT_KEYS if k in opts},
+                               options=options, **job_options(cat, eng))
+    f = run.value
+    with Steps()(f"Writing {output}"), reproducible_vectors():
+        write = write_segments if kind == "edges" else write_points
+        write(f, output, overwrite=settings().overwrite, layer=kind)
+    results: dict[str, Any] = {f"n_{kind}": len(f), "output": output, "catalog": run_summary(run)}
+    if kind == "edges":
+        results["total_length_m"] = float(f.lengths.sum()) if len(f) else 0.0
+    n_edge = int(np.sum(f.attributes["at_buffer_edge"])) if "at_buffer_edge" in f.attributes \
+        else 0
+    results["n_at_buffer_edge"] = n_edge
+    if n_edge:
+        click.echo(f"Warning: {n_edge} of {len(f)} {kind} come from planes that reach a chunk's "
+                   "buffer edge (column at_buffer_edge): a roof wider than --buffer may be cut "
+                   "there; widen --buffer", err=True)
+    per_chunk = Counter(f.attributes["chunk"].tolist()) if len(f) else Counter()
+    results["per_chunk"] = dict(sorted(per_chunk.items()))
+    echo(f"{len(f)} {kind} from {len(run.catalog.tiles)} tile(s) -> {output}")
+    echo_run(run)
+    c = run.chunks[0] if run.chunks else None
+    finish(kind, inputs={"paths": list(paths), "classes": classes, "source_id": source_id},
+           parameters={**run.extra.get("segment_options", {}), **run.extra.get("options", {}),
+                       "chunk_size": c.size if c else None,
+                       "buffer": (c.buffered[2] - c.core[2]) if c else None,
+                       "workers": cat.get("workers"), "scheduler": cat.get("scheduler"),
+                       "rule": "anchor-in-core (corner point, edge midpoint, plane centroid)"},
+           results=results)
+    failed_exit(run)
     return True
 
 

@@ -2,12 +2,11 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import click
 
-from ._catalog import bad_lines, is_catalog, sigterm_as_interrupt
+from ._catalog import is_catalog, open_catalog_source, sigterm_as_interrupt
 from ._common import (
     INT_LIST,
     Steps,
@@ -244,23 +243,72 @@ def ground(
         )
     params.update(given)
     if is_catalog(paths) or any(v is not None for v in catalog_opts.values()):
-        ground_on_catalog(
-            paths,
-            output,
-            method=method,
-            preset=preset,
-            sensor=sensor,
-            params=params,
-            all_returns=all_returns,
-            exclude_classes=exclude_classes,
-            evaluate=evaluate,
-            ignore_classes=ignore_classes,
-            chunk_size=chunk_size,
-            buffer=buffer,
-            workers=workers,
-            scheduler=scheduler,
-            resume=resume,
-            skip_bad=skip_bad,
+        from ..tiling.ground import ground_catalog
+
+        s = settings()
+        if s.json_path:
+            from ..io import check_output
+
+            check_output(s.json_path, overwrite=s.overwrite)
+        catalog = open_catalog_source(paths, {"skip_bad": skip_bad}, crs=given_crs,
+                                      z_to_metres=False).catalog
+        with sigterm_as_interrupt():
+            cres = ground_catalog(
+                catalog,
+                output,
+                method=method,
+                preset=preset,
+                sensor=sensor,
+                last_returns_only=not all_returns,
+                exclude_classes=exclude_classes or (),
+                evaluate=evaluate,
+                ignore_classes=ignore_classes,
+                chunk_size=chunk_size,
+                buffer=buffer,
+                workers=workers,
+                scheduler=scheduler,
+                resume=resume,
+                skip_bad=skip_bad,
+                overwrite=s.overwrite,
+                progress=not s.quiet,
+                **params,
+            )
+        res = cres.to_dict()
+        for msg in cres.warnings:
+            click.echo(f"Warning: {msg}", err=True)
+        echo(f"{len(catalog.tiles)} tile(s) -> {output}  ({cres.vpc})")
+        echo(f"  method          {method}")
+        auto = cres.parameters.get("auto")
+        if auto:
+            echo(f"  parameters      auto: {auto['regime']} (measured once on a sample of "
+                 "whole tiles)")
+        echo(
+            f"  chunks          {cres.n_chunks} of {cres.chunk_size:g} m, "
+            f"buffer {cres.buffer:g} m"
+            + (f" ({cres.n_chunks_resumed} resumed)" if cres.n_chunks_resumed else "")
+        )
+        echo(f"  points          {res['n_points']:,}")
+        echo_ground_counts(res, cres.evaluation, " (counts summed over chunks)")
+        if catalog.bad:
+            echo(f"  skipped         {len(catalog.bad)} bad input(s)")
+        finish(
+            "ground",
+            inputs={"paths": list(paths), "output": output},
+            parameters={
+                "method": method,
+                "preset": preset,
+                "sensor": sensor,
+                "last_returns_only": not all_returns,
+                "exclude_classes": list(exclude_classes or []),
+                "ignore_classes": list(ignore_classes or []),
+                "chunk_size": cres.chunk_size,
+                "buffer": cres.buffer,
+                "workers": workers,
+                "scheduler": scheduler,
+                **cres.parameters.get("filter", {}),
+                **({"auto": cres.parameters["auto"]} if "auto" in cres.parameters else {}),
+            },
+            results=res,
         )
         return
     path = paths[0]
@@ -386,94 +434,3 @@ def echo_terrain(t: dict | None) -> None:
             "ground surface per ground point"
             + (f": {t['note']}" if t["reference_thinned"] else "")
         )
-
-
-def ground_on_catalog(
-    paths: Sequence[str],
-    output: str,
-    *,
-    method: str,
-    preset: str | None,
-    params: dict[str, Any],
-    sensor: str = "auto",
-    all_returns: bool,
-    exclude_classes: Any,
-    evaluate: bool,
-    ignore_classes: Any,
-    chunk_size: float | None,
-    buffer: float | None,
-    workers: int | None,
-    scheduler: str | None,
-    resume: bool,
-    skip_bad: bool,
-) -> None:
-    """`lidarqa ground` on a catalog: the catalog ground job, then the summary."""
-    from ..tiling import open_catalog
-    from ..tiling.ground import ground_catalog
-
-    s = settings()
-    if s.json_path:
-        from ..io import check_output
-
-        check_output(s.json_path, overwrite=s.overwrite)
-    steps = Steps()
-    with steps(f"Reading the headers of {', '.join(paths)}"):
-        catalog = open_catalog(list(paths), skip_bad=skip_bad)
-    bad_lines(catalog.bad)
-    with sigterm_as_interrupt():
-        result = ground_catalog(
-            catalog,
-            output,
-            method=method,
-            preset=preset,
-            sensor=sensor,
-            last_returns_only=not all_returns,
-            exclude_classes=exclude_classes or (),
-            evaluate=evaluate,
-            ignore_classes=ignore_classes,
-            chunk_size=chunk_size,
-            buffer=buffer,
-            workers=workers,
-            scheduler=scheduler,
-            resume=resume,
-            skip_bad=skip_bad,
-            overwrite=s.overwrite,
-            progress=not s.quiet,
-            **params,
-        )
-    res = result.to_dict()
-    for w in result.warnings:
-        click.echo(f"Warning: {w}", err=True)
-    echo(f"{len(catalog.tiles)} tile(s) -> {output}  ({result.vpc})")
-    echo(f"  method          {method}")
-    auto = result.parameters.get("auto")
-    if auto:
-        echo(f"  parameters      auto: {auto['regime']} (measured once on a sample of whole tiles)")
-    echo(
-        f"  chunks          {result.n_chunks} of {result.chunk_size:g} m, "
-        f"buffer {result.buffer:g} m"
-        + (f" ({result.n_chunks_resumed} resumed)" if result.n_chunks_resumed else "")
-    )
-    echo(f"  points          {res['n_points']:,}")
-    echo_ground_counts(res, result.evaluation, " (counts summed over chunks)")
-    if catalog.bad:
-        echo(f"  skipped         {len(catalog.bad)} bad input(s)")
-    finish(
-        "ground",
-        inputs={"paths": list(paths), "output": output},
-        parameters={
-            "method": method,
-            "preset": preset,
-            "sensor": sensor,
-            "last_returns_only": not all_returns,
-            "exclude_classes": list(exclude_classes or []),
-            "ignore_classes": list(ignore_classes or []),
-            "chunk_size": result.chunk_size,
-            "buffer": result.buffer,
-            "workers": workers,
-            "scheduler": scheduler,
-            **result.parameters.get("filter", {}),
-            **({"auto": result.parameters["auto"]} if "auto" in result.parameters else {}),
-        },
-        results=res,
-    )

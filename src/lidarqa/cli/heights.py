@@ -20,7 +20,18 @@ from ..accuracy.heights import (
     SIGMA_REF,
     SIGMA_STRIP,
 )
-from ._catalog_jobs import catalog_options, option_given, wants_catalog
+from ._catalog import (
+    catalog_engine,
+    catalog_options,
+    echo_run,
+    failed_exit,
+    job_options,
+    open_catalog_source,
+    option_given,
+    reproducible_vectors,
+    run_summary,
+    wants_catalog,
+)
 from ._common import (
     INT_LIST,
     Steps,
@@ -59,35 +70,36 @@ def _ids(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.concatenate([a.astype(str), b.astype(str)]).astype(object)
 
 
-def _output_rows(report: Any, map_ids: np.ndarray, ref_ids: np.ndarray, crs: Any) -> Any:
+_ZERO_PADDED = ("n_points", "failed", "outlier", "inside")  # counts and flags (0/1)
+
+
+def _column(name: str, values: Any, before: int, after: int) -> np.ndarray:
+    """`values` with empty rows before and after: NaN, 0 for counts and flags, '' for reasons."""
+    v = np.asarray(values)
+    if name == "reason":
+        return np.concatenate([np.full(before, ""), v.astype(str), np.full(after, "")]).astype(
+            object)
+    if name in _ZERO_PADDED:
+        v = v.astype(np.int64) if v.dtype == bool else v
+        return np.concatenate([np.zeros(before, dtype=np.int64), v,
+                               np.zeros(after, dtype=np.int64)])
+    return np.concatenate([np.full(before, np.nan), v, np.full(after, np.nan)])
+
+
+def _output_rows(mp: Any, map_xy: Any, ref_xyz: Any, ref_cols: dict[str, Any], ids: Any,
+                 crs: Any, map_fields: tuple[str, ...], **first: Any) -> Any:
+    """One row per map point (its fit) then per reference point (its test), as a PointSet."""
     from ..io.vector import PointSet
 
-    mp = report.map_points
-    m, r = len(mp), len(report.reference_xyz)
-    nan_m, nan_r = np.full(m, np.nan), np.full(r, np.nan)
-    zero_m, zero_r = np.zeros(m, dtype=np.int64), np.zeros(r, dtype=np.int64)
-    xyz = np.vstack([np.column_stack([mp.xy, mp.height]), report.reference_xyz]).reshape(-1, 3)
-    attrs = {
-        "kind": np.array(["map"] * m + ["reference"] * r, dtype=object),
-        "height": np.concatenate([mp.height, nan_r]),
-        "sigma": np.concatenate([mp.sigma, nan_r]),
-        "sigma_plane": np.concatenate([mp.sigma_plane, nan_r]),
-        "sigma_block": np.concatenate([mp.sigma_block, nan_r]),
-        "sigma_model": np.concatenate([mp.sigma_model, nan_r]),
-        "n_points": np.concatenate([mp.n_points, zero_r]),
-        "radius": np.concatenate([mp.radius, nan_r]),
-        "distance": np.concatenate([mp.distance, nan_r]),
-        "failed": np.concatenate([mp.failed.astype(np.int64), zero_r]),
-        "reason": np.concatenate([mp.reason.astype(str), np.full(r, "")]).astype(object),
-        "model_height": np.concatenate([nan_m, report.tin.height]),
-        "model_sigma": np.concatenate([nan_m, report.tin.sigma]),
-        "dh": np.concatenate([nan_m, report.dh]),
-        "sigma_dh": np.concatenate([nan_m, report.sigma_dh]),
-        "w": np.concatenate([nan_m, report.w_values]),
-        "outlier": np.concatenate([zero_m, report.outlier.astype(np.int64)]),
-        "inside": np.concatenate([zero_m, report.inside.astype(np.int64)]),
-    }
-    return PointSet(ids=_ids(map_ids, ref_ids), xyz=xyz, attributes=attrs, crs=crs)
+    m, r = len(mp), len(ref_xyz)
+    attrs = {"kind": np.array(["map"] * m + ["reference"] * r, dtype=object), **first}
+    attrs.update({k: _column(k, getattr(mp, k), 0, r) for k in map_fields})
+    attrs.update({k: _column(k, v, m, 0) for k, v in ref_cols.items()})
+    xyz = np.vstack([np.column_stack([map_xy, mp.height]), ref_xyz]).reshape(-1, 3)
+    return PointSet(ids=ids, xyz=xyz, attributes=attrs, crs=crs)
+
+
+_MAP_FIELDS = ("height", "sigma", "sigma_plane", "sigma_block", "sigma_model", "n_points")
 
 
 class _SigmaStrip(click.ParamType):
@@ -329,8 +341,6 @@ def heights(
     on_catalog = wants_catalog((cloud,), cat_opts)
     sigma_strip_source = "given"
     if on_catalog:
-        from ..tiling.source import open_source
-
         if largest_segment:
             raise OptionError("--largest-segment is not available on a catalog")
         if sigma_strip == "auto":
@@ -338,9 +348,8 @@ def heights(
                 "--sigma-strip auto measures the strip offsets of one file; on a catalog give "
                 "the value (e.g. from `lidarqa swaths`)"
             )
-        with steps("Reading the headers of " + cloud):
-            cat = open_source([cloud], skip_bad=bool(cat_opts.get("skip_bad")), crs=given,
-                              classes=classes, source_id=source_id)
+        cat = open_catalog_source([cloud], cat_opts, crs=given, classes=classes,
+                                  source_id=source_id)
         require_metric_xy(cat.native_crs, cloud, "the search radius and the plane fits need")
         pc: Any = type("Header", (), {"crs": cat.native_crs})()
     else:
@@ -397,10 +406,12 @@ def heights(
     )
     catalog_run = None
     if on_catalog:
-        from ._catalog_jobs import heights_on_catalog
+        from ..tiling.jobs_api import catalog_heights
 
-        report, catalog_run = heights_on_catalog(cat, mp.xyz[:, :2], ref_xyz, classes=None,
-                                                 options=options, cat_opts=cat_opts)
+        with catalog_engine(cat_opts) as eng:
+            catalog_run = catalog_heights(cat, mp.xyz[:, :2], ref_xyz, options=options,
+                                          **job_options(cat_opts, eng))
+        report = catalog_run.value
     else:
         with steps(f"Fitting {len(mp):,} map points, testing {len(ref):,} reference points"):
             report = assess_heights(xyz, mp.xyz[:, :2], ref_xyz, largest_segment=largest_segment,
@@ -421,11 +432,15 @@ def heights(
         )
     if output is not None:
         from ..io.vector import write_points
-        from ._catalog_jobs import reproducible_vectors
-
         stamp = reproducible_vectors() if on_catalog else contextlib.nullcontext()
         with steps("Writing " + output), stamp:
-            rows = _output_rows(report, mp.ids, ref.ids, pc.crs or mp.crs or ref.crs)
+            rows = _output_rows(
+                report.map_points, report.map_points.xy, report.reference_xyz,
+                {"model_height": report.tin.height, "model_sigma": report.tin.sigma,
+                 "dh": report.dh, "sigma_dh": report.sigma_dh, "w": report.w_values,
+                 "outlier": report.outlier, "inside": report.inside},
+                _ids(mp.ids, ref.ids), pc.crs or mp.crs or ref.crs,
+                (*_MAP_FIELDS, "radius", "distance", "failed", "reason"))
             write_points(rows, output, overwrite=settings().overwrite, layer="heights")
     res = report.to_dict()
     m, c, w = res["map_points"], res["comparison"], res["w"]
@@ -454,10 +469,8 @@ def heights(
         sigma_strip_source=sigma_strip_source,
     )
     if catalog_run is not None:
-        from ._catalog_jobs import _echo_run, _run_summary
-
-        _echo_run(catalog_run)
-        res["catalog"] = _run_summary(catalog_run)
+        echo_run(catalog_run)
+        res["catalog"] = run_summary(catalog_run)
         params.update({k: v for k, v in cat_opts.items() if option_given(v)})
     finish(
         "heights",
@@ -466,9 +479,7 @@ def heights(
         results=res,
     )
     if catalog_run is not None:
-        from ._catalog_jobs import _failed_exit
-
-        _failed_exit(catalog_run)
+        failed_exit(catalog_run)
 
 
 def _is_polygon_map(path: str) -> bool:
@@ -502,7 +513,6 @@ def _heights_by_levels(
     """``lidarqa heights`` with road polygons: test each reference point on its own level."""
     from ..accuracy.roads import compare_road_heights, read_road_polygons, reconstruct_roads
     from ..io.crs import check_map_crs, z_to_metres_factor
-    from ..io.vector import PointSet
 
     with steps("Reading road polygons and reference points"):
         polys, ids, crs = read_road_polygons(map_path)
@@ -521,34 +531,12 @@ def _heights_by_levels(
     if output is not None:
         from ..io.vector import write_points
 
-        m, r = len(mp), len(ref_xyz)
-        nan_m, nan_r = np.full(m, np.nan), np.full(r, np.nan)
-        zero_m, zero_r = np.zeros(m, dtype=np.int64), np.zeros(r, dtype=np.int64)
-        attrs = {
-            "kind": np.array(["map"] * m + ["reference"] * r, dtype=object),
-            "road": np.concatenate([mp.road, comp.road]),
-            "height": np.concatenate([mp.height, nan_r]),
-            "sigma": np.concatenate([mp.sigma, nan_r]),
-            "sigma_plane": np.concatenate([mp.sigma_plane, nan_r]),
-            "sigma_block": np.concatenate([mp.sigma_block, nan_r]),
-            "sigma_model": np.concatenate([mp.sigma_model, nan_r]),
-            "n_points": np.concatenate([mp.n_points, zero_r]),
-            "failed": np.concatenate([mp.failed.astype(np.int64), zero_r]),
-            "reason": np.concatenate([mp.reason.astype(str), np.full(r, "")]).astype(object),
-            "model_height": np.concatenate([nan_m, comp.height]),
-            "model_sigma": np.concatenate([nan_m, comp.sigma]),
-            "dh": np.concatenate([nan_m, comp.comparison.dh]),
-            "sigma_dh": np.concatenate([nan_m, comp.comparison.sigma_dh]),
-            "w": np.concatenate([nan_m, comp.w.w]),
-            "outlier": np.concatenate([zero_m, comp.w.outlier.astype(np.int64)]),
-        }
-        xyz_out = np.vstack([np.column_stack([mp.xy_laser, mp.height]), ref_xyz]).reshape(-1, 3)
-        rows = PointSet(
-            ids=_ids(np.arange(m), ref.ids),
-            xyz=xyz_out,
-            attributes=attrs,
-            crs=pc.crs or crs or ref.crs,
-        )
+        rows = _output_rows(
+            mp, mp.xy_laser, ref_xyz,
+            {"model_height": comp.height, "model_sigma": comp.sigma, "dh": comp.comparison.dh,
+             "sigma_dh": comp.comparison.sigma_dh, "w": comp.w.w, "outlier": comp.w.outlier},
+            _ids(np.arange(len(mp)), ref.ids), pc.crs or crs or ref.crs,
+            (*_MAP_FIELDS, "failed", "reason"), road=np.concatenate([mp.road, comp.road]))
         with steps("Writing " + output):
             write_points(rows, output, overwrite=settings().overwrite, layer="heights")
     res_roads = rec.to_dict()

@@ -37,11 +37,11 @@ def info(paths: tuple[str, ...], skip_bad: bool, strips: bool, crs: str | None) 
     from ..io.info import describe
     from ._catalog import info_on_catalog, is_catalog
 
+    given = input_crs(crs)
     if is_catalog(paths) or skip_bad or strips:
-        info_on_catalog(paths, skip_bad=skip_bad, strips=strips)
+        info_on_catalog(paths, skip_bad=skip_bad, strips=strips, crs=given)
         return
     path = paths[0]
-    given = input_crs(crs)
     prepare_outputs(inputs=(path,))
     with Steps()("Reading " + path):
         result = describe(path, crs=given)

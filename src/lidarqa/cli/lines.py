@@ -11,12 +11,22 @@ from typing import Any
 import click
 
 from ..units import format_decimal
-from ._catalog_jobs import catalog_options, catalog_options_given, wants_catalog
+from ._catalog import (
+    catalog_engine,
+    catalog_options,
+    catalog_options_given,
+    echo_run,
+    failed_exit,
+    job_options,
+    open_catalog_source,
+    run_summary,
+    wants_catalog,
+)
 from ._common import (
-    CRS_HELP,
     INT_LIST,
     Steps,
     common_options,
+    crs_option,
     echo,
     finish,
     fmt_number,
@@ -27,7 +37,7 @@ from ._common import (
 
 
 def _matching_options(func: Callable[..., Any]) -> Callable[..., Any]:
-    opts = [
+    opts: list[Callable[..., Any]] = [
         click.option(
             "--weight",
             default=10.0,
@@ -69,7 +79,7 @@ def _matching_options(func: Callable[..., Any]) -> Callable[..., Any]:
             default=None,
             help="Point-cloud input: classes whose edges are extracted, e.g. 6.",
         ),
-        click.option("--crs", "crs", default=None, metavar="CRS", help=CRS_HELP),
+        crs_option,
     ]
     for opt in reversed(opts):
         func = opt(func)
@@ -254,10 +264,8 @@ def _side_segments(side: str, path: str, label: str, classes: Any, source_id: An
         with steps(f"Extracting the edges of {side} {label}"), engine_for(
                 workers=cat_opts.get("workers"), scheduler=cat_opts.get("scheduler")) as eng:
             run = catalog_features(path, kind="edges", classes=classes, source_id=source_id,
-                                   crs=given, progress=not settings().quiet, engine=eng,
-                                   chunk_size=cat_opts.get("chunk_size"),
-                                   buffer=cat_opts.get("buffer"),
-                                   skip_bad=bool(cat_opts.get("skip_bad")), skip_failed=True)
+                                   crs=given, engine=eng, skip_bad=bool(cat_opts.get("skip_bad")),
+                                   **job_options(cat_opts))
         if run.failed:
             from ..errors import TilingError
 
@@ -433,19 +441,36 @@ def repeatability(
     # a folder, a glob, a .vpc or any catalog option compares the strips over the whole block.
     named_files = len(files) > 1 and not catalog_options_given(cat_opts)
     if by_source_id and wants_catalog(files, cat_opts) and not named_files:
-        from ._catalog_jobs import repeatability_on_catalog
+        from ..tiling.jobs_api import catalog_repeatability
 
         if outlines or shared_threshold:
             raise OptionError(
                 "--outlines and --shared-threshold are not available on a catalog yet"
             )
-
-        repeatability_on_catalog(
-            files, classes=classes, source_id=source_id, edge_options={"steps": step_edges},
-            match_options={"weight": weight, "sensitivity": sensitivity, "threshold": threshold,
-                           "rotate": rotate, "denominator": denominator, "auto": auto},
-            cat_opts=cat_opts, crs=given,
-            print_rows=lambda rows: _print_rows(rows, threshold, pool=True))
+        match_options = {"weight": weight, "sensitivity": sensitivity, "threshold": threshold,
+                         "rotate": rotate, "denominator": denominator, "auto": auto}
+        prepare_outputs(inputs=tuple(files))
+        source = open_catalog_source(files, cat_opts, crs=given, z_to_metres=False)
+        with catalog_engine(cat_opts) as eng:
+            run = catalog_repeatability(source, classes=classes, source_id=source_id,
+                                        match_options=match_options,
+                                        edge_options={"steps": step_edges},
+                                        **job_options(cat_opts, eng))
+        if not run.value:
+            raise OptionError(f"repeatability needs at least two strips with edges, got "
+                              f"{len(run.extra['strips'])}")
+        _print_rows(run.value, threshold, pool=True)
+        echo_run(run)
+        strips = {str(k): len(v) for k, v in run.extra["strips"].items()}
+        echo("  strips          " + ", ".join(f"{k} ({n} edges)" for k, n in strips.items()))
+        finish("repeatability", inputs={"files": list(files)},
+               parameters={"by_source_id": True, "source_id": source_id, "classes": classes,
+                           **match_options, **run.extra["segment_options"],
+                           **run.extra["edge_options"],
+                           **{k: cat_opts.get(k) for k in ("chunk_size", "buffer", "workers",
+                                                           "scheduler")}},
+               results={"pairs": run.value, "strips": strips, "catalog": run_summary(run)})
+        failed_exit(run)
         return
     if catalog_options_given(cat_opts):
         raise OptionError("catalog options apply to repeatability --by-source-id only")

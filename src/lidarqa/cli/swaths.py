@@ -12,11 +12,17 @@ import click
 import numpy as np
 
 from ..accuracy.swaths import DEFAULT_QUALITY_LEVEL, QUALITY_LEVELS
-from ._catalog_jobs import (
+from ._catalog import (
+    catalog_engine,
     catalog_options,
     catalog_options_given,
+    echo_run,
+    failed_exit,
+    job_options,
+    open_catalog_source,
     option_given,
     pop_catalog_options,
+    run_summary,
     wants_catalog,
 )
 from ._common import INT_LIST, Steps, common_options, echo, finish, settings
@@ -245,26 +251,15 @@ def swaths(
     )
     catalog_run = None
     if on_catalog:
-        from ._catalog_jobs import _engine, _open
+        from ..tiling.jobs_swaths import catalog_swaths
 
         # heights are converted by the chunk task (as load_strips does for files)
-        catalog = _open(files, cat_opts.get("skip_bad"), steps, z_to_metres=False)
+        catalog = open_catalog_source(files, cat_opts, z_to_metres=False)
         crs = catalog.crs
-        with _engine(cat_opts.get("scheduler"), cat_opts.get("workers")) as eng:
-            from ..tiling.jobs_swaths import catalog_swaths
-
-            catalog_run = catalog_swaths(
-                catalog,
-                by_source_id=by_source_id,
-                classes=classes,
-                all_returns=all_returns,
-                chunk_size=cat_opts.get("chunk_size"),
-                buffer=cat_opts.get("buffer"),
-                engine=eng,
-                progress=not s.quiet,
-                skip_failed=True,
-                **options,
-            )
+        with catalog_engine(cat_opts) as eng:
+            catalog_run = catalog_swaths(catalog, by_source_id=by_source_id, classes=classes,
+                                         all_returns=all_returns, **job_options(cat_opts, eng),
+                                         **options)
         rep, labels = catalog_run.value, catalog_run.extra["labels"]
     else:
         with steps("Reading " + ", ".join(Path(f).name for f in files)):
@@ -356,10 +351,8 @@ def swaths(
     echo(f"{'PASS' if rep.passed else 'FAIL'}; wrote {len(written)} file(s) to {out}")
     results = dict(rep.to_dict(), outputs=written)
     if catalog_run is not None:
-        from ._catalog_jobs import _echo_run, _run_summary
-
-        _echo_run(catalog_run)
-        results["catalog"] = _run_summary(catalog_run)
+        echo_run(catalog_run)
+        results["catalog"] = run_summary(catalog_run)
     finish(
         "swaths",
         inputs={"files": list(files), "strips": labels},
@@ -374,9 +367,7 @@ def swaths(
         results=results,
     )
     if catalog_run is not None:
-        from ._catalog_jobs import _failed_exit
-
-        _failed_exit(catalog_run)
+        failed_exit(catalog_run)
 
 
 def _horizontal(crs: Any) -> Any:

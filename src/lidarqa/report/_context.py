@@ -185,6 +185,13 @@ class RunContext:
                 yield progress
 
     # -- inputs
+    def is_catalog(self, name: str) -> bool:
+        """True when cloud input `name` is a catalog (a folder, a glob or a ``.vpc``)."""
+        from ..tiling.source import is_catalog_input
+
+        spec = self.config.inputs.get(name)
+        return spec is not None and spec.kind == "clouds" and is_catalog_input(str(spec.path))
+
     def cloud(self, name: str) -> Any:
         """The point cloud input `name` (read once)."""
         if name not in self._clouds:
@@ -238,14 +245,11 @@ class RunContext:
     def edges(self, cloud: str, classes: Any, source_id: Any, options: dict[str, Any]) -> Any:
         """Edges extracted from a cloud selection (cached on selection + options)."""
         key = (cloud, _norm_ids(classes), _norm_ids(source_id), _freeze(options))
-        spec = self.config.inputs.get(cloud)
-        if key not in self._edges and spec is not None and spec.kind == "clouds":
-            from ..tiling.source import is_catalog_input
-
-            if is_catalog_input(str(spec.path)):  # chunk by chunk, each edge once
-                label = selection_label(cloud, classes, source_id)
-                with self.step(f"Extracting edges ({label}, catalog)"):
-                    self._edges[key] = _catalog_edges(spec.path, classes, source_id, options)
+        if key not in self._edges and self.is_catalog(cloud):  # chunk by chunk, each edge once
+            label = selection_label(cloud, classes, source_id)
+            with self.step(f"Extracting edges ({label}, catalog)"):
+                path = self.config.inputs[cloud].path
+                self._edges[key] = _catalog_edges(path, classes, source_id, options)
         if key not in self._edges:
             extract_edges = library_attr("lidarqa.geometry.edges", "extract_edges", "edges")
             sub = self.select(cloud, classes, source_id)

@@ -331,12 +331,6 @@ def _parse_crs(value: Any, where: str) -> Any:
 _NAME_RE = re.compile(r"^[A-Za-z0-9_.-]+$")
 
 
-def _is_catalog_path(p: Path) -> bool:
-    from .catalog_analyses import is_catalog_path
-
-    return is_catalog_path(p)
-
-
 def _parse_inputs(table: Any, base: Path) -> dict[str, InputSpec]:
     groups = check_table(table, {k: Key("table", default={}) for k in INPUT_KINDS}, "[inputs]")
     out: dict[str, InputSpec] = {}
@@ -364,7 +358,9 @@ def _parse_inputs(table: Any, base: Path) -> dict[str, InputSpec]:
             p = Path(os.path.expanduser(entry["path"]))
             if not p.is_absolute():
                 p = base / p
-            if kind == "clouds" and _is_catalog_path(p):  # a folder, glob or .vpc of tiles
+            from ..tiling.source import is_catalog_input
+
+            if kind == "clouds" and is_catalog_input(str(p)):  # a folder, glob or .vpc of tiles
                 crs = _parse_crs(entry["crs"], where) if entry["crs"] is not None else None
                 out[name] = InputSpec(name=name, kind=kind, path=p, crs=crs)
                 continue
@@ -482,10 +478,12 @@ def read_header_crs(spec: InputSpec) -> Any:
     """The CRS declared by an input file's header (cheap: no points are read)."""
     suffix = spec.path.suffix.lower()
     try:
-        if spec.kind == "clouds" and _is_catalog_path(spec.path):
-            from .catalog_analyses import catalog_crs
+        from ..tiling.source import is_catalog_input
 
-            return catalog_crs(spec.path)
+        if spec.kind == "clouds" and is_catalog_input(str(spec.path)):
+            from ..tiling import open_catalog  # refuses mixed CRSs, bad tiles, empty folders
+
+            return open_catalog(str(spec.path)).crs
         if spec.kind == "clouds" and suffix in {".las", ".laz"}:
             from ..io.las import LasReader
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import datetime as _dt
+import hashlib
 import json
 import os
 import shutil
@@ -204,15 +205,38 @@ def _verdict(item: AnalysisItem, results: dict[str, Any]) -> tuple[str, str, lis
     return ("pass" if ok_all else "fail"), "; ".join(texts), records
 
 
+def catalog_record(name: str, spec: Any) -> dict[str, Any]:
+    """The report's input record of a catalog: tiles, points and a fingerprint.
+
+    Hashing every byte of a delivery would read it all; the fingerprint is the
+    SHA-256 of the sorted tile names, sizes and header bounds instead.
+    """
+    from ..io.crs import crs_epsg, crs_name
+    from ..tiling import open_catalog
+
+    cat = open_catalog(str(spec.path))
+    h = hashlib.sha256()
+    for t in cat.tiles:
+        size = Path(t.path).stat().st_size if Path(t.path).exists() else -1
+        h.update(f"{Path(t.path).name}|{size}|{t.n_points}|{t.bounds}\n".encode())
+    crs = spec.effective_crs or cat.crs
+    return {"name": name, "kind": spec.kind, "path": str(spec.path), "catalog": True,
+            "n_tiles": len(cat.tiles), "n_points": int(cat.n_points),
+            "size": int(sum(Path(t.path).stat().st_size for t in cat.tiles
+                            if Path(t.path).exists())),
+            "sha256": h.hexdigest(), "fingerprint": "tile names, sizes, point counts, bounds",
+            "crs_epsg": crs_epsg(crs), "crs_name": crs_name(crs)}
+
+
 def _input_records(config: AssessmentConfig, progress: _Progress) -> dict[str, dict[str, Any]]:
     from ..io.crs import crs_epsg, crs_name
+    from ..tiling.source import is_catalog_input
     from ._context import sha256_file
-    from .catalog_analyses import catalog_record, is_catalog_path
 
     out = {}
     with progress("Hashing inputs"):
         for name, spec in config.inputs.items():
-            if spec.kind == "clouds" and is_catalog_path(spec.path):
+            if spec.kind == "clouds" and is_catalog_input(str(spec.path)):
                 out[name] = catalog_record(name, spec)
                 continue
             crs = spec.effective_crs
@@ -278,7 +302,6 @@ def run_assessment(
     from .. import show_versions
     from ._context import RunContext
     from ._registry import ANALYSES, specs
-    from .catalog_analyses import catalog_analysis
 
     specs()  # load the analysis modules
 
@@ -314,7 +337,7 @@ def run_assessment(
             section = Section(id=item.id, title=item.title, kind=item.kind)
             try:
                 with progress(item.title):
-                    res = (catalog_analysis(ctx, item) or ANALYSES[item.kind])(ctx, item)
+                    res = ANALYSES[item.kind](ctx, item)
             except (KeyboardInterrupt, SystemExit):
                 raise
             except Exception as exc:  # one failing analysis must not lose the others

@@ -15,8 +15,9 @@
 
 A single file (not a catalog) with no chunk option is **one region**: the whole
 area in one chunk, read once, so a file run and a catalog run are the same code.
-Chunking, retries, progress and Dask (``workers``, ``scheduler`` or an
-:class:`~lidarqa.tiling.Engine`) are handled here for every job. Ownership of
+Chunking, retries, progress, Dask (``workers``, ``scheduler`` or an
+:class:`~lidarqa.tiling.Engine`) and resuming (``work_dir`` + ``resume``, see
+:class:`ChunkStore`) are handled here for every job. Ownership of
 per-point or per-feature results on chunk borders is the chunk's own rule
 (:meth:`Chunk.core_mask`, used through :func:`owned`).
 """
@@ -24,14 +25,18 @@ per-point or per-feature results on chunk borders is the chunk's own rule
 from __future__ import annotations
 
 import contextlib
+import hashlib
+import os
+import pickle
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-__all__ = ["CatalogRun", "apply", "chunk_status", "engine_for", "open_sources", "owned",
-           "region_chunks"]
+__all__ = ["CatalogRun", "ChunkStore", "apply", "chunk_status", "default_work_dir", "engine_for",
+           "open_sources", "owned", "region_chunks"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -63,22 +68,31 @@ class CatalogRun:
         """Ids of the chunks that failed after their retries."""
         return [o.chunk.id for o in self.outcomes if not o.ok and not getattr(o, "skipped", False)]
 
+    @property
+    def resumed(self) -> list[str]:
+        """Ids of the chunks whose parts were re-used from an interrupted run."""
+        return [o.chunk.id for o in self.outcomes if getattr(o, "resumed", False)]
+
     def chunk_status(self) -> list[dict[str, Any]]:
-        """``[{"chunk", "status", "attempts", "error"}]``; status ok, retried, failed or skipped."""
+        """``[{"chunk", "status", "attempts", "error"}]``; ok, retried, failed, skipped, resumed."""
         return [chunk_status(o) for o in self.outcomes]
 
     def to_dict(self) -> dict[str, Any]:
         st = self.chunk_status()
         counts = {k: sum(1 for s in st if s["status"] == k)
-                  for k in ("ok", "retried", "failed", "skipped")}
+                  for k in ("ok", "retried", "failed", "skipped", "resumed")}
+        if not counts["resumed"]:  # only a resumed run has the key
+            del counts["resumed"]
         return {"n_tiles": len(self.catalog.tiles), "n_chunks": len(self.chunks),
                 "chunk_status": counts, "failed_chunks": self.failed}
 
 
 def chunk_status(outcome: Any) -> dict[str, Any]:
-    """One outcome's status: ``ok``, ``retried`` (ok after > 1 attempt), ``failed``, ``skipped``."""
+    """One outcome's status: ok, retried (ok after > 1 attempt), failed, skipped or resumed."""
     attempts = int(getattr(outcome, "attempts", 1) or 1)
-    if getattr(outcome, "skipped", False):
+    if getattr(outcome, "resumed", False):
+        status = "resumed"
+    elif getattr(outcome, "skipped", False):
         status = "skipped"
     elif outcome.ok:
         status = "retried" if attempts > 1 else "ok"
@@ -86,6 +100,90 @@ def chunk_status(outcome: Any) -> dict[str, Any]:
         status = "failed"
     return {"chunk": outcome.chunk.id, "status": status, "attempts": attempts,
             "error": outcome.error}
+
+
+def default_work_dir() -> Path:
+    """Where catalog commands keep finished chunks' parts (for ``--resume``).
+
+    ``$LIDARQA_WORK_DIR``, else ``lidarqa/chunks`` in the user cache folder
+    (``$XDG_CACHE_HOME`` or ``~/.cache``).
+    """
+    env = os.environ.get("LIDARQA_WORK_DIR")
+    if env:
+        return Path(env)
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "lidarqa" / "chunks"
+
+
+def _digest(obj: Any) -> str:
+    return hashlib.sha256(pickle.dumps(obj, protocol=4)).hexdigest()
+
+
+def _fingerprint(source: Any) -> tuple[Any, ...]:
+    """What a source's parts depend on: its files (path, size, time), selection and units."""
+    if source.catalog is None:
+        xyz = np.ascontiguousarray(source.cloud.xyz)
+        data: Any = hashlib.sha256(xyz.tobytes()).hexdigest()
+    else:
+        data = []
+        for t in source.catalog.tiles:
+            try:
+                st = os.stat(t.path)
+                data.append((str(t.path), st.st_size, st.st_mtime_ns))
+            except OSError:
+                data.append((str(t.path), -1, -1))
+    return (data, source.selection.to_dict(), source.z_factor, source.xy_factor,
+            str(source.native_crs))
+
+
+class ChunkStore:
+    """The finished chunks' parts of one job, kept in a folder so an interrupted run re-uses them.
+
+    Every part is a pickle named by the job (the source's files, selection and
+    units, and the task with all its options) and the chunk, so a part is only
+    ever re-used by the very same job on the very same chunk; a changed file, option
+    or chunk grid recomputes. Parts are written atomically as each chunk finishes
+    and removed when the job has no failed chunk.
+
+    Parameters
+    ----------
+    folder : path-like
+        Created when the first part is saved.
+    source : Source
+    task : picklable
+    """
+
+    def __init__(self, folder: Any, source: Any, task: Any) -> None:
+        self.folder = Path(folder)
+        self.job = _digest((_fingerprint(source), task))[:24]
+
+    def path(self, chunk: Any) -> Path:
+        """The file of `chunk`'s part."""
+        return self.folder / f"{self.job}-{_digest(chunk)[:16]}.pkl"
+
+    def load(self, chunk: Any) -> tuple[bool, Any]:
+        """``(True, part)`` when `chunk`'s part is kept (and readable), else ``(False, None)``."""
+        try:
+            with open(self.path(chunk), "rb") as fh:
+                return True, pickle.load(fh)
+        except Exception:  # missing, truncated or unreadable: compute the chunk again
+            return False, None
+
+    def save(self, outcome: Any) -> None:
+        """Keep a finished chunk's part (atomic: a complete file or none)."""
+        if not outcome.ok:
+            return
+        self.folder.mkdir(parents=True, exist_ok=True)
+        path = self.path(outcome.chunk)
+        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+        with open(tmp, "wb") as fh:
+            pickle.dump(outcome.result, fh, protocol=pickle.HIGHEST_PROTOCOL)
+        os.replace(tmp, path)
+
+    def clear(self, chunks: Sequence[Any]) -> None:
+        """Remove the parts of `chunks`."""
+        for c in chunks:
+            self.path(c).unlink(missing_ok=True)
 
 
 def open_sources(sources: Any, *, skip_bad: bool = False, crs: Any = None,
@@ -184,6 +282,8 @@ def apply(
     description: str = "Chunks",
     order_seed: int | None = None,
     extra: dict[str, Any] | None = None,
+    work_dir: Any = None,
+    resume: bool = False,
 ) -> Any:
     """Run `task` on every region of `source` and `merge` the parts.
 
@@ -205,25 +305,46 @@ def apply(
         As :func:`~lidarqa.tiling.run_chunks`.
     extra : dict, optional
         Stored on the returned run.
+    work_dir : path-like, optional
+        Keep every finished chunk's part there (a :class:`ChunkStore`) until the
+        job ends with no failed chunk, so that an interrupted or failed run can be
+        resumed.
+    resume : bool, default False
+        Re-use the parts kept in `work_dir` by an earlier run of the same job
+        instead of computing those chunks again (their status is ``resumed``).
 
     Returns
     -------
     CatalogRun
         ``value`` (the merged result), the source, the chunks and their outcomes.
     """
-    from .engine import run_chunks
+    from .engine import ChunkOutcome, run_chunks
 
     source = open_sources(source)
     if chunks is None:
         chunks = region_chunks(source, task, chunk_size=chunk_size, buffer=buffer,
                                origin=origin, one_region=one_region)
     chunks = list(chunks)
-    outcomes: list[Any] = []
-    if chunks:
+    store = ChunkStore(work_dir, source, task) if work_dir is not None else None
+    done: dict[int, Any] = {}
+    if store is not None and resume:
+        for i, c in enumerate(chunks):
+            found, part = store.load(c)
+            if found:
+                done[i] = ChunkOutcome(c, True, part, None, 0)
+    todo = [c for i, c in enumerate(chunks) if i not in done]
+    ran: list[Any] = []
+    if todo:
         with engine_for(engine, workers=workers, scheduler=scheduler) as eng:
-            outcomes = run_chunks(source, chunks, task, engine=eng, progress=progress,
-                                  retries=retries, skip_failed=skip_failed,
-                                  description=description, order_seed=order_seed)
+            ran = run_chunks(source, todo, task, engine=eng, progress=progress,
+                             retries=retries, skip_failed=skip_failed,
+                             description=description, order_seed=order_seed,
+                             on_outcome=store.save if store is not None else None)
+    it = iter(ran)
+    outcomes = [replace(done[i], resumed=True) if i in done else next(it)
+                for i in range(len(chunks))]
+    if store is not None and all(o.ok for o in outcomes):
+        store.clear(chunks)
     parts = [o.result if o.ok else None for o in outcomes]
     value = merge(parts) if merge is not None else parts
     return CatalogRun(value, source, tuple(chunks), tuple(outcomes), dict(extra or {}))

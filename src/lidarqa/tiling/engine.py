@@ -63,6 +63,7 @@ class ChunkOutcome:
     error: str | None = None
     attempts: int = 1
     skipped: bool = False
+    resumed: bool = False
 
     def to_dict(self) -> dict[str, Any]:
         return {

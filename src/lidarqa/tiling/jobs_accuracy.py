@@ -23,8 +23,7 @@ statistics here: the merge puts them back in the reference order and computes
 every figure (RMSE, mean, std, NSSDA/ASPRS, w-tests and data snooping, even
 with an estimated common offset) with the same functions as the in-memory
 run, so the figures are those of one run over the whole area whatever the
-chunking and the completion order. Per-chunk figures (the report's per-chunk
-table) are merged exactly with :mod:`lidarqa.tiling.jobs_stats`.
+chunking and the completion order.
 
 A default that depends on all check points (the vertical check's ``max_edge``
 from the median ground spacing) is found in a first light pass over the
@@ -43,8 +42,7 @@ import numpy as np
 
 from ..errors import DegenerateGeometryError, InvalidPointsError, OptionError
 from ..io.vector import PointSet
-from .jobs_stats import ResidualMoments, WStatistics
-from .jobs_vector import in_core, owned
+from .jobs_vector import in_core, open_box, owned
 
 __all__ = [
     "CheckSpacingTask",
@@ -135,7 +133,6 @@ class VerticalPart:
     flag: np.ndarray
     longest_edge: np.ndarray
     n_ground: int
-    moments: ResidualMoments
 
 
 @dataclass(frozen=True, eq=False)
@@ -150,6 +147,11 @@ class VerticalCheckTask:
         Fixed for the whole catalog (m); see :func:`lidarqa.accuracy.checkpoints.vertical_check`.
     classes : tuple of int or None
         Ground classes; None takes every point as ground.
+    xy_factor : float
+        Horizontal unit to metres.
+    bounds : (xmin, ymin, xmax, ymax), optional
+        The source's extent: a buffer side beyond it needs no margin (no points
+        there), so one region holding the whole area is the in-memory check.
     """
 
     check: PointSet
@@ -157,14 +159,16 @@ class VerticalCheckTask:
     search_radius: float | None = None
     classes: tuple[int, ...] | None = (2,)
     xy_factor: float = 1.0
+    bounds: tuple[float, float, float, float] | None = None
 
     def __call__(self, chunk_data: Any) -> VerticalPart:
         from ..accuracy.checkpoints import vertical_check
         from ..errors import TilingError
 
         core = chunk_data.chunk
-        margin = min(core.core[0] - core.buffered[0], core.core[1] - core.buffered[1])
-        margin *= self.xy_factor
+        b = open_box(core.buffered, self.bounds)
+        margin = min(core.core[0] - b[0], core.core[1] - b[1], b[2] - core.core[2],
+                     b[3] - core.core[3]) * self.xy_factor
         if margin < 2.0 * self.max_edge:
             raise TilingError(f"chunk {core.id}: the buffer ({margin:g} m) must be at least "
                               f"2 x max_edge = {2 * self.max_edge:g} m for the vertical check")
@@ -191,11 +195,8 @@ class VerticalCheckTask:
             except DegenerateGeometryError:
                 pass  # < 3 ground points in the chunk: every check point stays outside_tin
         dz = tin_z - self.check.xyz[idx, 2]
-        ok = flag == "ok"
-        res = np.column_stack([np.full(ok.sum(), np.nan), np.full(ok.sum(), np.nan), dz[ok]])
         return VerticalPart(chunk=chunk_data.chunk.id, index=idx, tin_z=tin_z, dz=dz, flag=flag,
-                            longest_edge=longest, n_ground=n_ground,
-                            moments=ResidualMoments.of(res))
+                            longest_edge=longest, n_ground=n_ground)
 
 
 def merge_vertical(
@@ -252,7 +253,6 @@ class HeightsPart:
     height: np.ndarray
     sigma: np.ndarray
     inside: np.ndarray
-    w: WStatistics
 
 
 _MAP_FIELDS = ("height", "sigma", "sigma_plane", "sigma_block", "sigma_model", "n_points",
@@ -310,13 +310,8 @@ class HeightsTask:
         r_used = np.where(np.isfinite(mp.radius), mp.radius,
                           float(opts.get("max_radius", MAX_RADIUS)))
         xy = self.map_xy[mi]
-        lo_x, lo_y, hi_x, hi_y = box
-        if self.bounds is not None:  # no laser point beyond the catalog: that side is open
-            b = self.bounds
-            lo_x = -np.inf if box[0] <= b[0] else lo_x
-            lo_y = -np.inf if box[1] <= b[1] else lo_y
-            hi_x = np.inf if box[2] >= b[2] else hi_x
-            hi_y = np.inf if box[3] >= b[3] else hi_y
+        # no laser point beyond the catalog: a side there is open
+        lo_x, lo_y, hi_x, hi_y = open_box(box, self.bounds)
         trusted = ((xy[:, 0] - r_used >= lo_x) & (xy[:, 0] + r_used <= hi_x)
                    & (xy[:, 1] - r_used >= lo_y) & (xy[:, 1] + r_used <= hi_y))
         mine = owned(xy, chunk)
@@ -329,17 +324,8 @@ class HeightsTask:
                               self.reference_xyz[ri, :2], **tin_opts)
         self._check_delaunay(chunk.id, xy[vert], tin, mi[trusted], self.reference_xyz[ri, :2])
         rows = {k: np.asarray(getattr(mp, k))[mine] for k in _MAP_FIELDS}
-        from ..accuracy.heights import compare_heights, w_test
-
-        comp = compare_heights(tin.height, tin.sigma, self.reference_xyz[ri, 2],
-                               **({"sigma_ref": self.options["sigma_ref"]}
-                                  if "sigma_ref" in self.options else {}))
-        wt = w_test(comp.dh, comp.sigma_dh, alpha=self.options.get("alpha", 0.001))
-        return HeightsPart(
-            chunk=chunk.id, map_index=mi[mine], map_rows=rows, ref_index=ri,
-            height=tin.height, sigma=tin.sigma, inside=tin.inside,
-            w=WStatistics.of(wt.w, wt.outlier, critical=wt.critical),
-        )
+        return HeightsPart(chunk=chunk.id, map_index=mi[mine], map_rows=rows, ref_index=ri,
+                           height=tin.height, sigma=tin.sigma, inside=tin.inside)
 
     def _check_delaunay(self, chunk_id: str, vxy: np.ndarray, tin: Any, used: np.ndarray,
                         ref_xy: np.ndarray) -> None:

@@ -51,12 +51,17 @@ __all__ = [
 
 def _run(catalog: Any, chunks: Sequence[Any], task: Any, run_opts: dict[str, Any],
          description: str) -> tuple[list[Any], list[Any | None]]:
-    from . import run_chunks
+    """Run `task` on `chunks` through :func:`~lidarqa.tiling.apply.apply` (retries, resume)."""
+    from .apply import apply
 
-    if not chunks:
-        return [], []
-    outcomes = run_chunks(catalog, list(chunks), task, description=description, **run_opts)
-    return outcomes, [o.result if o.ok else None for o in outcomes]
+    run = apply(catalog, task, chunks=chunks, description=description, **run_opts)
+    return list(run.outcomes), run.value
+
+
+#: The engine options of every job (see :func:`~lidarqa.tiling.apply.apply`).
+RUN_KEYS = ("engine", "progress", "retries", "skip_failed", "order_seed", "work_dir", "resume")
+#: Every common keyword argument of a job: how to open the source, chunk it and run it.
+COMMON_KEYS = ("skip_bad", "crs", "chunk_size", "buffer", "origin", *RUN_KEYS)
 
 
 def _split(kw: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any], dict[str, Any]]:
@@ -64,21 +69,11 @@ def _split(kw: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any], dict[str
     open_opts = {"skip_bad": kw.pop("skip_bad", False), "crs": kw.pop("crs", None)}
     chunk_opts = {"chunk_size": kw.pop("chunk_size", None), "buffer": kw.pop("buffer", None),
                   "origin": kw.pop("origin", (0.0, 0.0))}
-    run_keys = ("engine", "progress", "retries", "skip_failed", "order_seed")
-    run_opts: dict[str, Any] = {k: kw.pop(k) for k in run_keys if k in kw}
+    run_opts: dict[str, Any] = {k: kw.pop(k) for k in RUN_KEYS if k in kw}
     run_opts.setdefault("progress", False)
     if kw:
         raise OptionError(f"unknown option(s): {', '.join(sorted(kw))}")
     return open_opts, chunk_opts, run_opts
-
-
-def _sample_points(source: Any, chunks: Sequence[Any]) -> np.ndarray:
-    """Selected points of the source's central sample window (to fix data-driven defaults).
-
-    The window does not depend on the chunking, so a file and a folder of its tiles
-    get the same defaults.
-    """
-    return source.sample().xyz
 
 
 # ------------------------------------------------------------------ vector features
@@ -112,7 +107,8 @@ def catalog_features(
     **common
         ``chunk_size``, ``buffer``, ``origin``, ``engine``, ``progress``,
         ``retries``, ``skip_failed``, ``order_seed`` (shuffled submission, for
-        tests), ``skip_bad``, ``crs``.
+        tests), ``skip_bad``, ``crs``, ``work_dir`` and ``resume`` (see
+        :func:`~lidarqa.tiling.apply.apply`).
     """
     from .jobs_vector import VectorTask, fixed_auto_options, merge_vector_parts
 
@@ -120,10 +116,10 @@ def catalog_features(
     catalog = open_sources(sources, classes=classes or None, source_id=source_id or None,
                            z_to_metres=False, **open_opts)
     chunks = region_chunks(catalog, **chunk_opts)
-    seg_opts, opts = fixed_auto_options(_sample_points(catalog, chunks), kind=kind,
+    seg_opts, opts = fixed_auto_options(catalog.sample().xyz, kind=kind,
                                         segment_options=segment_options, options=options)
     task = VectorTask(kind=kind, segment_options=seg_opts,
-                      options=opts, bounds=_bounds2d(catalog))
+                      options=opts, bounds=catalog.area_bounds)
     outcomes, parts = _run(catalog, chunks, task, run_opts, f"{kind.capitalize()}")
     value = merge_vector_parts(parts, tolerance=tolerance, crs=catalog.crs)
     return CatalogRun(value, catalog, tuple(chunks), tuple(outcomes),
@@ -182,7 +178,8 @@ def catalog_vertical_check(
                           "Ground spacing")
         max_edge = max_edge_from_spacing(spacing) * catalog.xy_factor
     task = VerticalCheckTask(cp, max_edge=float(max_edge), search_radius=search_radius,
-                             classes=cls, xy_factor=catalog.xy_factor)
+                             classes=cls, xy_factor=catalog.xy_factor,
+                             bounds=catalog.area_bounds)
     outcomes, parts = _run(catalog, chunks, task, run_opts, "Check points")
     if catalog.xy_factor != 1.0:
         xyz = cp.xyz.copy()
@@ -228,7 +225,7 @@ def catalog_heights(
     chunks = tuple(c for c in region_chunks(catalog, **chunk_opts)
                    if owned(mxy, c).any() or owned(ref, c).any())
     task = HeightsTask(mxy, ref, options=dict(options or {}), classes=None,
-                       bounds=_bounds2d(catalog))
+                       bounds=catalog.area_bounds)
     outcomes, parts = _run(catalog, chunks, task, run_opts, "Heights")
     value = merge_heights(parts, mxy, ref, options=options)
     return CatalogRun(value, catalog, tuple(chunks), tuple(outcomes))
@@ -279,7 +276,7 @@ def catalog_repeatability(
     catalog = open_sources(sources, classes=classes or None, source_id=source_id or None,
                            z_to_metres=False, **open_opts)
     chunks = region_chunks(catalog, **chunk_opts)
-    seg_opts, e_opts = fixed_auto_options(_sample_points(catalog, chunks),
+    seg_opts, e_opts = fixed_auto_options(catalog.sample().xyz,
                                           segment_options=segment_options, options=edge_options)
     task = StripEdgesTask(segment_options=seg_opts, edge_options=e_opts)
     outcomes, parts = _run(catalog, chunks, task, run_opts, "Strip edges")
@@ -293,9 +290,3 @@ def catalog_repeatability(
     return CatalogRun(rows, catalog, tuple(chunks), tuple(outcomes),
                       {"strips": strips, "strip_chunks": where,
                        "segment_options": seg_opts, "edge_options": e_opts})
-
-
-def _bounds2d(catalog: Any) -> tuple[float, float, float, float]:
-    """The catalog's (min x, min y, max x, max y)."""
-    b = catalog.bounds
-    return float(b[0]), float(b[1]), float(b[2]), float(b[3])

@@ -229,11 +229,9 @@ def catalog_swaths(
         swaths_from_planes,
     )
     from . import make_chunks
-    from .jobs_api import CatalogRun, _run, _split, open_sources
+    from .jobs_api import COMMON_KEYS, CatalogRun, _run, _split, open_sources
 
-    common = {k: options.pop(k) for k in list(options)
-              if k in ("chunk_size", "buffer", "origin", "engine", "progress", "retries",
-                       "skip_failed", "order_seed", "skip_bad", "crs")}
+    common = {k: options.pop(k) for k in list(options) if k in COMMON_KEYS}
     assess_options(min_points=min_points, max_roughness=max_roughness, max_slope=max_slope,
                    range_cell=range_cell, cell_size=cell_size, **options)
     open_opts, chunk_opts, run_opts = _split(common)

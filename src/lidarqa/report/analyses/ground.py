@@ -87,6 +87,8 @@ def run_ground(ctx: RunContext, item: AnalysisItem) -> SectionResult:
 
     ground_mod = import_module("lidarqa.ground", "ground")
     opts = item.options
+    if ctx.is_catalog(opts["cloud"]):
+        return _run_on_catalog(ctx, item)
     cloud = ctx.cloud(opts["cloud"])
     n = len(cloud)
     notes: list[str] = []
@@ -145,41 +147,8 @@ def run_ground(ctx: RunContext, item: AnalysisItem) -> SectionResult:
                     "type I: reference ground rejected; type II: object accepted as ground",
                 )
             )
-    tables = []
-    if errors is not None:
-        e = errors
-        tables.append(
-            Table(
-                "Cross table (points)",
-                ["reference \\ filter", "ground", "object", "total"],
-                [
-                    ["ground", e.a, e.b, e.a + e.b],
-                    ["object", e.c, e.d, e.c + e.d],
-                    ["total", e.a + e.c, e.b + e.d, e.n],
-                ],
-                note=("classes " + ", ".join(map(str, ignore)) + " not evaluated")
-                if ignore
-                else "",
-            )
-        )
-        tables.append(
-            Table(
-                "ISPRS errors",
-                ["measure", "value"],
-                [
-                    ["type I (%)", e.type_i_pct],
-                    ["type II (%)", e.type_ii_pct],
-                    ["total (%)", e.total_pct],
-                    ["Cohen's κ", e.kappa],
-                    ["points evaluated", e.n],
-                ],
-            )
-        )
-        headline = (
-            f"total error {e.total_pct:.2f} % (type I {e.type_i_pct:.2f} %, type II "
-            f"{e.type_ii_pct:.2f} %), κ {e.kappa:.3f}"
-        )
-    else:
+    tables, headline = _isprs_tables(errors, ignore)
+    if errors is None:
         headline = f"{int(ground.sum()):,} of {n:,} points classified as ground"
     terrain = res.get("terrain")
     if terrain:
@@ -235,3 +204,96 @@ def run_ground(ctx: RunContext, item: AnalysisItem) -> SectionResult:
             "geometry (and return numbers) only; the file's classes are used only to score it."
         ],
     )
+
+
+def _isprs_tables(e: Any, ignore: list[int]) -> tuple[list[Table], str]:
+    """The cross table and ISPRS errors of an evaluation, and the headline ([] and "" if None)."""
+    if e is None:
+        return [], ""
+    tables = [
+        Table(
+            "Cross table (points)",
+            ["reference \\ filter", "ground", "object", "total"],
+            [
+                ["ground", e.a, e.b, e.a + e.b],
+                ["object", e.c, e.d, e.c + e.d],
+                ["total", e.a + e.c, e.b + e.d, e.n],
+            ],
+            note=("classes " + ", ".join(map(str, ignore)) + " not evaluated") if ignore else "",
+        ),
+        Table(
+            "ISPRS errors",
+            ["measure", "value"],
+            [
+                ["type I (%)", e.type_i_pct],
+                ["type II (%)", e.type_ii_pct],
+                ["total (%)", e.total_pct],
+                ["Cohen's κ", e.kappa],
+                ["points evaluated", e.n],
+            ],
+        ),
+    ]
+    headline = (f"total error {e.total_pct:.2f} % (type I {e.type_i_pct:.2f} %, type II "
+                f"{e.type_ii_pct:.2f} %), κ {e.kappa:.3f}")
+    return tables, headline
+
+
+def _run_on_catalog(ctx: RunContext, item: AnalysisItem) -> SectionResult:
+    """Ground over a catalog (:func:`~lidarqa.tiling.ground.ground_catalog`, in this process)."""
+    import contextlib
+    import tempfile
+    from pathlib import Path
+    from types import SimpleNamespace
+
+    from ...tiling import open_catalog
+    from ...tiling.ground import ground_catalog
+    from ..catalog_overview import with_overview
+
+    opts = item.options
+    name = opts["cloud"]
+    cat = open_catalog(str(ctx.config.inputs[name].path))
+    params = {k: v for k, v in item.params.items() if k != "progress"}
+    ignore = list(opts["ignore_classes"] or [])
+    notes: list[str] = []
+    with contextlib.ExitStack() as stack:
+        if opts["write_cloud"]:
+            out_dir = ctx.output_path(item, f"{name}_ground")
+            if opts["cloud_format"] != "laz":
+                notes.append("on a catalog the output tiles keep the input tiles' format "
+                             "(cloud_format is not used)")
+        else:
+            out_dir = Path(stack.enter_context(tempfile.TemporaryDirectory())) / "ground"
+        with ctx.step(f"Ground filtering the catalog {name} ({int(cat.n_points):,} points, "
+                      f"{opts['method']})"):
+            res = ground_catalog(cat, out_dir, method=opts["method"],
+                                 evaluate=bool(opts["evaluate"]), ignore_classes=ignore or None,
+                                 workers=1, overwrite=True, **params)
+    d = res.to_dict()
+    if not opts["write_cloud"]:  # the tiles were written to a temporary folder, now gone
+        d.update(outputs=[], vpc=None)
+    notes.extend(res.warnings)
+    e = res.evaluation
+    if e is not None:
+        d.update(type_i_pct=e.type_i_pct, type_ii_pct=e.type_ii_pct, total_pct=e.total_pct,
+                 ignore_classes=ignore)
+    tables, headline = _isprs_tables(e, ignore)
+    headline = (headline or f"{res.n_ground:,} of {res.n_points:,} points classified as "
+                "ground") + " (catalog)"
+    tables.append(Table("Filter run", ["quantity", "value"],
+                        [["points", res.n_points], ["ground points", res.n_ground],
+                         ["chunks", res.n_chunks], ["chunk size (m)", res.chunk_size],
+                         ["buffer (m)", res.buffer]]))
+    out = SectionResult(
+        results=d, headline=headline, tables=tables, notes=notes,
+        parameters={"filter": dict(res.parameters)},
+        paragraphs=[f"{name} is a catalog: the filter runs chunk by chunk with a {res.buffer:g} m "
+                    "buffer and keeps each chunk's core labels; the ISPRS counts are summed "
+                    "over the chunks, which gives those of one run over the whole area."
+                    + (" The classified tiles and a .vpc of them are in the outputs."
+                       if opts["write_cloud"] else "")],
+    )
+    chunks = tuple(SimpleNamespace(id=c["id"], core=tuple(c["core"])) for c in res.chunks)
+    status = [{"chunk": c["id"], "status": "ok", "attempts": 1, "error": None}
+              for c in res.chunks]
+    run = SimpleNamespace(catalog=cat, chunks=chunks, extra={}, chunk_status=lambda: status)
+    return with_overview(out, run, f"{name}: chunks")

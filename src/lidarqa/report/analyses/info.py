@@ -17,6 +17,8 @@ def run_info(ctx: RunContext, item: AnalysisItem) -> SectionResult:
     from .. import plots
 
     name = item.options["cloud"]
+    if ctx.is_catalog(name):
+        return _run_on_catalog(ctx, item)
     cloud = ctx.cloud(name)
     info = describe_cloud(cloud).to_dict()
     figures = []
@@ -109,3 +111,35 @@ def run_info(ctx: RunContext, item: AnalysisItem) -> SectionResult:
     )
     info.pop("header", None)
     return SectionResult(results=info, headline=headline, figures=figures, tables=tables)
+
+
+def _run_on_catalog(ctx: RunContext, item: AnalysisItem) -> SectionResult:
+    """The catalog summary from the tile headers, with the chunks a job would use."""
+    from ...tiling import make_chunks, open_catalog
+    from ...tiling.apply import CatalogRun
+    from ..catalog_overview import catalog_section
+
+    name = item.options["cloud"]
+    with ctx.step(f"Reading the headers of {name}"):
+        cat = open_catalog(str(ctx.config.inputs[name].path))
+    chunks = make_chunks(cat)
+    run = CatalogRun(None, cat, tuple(chunks), ())  # no job: the chunks a job would use
+    sec = catalog_section(run, title=f"{name}: catalog")
+    d = cat.to_dict()
+    results = {**sec["results"], "crs_name": d.get("crs_name"), "crs_epsg": d.get("crs_epsg"),
+               "density_per_m2": d.get("density_per_m2"), "gaps": len(d.get("gaps", [])),
+               "overlaps": len(d.get("overlaps", [])),
+               "chunk_size": chunks[0].size if chunks else None}
+    rows = [["tiles", len(cat.tiles)], ["points", int(cat.n_points)],
+            ["CRS", d.get("crs_name") or "none"], ["density (pts/m²)", d.get("density_per_m2")],
+            ["gaps (missing tile cells)", results["gaps"]],
+            ["duplicate overlaps", results["overlaps"]],
+            ["default chunks", f"{len(chunks)} of {results['chunk_size']:g} m"
+             if chunks else "–"]]
+    headline = (f"catalog of {len(cat.tiles)} tiles, {int(cat.n_points):,} points"
+                + (f", {d['density_per_m2']:.1f} pts/m²" if d.get("density_per_m2") else ""))
+    return SectionResult(results=results, headline=headline,
+                         figures=sec["figures"],
+                         tables=[Table("Catalog", ["property", "value"], rows),
+                                 sec["tables"][1]],
+                         notes=sec["notes"])

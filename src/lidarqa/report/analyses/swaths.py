@@ -114,6 +114,21 @@ def run_swaths(ctx: RunContext, item: AnalysisItem) -> SectionResult:
     from ...io.crs import z_to_metres_factor
 
     opts = item.options
+    if ctx.is_catalog(opts["cloud"]):  # chunk by chunk: every cell fitted by its owner
+        from ...tiling.jobs_swaths import catalog_swaths
+        from ..catalog_overview import with_overview
+
+        name = opts["cloud"]
+        with ctx.step(f"Comparing the flight strips of the catalog {name}"):
+            run = catalog_swaths(str(ctx.config.inputs[name].path), by_source_id=True,
+                                 classes=opts["classes"], source_ids=opts["source_ids"],
+                                 all_returns=not opts["last_returns"], skip_failed=True,
+                                 **item.params)
+        out = swaths_section(ctx, item, run.value, run.catalog.crs)
+        out.paragraphs.append(f"{name} is a catalog: every grid cell is fitted in the chunk "
+                              "that owns it, with all its points; the figures are those of one "
+                              "run over the whole block.")
+        return with_overview(out, run, f"{name}: chunks")
     cloud = ctx.select(opts["cloud"], opts["classes"], opts["source_ids"])
     sid = cloud.point_source_id
     if sid is None:
