@@ -16,6 +16,8 @@ from scipy.spatial import Delaunay, QhullError
 from .._arrays import colmax, colmin
 
 EPS = 1e-9
+#: vertex numbers below this fit the 21-bit fields of a facet key (judge_points(keys=True))
+KEY_VERTICES = 1 << 21
 
 __all__ = [
     "EPS",
@@ -276,6 +278,12 @@ class PointTest:
     frozen_ok: np.ndarray  # (M,) bool, in a frozen triangle and within d of its facet
     mirrored: np.ndarray  # (M,) bool, passed only by mirroring
     dist: np.ndarray  # (M,) distance to the facet plane (inf outside)
+    # (M,) int64, with ``keys=True``: the point's facet as its sorted vertex triple
+    # packed in 21 bits each (:data:`KEY_VERTICES`), -1 when the point lies on an edge
+    # or outside (its facet then depends on the triangle numbering); and the facet of
+    # its mirrored point the same way, -2 when no mirrored point was located
+    tri_key: np.ndarray | None = None
+    mirror_key: np.ndarray | None = None
 
 
 def judge_points(
@@ -285,6 +293,7 @@ def judge_points(
     *,
     check_frozen: bool = True,
     presorted: bool = False,
+    keys: bool = False,
 ) -> PointTest:
     """Run the densification tests of :ref:`alg-ptd` for candidate points `p` (M, 3) against `tin`.
 
@@ -293,6 +302,9 @@ def judge_points(
     mirroring through the nearest real vertex (the mirrored point is walked to
     from the point's own facet). ``presorted=True``: `p` is in
     :func:`spatial_order` already (saves a sort per call in the densification).
+    ``keys=True`` also returns the facet keys of :class:`PointTest` (the TIN must have
+    fewer than :data:`KEY_VERTICES` vertices): a point whose keys name facets that
+    are still in a later TIN gets the same result there.
     """
     m = p.shape[0]
     order = None if presorted or m < 2 else spatial_order(p[:, :2])
@@ -315,7 +327,10 @@ def judge_points(
         bool(crit.mirror),
         float(crit.mirror_max_distance),
         max(1, min(4 * get_num_threads(), m // 2048)),
+        bool(keys),
     )
+    if not keys:
+        out = out[:-2]
     if order is not None:
         inv = np.empty_like(order)
         inv[order] = np.arange(m)
@@ -586,6 +601,7 @@ def _judge_kernel(
     mirror,
     mirror_max,
     n_chunks,
+    keys,
 ):  # pragma: no cover - numba
     """The densification tests (:ref:`alg-ptd`) of each point against the TIN."""
     m = p.shape[0]
@@ -599,6 +615,8 @@ def _judge_kernel(
     frozen_ok = np.zeros(m, np.bool_)
     mirrored = np.zeros(m, np.bool_)
     dist_out = np.full(m, np.inf)
+    tkey = np.full(m if keys else 0, -1, np.int64)
+    mkey = np.full(m if keys else 0, -2, np.int64)
     vxy = vxyz[:, :2]
     d_tol = iter_dist + 1e-12
     cos_max = math.cos(max_angle) - 1e-12
@@ -613,6 +631,8 @@ def _judge_kernel(
             if t < 0:
                 continue
             start = t
+            if keys:
+                tkey[i] = _facet_key(px, py, t, vxy, simp)
             theta = iter_angle
             is_frozen = False
             if check_frozen and min_edge > 0.0 and edge_max[t] < min_edge:
@@ -685,13 +705,57 @@ def _judge_kernel(
             t2 = _locate_one(mx, my, t, vxy, simp, nb, n_virtual)
             if t2 < 0:
                 continue
+            if keys:
+                mkey[i] = _facet_key(mx, my, t2, vxy, simp)
             d2, b2 = _facet_test(mx, my, mz, vxyz, simp, normal, t2)
             if d2 <= d_tol and b2 <= theta + 1e-12:
                 passed[i] = True
                 mirrored[i] = True
                 score[i] = d2
                 beta_out[i] = b2
-    return tri, passed, score, beta_out, dup_ok, dup, frozen, frozen_ok, mirrored, dist_out
+    return (
+        tri, passed, score, beta_out, dup_ok, dup, frozen, frozen_ok, mirrored, dist_out, tkey, mkey
+    )
+
+
+@njit(cache=True)
+def _facet_key(px, py, t, vxy, simp):  # pragma: no cover - numba
+    """Sorted vertex triple of facet `t` in 21 bits each; -1 when (px, py) is on an edge.
+
+    On an edge the point's facet is chosen by triangle number (:func:`_locate_one`),
+    which another TIN may number differently: such a point is always judged again.
+    """
+    a, b, c = simp[t, 0], simp[t, 1], simp[t, 2]
+    for j in range(3):
+        if _orient(vxy, simp[t, (j + 1) % 3], simp[t, (j + 2) % 3], px, py) == 0.0:
+            return -1
+    if a > b:
+        a, b = b, a
+    if b > c:
+        b, c = c, b
+    if a > b:
+        a, b = b, a
+    return (a << 42) | (b << 21) | c
+
+
+def facet_keys(tin: TIN) -> np.ndarray:
+    """Sorted keys (as in :class:`PointTest`) of every facet of `tin`."""
+    return np.sort(_all_facet_keys(tin.simplices))
+
+
+@njit(cache=True)
+def _all_facet_keys(simp):  # pragma: no cover - numba
+    out = np.empty(simp.shape[0], np.int64)
+    for t in range(simp.shape[0]):
+        a, b, c = simp[t, 0], simp[t, 1], simp[t, 2]
+        if a > b:
+            a, b = b, a
+        if b > c:
+            b, c = c, b
+        if a > b:
+            a, b = b, a
+        out[t] = (a << 42) | (b << 21) | c
+    return out
 
 
 def supported_lowest_per_cell(

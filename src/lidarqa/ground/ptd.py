@@ -20,12 +20,14 @@ from .._validate import as_points, check_choice, check_positive, check_range
 from ..errors import InvalidPointsError
 from ._prefilter import low_outliers
 from ._tin import (
+    KEY_VERTICES,
     TIN,
     Criteria,
     IncrementalTIN,
     _MergedVertices,
     best_per_triangle,
     distance_to_tin,
+    facet_keys,
     judge_points,
     mirror_point,
     screen_seeds,
@@ -317,6 +319,7 @@ def densify(
     max_iter: int,
     min_gain_frac: float = 0.0,
     progress: ProgressCallback | None = None,
+    reuse: bool = True,
 ) -> TIN:
     """Point-wise progressive densification (:ref:`alg-ptd`) of `st`; returns the final TIN.
 
@@ -324,6 +327,8 @@ def densify(
     if startinpy merges two vertices (closer than 1e-7 m) it falls back to rebuilding.
     `progress` receives an estimate of the fraction done after each sweep (the
     gains shrink about geometrically, see :func:`lidarqa._progress.geometric_fraction`).
+    ``reuse=False`` judges every open candidate in every sweep (the same result, slower;
+    kept for the tests).
     """
     inc: IncrementalTIN | None
     try:
@@ -337,16 +342,35 @@ def densify(
     # candidates in spatial order once: each sweep walks the TIN along this order
     todo = np.flatnonzero(st.open_)
     todo = todo[spatial_order(xyz[todo, :2])]
+    # Each sweep judges only the candidates whose facet (or mirrored point's facet)
+    # changed since they were last judged: a candidate left open keeps its result
+    # while its facets stand, as the tests depend on nothing else. Facets are named by
+    # their vertices, which keep their numbers while the TIN grows by insertion.
+    tkey = np.full(todo.size, -1, dtype=np.int64)
+    mkey = np.full(todo.size, -2, dtype=np.int64)
     for k in range(1, int(max_iter) + 1):
         st.n_iter = k
         tin = current()
-        todo = todo[st.open_[todo]]
-        oi = todo
-        if oi.size == 0:
+        live = st.open_[todo]
+        todo, tkey, mkey = todo[live], tkey[live], mkey[live]
+        if todo.size == 0:
             st.added.append(0)
             st.stop = "no_gain"
             return tin
-        res = judge_points(tin, xyz[oi], crit, presorted=True)
+        keyed = reuse and inc is not None and tin.vxyz.shape[0] < KEY_VERTICES
+        if keyed:
+            fk = facet_keys(tin)
+            dirty = ~_in_sorted(tkey, fk) | ((mkey != -2) & ~_in_sorted(mkey, fk))
+            sel = np.flatnonzero(dirty)
+        else:
+            sel = np.arange(todo.size)
+        oi = todo[sel]
+        res = judge_points(tin, xyz[oi], crit, presorted=True, keys=keyed)
+        if keyed:
+            tkey[sel] = res.tri_key
+            mkey[sel] = res.mirror_key
+        else:
+            tkey[:] = -1
         # XY duplicates of vertices: ground or not, never inserted, decided once
         st.ground[oi[res.duplicate_ok]] = True
         st.open_[oi[res.duplicate]] = False
@@ -382,6 +406,14 @@ def densify(
         if k == max_iter:
             st.stop = "max_iter"
     return current()
+
+
+def _in_sorted(a: np.ndarray, sorted_keys: np.ndarray) -> np.ndarray:
+    """Which of `a` are in `sorted_keys` (negative values never are)."""
+    if sorted_keys.size == 0:
+        return np.zeros(a.size, dtype=bool)
+    pos = np.minimum(np.searchsorted(sorted_keys, a), sorted_keys.size - 1)
+    return (sorted_keys[pos] == a) & (a >= 0)
 
 
 def final_pass(xyz: np.ndarray, st: DensifyState, tin: TIN, distance: float) -> int:
