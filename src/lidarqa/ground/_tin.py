@@ -738,14 +738,19 @@ def _facet_key(px, py, t, vxy, simp):  # pragma: no cover - numba
     return (a << 42) | (b << 21) | c
 
 
-def facet_keys(tin: TIN) -> np.ndarray:
-    """Sorted keys (as in :class:`PointTest`) of every facet of `tin`."""
-    return np.sort(_all_facet_keys(tin.simplices))
+def facets_present(tin: TIN, keys: np.ndarray) -> np.ndarray:
+    """Which `keys` (as in :class:`PointTest`) name a facet of `tin`; negative keys never do."""
+    return _facets_present(tin.simplices, np.ascontiguousarray(keys, dtype=np.int64))
 
 
 @njit(cache=True)
-def _all_facet_keys(simp):  # pragma: no cover - numba
-    out = np.empty(simp.shape[0], np.int64)
+def _facets_present(simp, keys):  # pragma: no cover - numba
+    # open-addressing hash set of the facets' keys, then one probe per query
+    size = 1
+    while size < 2 * simp.shape[0] + 2:
+        size *= 2
+    mask = size - 1
+    table = np.full(size, -1, np.int64)
     for t in range(simp.shape[0]):
         a, b, c = simp[t, 0], simp[t, 1], simp[t, 2]
         if a > b:
@@ -754,7 +759,22 @@ def _all_facet_keys(simp):  # pragma: no cover - numba
             b, c = c, b
         if a > b:
             a, b = b, a
-        out[t] = (a << 42) | (b << 21) | c
+        k = (a << 42) | (b << 21) | c
+        h = (k * -7046029254386353131) >> 17 & mask
+        while table[h] >= 0 and table[h] != k:
+            h = (h + 1) & mask
+        table[h] = k
+    out = np.zeros(keys.size, np.bool_)
+    for i in range(keys.size):
+        k = keys[i]
+        if k < 0:
+            continue
+        h = (k * -7046029254386353131) >> 17 & mask
+        while table[h] >= 0:
+            if table[h] == k:
+                out[i] = True
+                break
+            h = (h + 1) & mask
     return out
 
 

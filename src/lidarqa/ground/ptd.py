@@ -27,7 +27,7 @@ from ._tin import (
     _MergedVertices,
     best_per_triangle,
     distance_to_tin,
-    facet_keys,
+    facets_present,
     judge_points,
     mirror_point,
     screen_seeds,
@@ -359,8 +359,7 @@ def densify(
             return tin
         keyed = reuse and inc is not None and tin.vxyz.shape[0] < KEY_VERTICES
         if keyed:
-            fk = facet_keys(tin)
-            dirty = ~_in_sorted(tkey, fk) | ((mkey != -2) & ~_in_sorted(mkey, fk))
+            dirty = ~facets_present(tin, tkey) | ((mkey != -2) & ~facets_present(tin, mkey))
             sel = np.flatnonzero(dirty)
         else:
             sel = np.arange(todo.size)
@@ -406,14 +405,6 @@ def densify(
         if k == max_iter:
             st.stop = "max_iter"
     return current()
-
-
-def _in_sorted(a: np.ndarray, sorted_keys: np.ndarray) -> np.ndarray:
-    """Which of `a` are in `sorted_keys` (negative values never are)."""
-    if sorted_keys.size == 0:
-        return np.zeros(a.size, dtype=bool)
-    pos = np.minimum(np.searchsorted(sorted_keys, a), sorted_keys.size - 1)
-    return (sorted_keys[pos] == a) & (a >= 0)
 
 
 def final_pass(xyz: np.ndarray, st: DensifyState, tin: TIN, distance: float) -> int:
