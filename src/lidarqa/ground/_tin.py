@@ -565,21 +565,30 @@ def _locate_kernel(pts, vxy, simp, nb, n_virtual):  # pragma: no cover - numba
 
 
 @njit(cache=True)
-def _facet_test(px, py, pz, vxyz, simp, normal, t):  # pragma: no cover - numba
-    """Distance of P to the plane of facet t and the largest vertex angle beta (rad)."""
+def _facet_dist(px, py, pz, vxyz, simp, normal, t):  # pragma: no cover - numba
+    """Distance of P to the plane of facet t."""
     i0 = simp[t, 0]
-    dist = abs(
+    return abs(
         (px - vxyz[i0, 0]) * normal[t, 0]
         + (py - vxyz[i0, 1]) * normal[t, 1]
         + (pz - vxyz[i0, 2]) * normal[t, 2]
     )
-    beta = 0.0
+
+
+@njit(cache=True)
+def _facet_beta(px, py, pz, dist, vxyz, simp, t):  # pragma: no cover - numba
+    """The largest vertex angle beta (rad) of P at distance `dist` from facet t.
+
+    asin is increasing, so the largest angle is the asin of the largest sine: one
+    asin instead of three.
+    """
+    smax = 0.0
     for j in range(3):
         v = simp[t, j]
         pv = math.sqrt((px - vxyz[v, 0]) ** 2 + (py - vxyz[v, 1]) ** 2 + (pz - vxyz[v, 2]) ** 2)
         s = dist / pv if pv > EPS else 1.0
-        beta = max(beta, math.asin(min(max(s, 0.0), 1.0)))
-    return dist, beta
+        smax = max(smax, s)
+    return math.asin(min(max(smax, 0.0), 1.0))
 
 
 @njit(cache=True, parallel=True)
@@ -653,12 +662,16 @@ def _judge_kernel(
             is_dup = dmin < EPS
             dup[i] = is_dup
             dup_ok[i] = is_dup and abs(pz - vxyz[simp[t, jmin], 2]) <= d_tol
-            dist, beta = _facet_test(px, py, pz, vxyz, simp, normal, t)
+            dist = _facet_dist(px, py, pz, vxyz, simp, normal, t)
             dist_out[i] = dist
             frozen_ok[i] = is_frozen and not is_dup and dist <= d_tol
             if is_dup or is_frozen:
                 continue
-            ok = dist <= d_tol and beta <= theta + 1e-12
+            ok = False
+            beta = np.inf
+            if dist <= d_tol:  # the angle only matters within the distance
+                beta = _facet_beta(px, py, pz, dist, vxyz, simp, t)
+                ok = beta <= theta + 1e-12
             if ok:
                 # sub-facets (P,A,B), (P,B,C), (P,C,A) no steeper than max_angle;
                 # those with XY area < EPS (P on an edge) are ignored
@@ -707,8 +720,11 @@ def _judge_kernel(
                 continue
             if keys:
                 mkey[i] = _facet_key(mx, my, t2, vxy, simp)
-            d2, b2 = _facet_test(mx, my, mz, vxyz, simp, normal, t2)
-            if d2 <= d_tol and b2 <= theta + 1e-12:
+            d2 = _facet_dist(mx, my, mz, vxyz, simp, normal, t2)
+            if d2 > d_tol:
+                continue
+            b2 = _facet_beta(mx, my, mz, d2, vxyz, simp, t2)
+            if b2 <= theta + 1e-12:
                 passed[i] = True
                 mirrored[i] = True
                 score[i] = d2
