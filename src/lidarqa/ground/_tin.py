@@ -231,6 +231,20 @@ class _MergedVertices(Exception):
     """startinpy merged two vertices closer than its snap tolerance."""
 
 
+def build_tin(xyz: np.ndarray, real_idx: np.ndarray, virtual: np.ndarray) -> TIN:
+    """A TIN of `real_idx` and the `virtual` vertices, by insertion (startinpy).
+
+    Four times faster than Qhull on tens of thousands of vertices; falls back to
+    :class:`TIN` (Qhull) when startinpy would merge vertices closer than 1e-7 m.
+    Co-circular vertices may get the other diagonal than Qhull's, in a canonical
+    (spatial, then coordinate) insertion order that does not depend on the input order.
+    """
+    try:
+        return IncrementalTIN(xyz, real_idx, virtual).snapshot()
+    except _MergedVertices:
+        return TIN(xyz, real_idx, virtual)
+
+
 def screen_seeds(
     xyz: np.ndarray,
     seeds: np.ndarray,

@@ -25,7 +25,7 @@ from .._validate import as_points, check_choice, check_positive, check_range
 from ..errors import DegenerateGeometryWarning, InvalidPointsError, OptionError
 from ..geometry._kernels import centred_moments, grid_keys
 from ._perched import perched_mask
-from ._tin import TIN, tree_workers, virtual_hull
+from ._tin import TIN, build_tin, tree_workers, virtual_hull
 from .features import (
     _segment_planes,
     detect_object_segments,
@@ -755,7 +755,7 @@ def _on_terrain(
     if ti.size < 3:
         return ground | terrain
     virtual = virtual_hull(xyz, ti, 1.0, colmin(xyz[ti]), colmax(xyz[ti]))
-    h = _height_above_tin(TIN(xyz, ti, virtual), xyz[gi])
+    h = _height_above_tin(build_tin(xyz, ti, virtual), xyz[gi])
     # facets with a virtual corner reach past the hull of the terrain points: there
     # the nearest terrain point (XY) is the terrain (a level extension)
     rest = np.flatnonzero(np.isnan(h))
