@@ -804,7 +804,7 @@ def _height_above_ground(
     xyz: np.ndarray, ground: np.ndarray, idx: np.ndarray, thin_cell: float, virtual: Any
 ) -> np.ndarray:
     """Height of points `idx` above the TIN of `ground` (thinned like the densification TIN)."""
-    tin = TIN(xyz, _thin(xyz, np.flatnonzero(ground), thin_cell), virtual)
+    tin = build_tin(xyz, _thin(xyz, np.flatnonzero(ground), thin_cell), virtual)
     return _height_above_tin(tin, xyz[idx])
 
 
