@@ -320,7 +320,8 @@ def densify(
     min_gain_frac: float = 0.0,
     progress: ProgressCallback | None = None,
     reuse: bool = True,
-) -> TIN:
+    final_tin: bool = True,
+) -> TIN | None:
     """Point-wise progressive densification (:ref:`alg-ptd`) of `st`; returns the final TIN.
 
     The TIN grows by insertion (startinpy) instead of being rebuilt each iteration;
@@ -328,7 +329,8 @@ def densify(
     `progress` receives an estimate of the fraction done after each sweep (the
     gains shrink about geometrically, see :func:`lidarqa._progress.geometric_fraction`).
     ``reuse=False`` judges every open candidate in every sweep (the same result, slower;
-    kept for the tests).
+    kept for the tests). ``final_tin=False``: the caller does not need the final TIN,
+    which may then not be built (None is returned).
     """
     inc: IncrementalTIN | None
     try:
@@ -359,7 +361,8 @@ def densify(
             return tin
         keyed = reuse and inc is not None and tin.vxyz.shape[0] < KEY_VERTICES
         if keyed:
-            dirty = ~facets_present(tin, tkey) | ((mkey != -2) & ~facets_present(tin, mkey))
+            here = facets_present(tin, np.concatenate([tkey, mkey]))
+            dirty = ~here[: tkey.size] | ((mkey != -2) & ~here[tkey.size :])
             sel = np.flatnonzero(dirty)
         else:
             sel = np.arange(todo.size)
@@ -404,7 +407,7 @@ def densify(
             break
         if k == max_iter:
             st.stop = "max_iter"
-    return current()
+    return current() if final_tin else None
 
 
 def final_pass(xyz: np.ndarray, st: DensifyState, tin: TIN, distance: float) -> int:
@@ -447,6 +450,7 @@ def _ptd(
         min_gain_frac=par.min_gain_frac,
         progress=stage(progress, 0.1, 0.95),
     )
+    assert tin is not None  # final_tin=True
     final_pass(xyz, st, tin, par.final_distance)
     tris = tin.real_triangles()
     return PTDResult(

@@ -1031,8 +1031,9 @@ def _segment_ptd(
             max_iter=int(par.max_iter),
             min_gain_frac=float(par.min_gain_frac),
             progress=span,
+            final_tin=par.final_distance > 0,
         )
-        if par.final_distance > 0:
+        if par.final_distance > 0 and tin is not None:
             final_pass(xyz, st, tin, par.final_distance)
         passed = st.ground & ~ground
         unseg_ground = passed & unseg_pt
