@@ -338,3 +338,28 @@ def test_densify_reuse_gives_the_same_ground(data_dir, monkeypatch, method):
     every = filt.run(cloud.xyz).ground_mask
     np.testing.assert_array_equal(reused, every)
     assert n_reused < 0.7 * sum(calls)  # and it judged fewer points
+
+
+def test_build_tin_is_the_delaunay_tin_and_falls_back_on_merged_vertices():
+    """build_tin (startinpy) = Qhull's TIN in general position; Qhull when vertices merge."""
+    from lidarqa.ground._tin import build_tin
+
+    rng = np.random.default_rng(3)
+    xyz = rng.random((3000, 3)) * [200.0, 150.0, 5.0]
+    idx = np.sort(rng.choice(3000, 2000, replace=False))
+    virt = virtual_hull(xyz, idx, 10.0, xyz.min(0), xyz.max(0))
+
+    def facets(tin):
+        return {tuple(sorted(map(int, tin.vsrc[t]))) if (tin.vsrc[t] >= 0).all() else None
+                for t in tin.simplices} - {None}
+
+    fast, ref = build_tin(xyz, idx, virt), TIN(xyz, idx, virt)
+    assert fast.dt is None and ref.dt is not None  # one by insertion, one by Qhull
+    assert facets(fast) == facets(ref) and len(facets(ref)) > 3000
+    q = rng.random((500, 2)) * [200.0, 150.0]
+    assert (fast.locate(q) >= 0).all()
+    # two vertices 1e-9 m apart: startinpy would merge them, Qhull keeps both
+    xyz2 = np.vstack([xyz, xyz[idx[0]] + [1e-9, 0.0, 0.0]])
+    idx2 = np.append(idx, 3000)
+    merged = build_tin(xyz2, idx2, virt)
+    assert merged.dt is not None and merged.n_real == idx2.size
