@@ -20,9 +20,13 @@ CSF = cloth-simulation-filter (``pip install cloth-simulation-filter``), on the 
 - ``csf05`` the same with a 0.5 m cloth on the dense synthetic scene (slower).
 
 Times are read + filter + write (the imports the run needs included, not the
-interpreter start). The methods run interleaved, ``--repeat`` rounds, each run in its
-own process, and the ratios use the median per method, of wall time and of CPU time
-(the machine may be shared: wall times are noisy, compare CPU seconds).
+interpreter start). Both methods run after ``import lidarqa``, which sets
+``OMP_WAIT_POLICY=PASSIVE``: CSF's OpenMP threads then sleep between parallel regions
+too (on 2 shared cores that took a quarter to a half of CSF's CPU time off on bcts_2
+and the Oakland set), so the CPU ratio compares the two without spinning threads.
+The methods run interleaved, ``--repeat`` rounds, each run in its own process, and
+the ratios use the median per method, of wall time and of CPU time (the machine may
+be shared: wall times are noisy, compare CPU seconds).
 
     python benchmarks/ground_speed.py [--methods segment-ptd,csf,csf05] [--only 2m,bcts2,oakland]
         [--repeat 3]
