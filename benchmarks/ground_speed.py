@@ -1,21 +1,35 @@
 """Speed and peak memory of ``lidarqa ground`` (read + filter + write) against the CSF wheel.
 
-Runs every measurement in a fresh subprocess so that peak RSS (ru_maxrss) is that
-run's own. Datasets: the unlabelled ISPRS site file FSite5_orig-utm.laz (628 k
-points, if ../shared is present) and a 2 M-point synthetic scene
-(lidarqa.testing.make_scene, 20 pts/m²). CSF = cloth-simulation-filter
-(``pip install cloth-simulation-filter``):
+Runs every measurement in a fresh subprocess so that peak RSS (ru_maxrss) and CPU
+time (user + sys of the process and its threads) are that run's own. Datasets
+(``--only``, comma-separated; default ``fsite5,2m``):
+
+- ``fsite5``: the unlabelled ISPRS site file FSite5_orig-utm.laz (628 k points);
+- ``2m``: a 2 M-point synthetic scene (lidarqa.testing.make_scene, 20 pts/m²);
+- ``bcts2``: the BC forest tile lasR-bcts/bcts_2 (824 k points);
+- ``oakland``: the 8 Oakland mobile-scanning chunks, one after the other in one
+  process (the set is timed as a whole);
+- ``sites``: FSite5 and three CSite files.
+
+CSF = cloth-simulation-filter (``pip install cloth-simulation-filter``), on the last
+(and single) returns like PDAL ``filters.csf``, noise classes 7 and 18 left out:
 
 - ``csf`` runs PDAL ``filters.csf``'s defaults (cloth resolution 1.0 m, rigidness 3,
   time step 0.65, class threshold 0.5, slope smoothing on, 500 iterations): what a
   PDAL user gets, and the reference of the speed goal;
 - ``csf05`` the same with a 0.5 m cloth on the dense synthetic scene (slower).
 
+Times are read + filter + write (the imports the run needs included, not the
+interpreter start). Both methods run after ``import lidarqa``, which sets
+``OMP_WAIT_POLICY=PASSIVE``: CSF's OpenMP threads then sleep between parallel regions
+too (on 2 shared cores that took a quarter to a half of CSF's CPU time off on bcts_2
+and the Oakland set), so the CPU ratio compares the two without spinning threads.
 The methods run interleaved, ``--repeat`` rounds, each run in its own process, and
-the ratio uses the median total time per method (the machine may be shared: the
-timings are noisy).
+the ratios use the median per method, of wall time and of CPU time (the machine may
+be shared: wall times are noisy, compare CPU seconds).
 
-    python benchmarks/ground_speed.py [--methods segment-ptd,csf,csf05] [--only 2m|fsite5]
+    python benchmarks/ground_speed.py [--methods segment-ptd,csf,csf05] [--only 2m,bcts2,oakland]
+        [--repeat 3]
 
 A method may name a preset: ``segment-ptd@als`` runs ``--preset als``; without one
 the default (``auto``) runs.
@@ -36,52 +50,83 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared" / "lidar-data" / "isprs-filtertest-pdal" / "FSite5_orig-utm.laz"
+DATA = REPO.parent / "shared" / "lidar-data"
+
+
+def _cpu() -> float:
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+
+
+def _csf(cloud, cloth: float):
+    """CSF at PDAL filters.csf defaults on the last returns, noise left out."""
+    import CSF
+    import numpy as np
+
+    from lidarqa.ground import ground_candidates
+
+    use = ground_candidates(cloud)[0]
+    idx = np.flatnonzero(use)
+    xyz = cloud.xyz[idx]
+    csf = CSF.CSF()
+    csf.params.bSloopSmooth = True
+    csf.params.cloth_resolution = cloth
+    csf.params.rigidness = 3
+    csf.params.time_step = 0.65
+    csf.params.class_threshold = 0.5
+    csf.params.interations = 500
+    csf.setPointCloud(xyz - xyz.min(axis=0))
+    g, ng = CSF.VecInt(), CSF.VecInt()
+    csf.do_filtering(g, ng, exportCloth=False)
+    ground = np.zeros(len(cloud), dtype=bool)
+    ground[idx[np.asarray(g, dtype=np.int64)]] = True
+    return ground
 
 
 def one(method: str, src: str, out: str, cloth: float = 0.5) -> dict:
+    """Read, filter and write every file of `src` (``;``-separated) with `method`."""
+    import warnings
+
     import numpy as np
 
+    c0 = _cpu()
+    t0 = time.perf_counter()
     import lidarqa
 
-    t0 = time.perf_counter()
-    cloud = lidarqa.read(src)
-    t1 = time.perf_counter()
-    if method.startswith("csf"):
-        import CSF
+    times = {"read_s": 0.0, "filter_s": 0.0, "write_s": 0.0}
+    n = n_ground = 0
+    for k, path in enumerate(src.split(";")):
+        t1 = time.perf_counter()
+        cloud = lidarqa.read(path)
+        t2 = time.perf_counter()
+        if method.startswith("csf"):
+            ground = _csf(cloud, 0.5 if method == "csf05" else 1.0)
+        else:
+            from lidarqa.ground import classify_ground
 
-        csf = CSF.CSF()
-        # PDAL filters.csf defaults
-        csf.params.bSloopSmooth = True
-        csf.params.cloth_resolution = 0.5 if method == "csf05" else 1.0
-        csf.params.rigidness = 3
-        csf.params.time_step = 0.65
-        csf.params.class_threshold = 0.5
-        csf.params.interations = 500
-        csf.setPointCloud(cloud.xyz - cloud.xyz.min(axis=0))
-        g, ng = CSF.VecInt(), CSF.VecInt()
-        csf.do_filtering(g, ng, exportCloth=False)
-        ground = np.zeros(len(cloud), dtype=bool)
-        ground[np.asarray(g, dtype=np.int64)] = True
-    else:
-        from lidarqa.ground import classify_ground
+            name, _, preset = method.partition("@")
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                ground = classify_ground(cloud, method=name, preset=preset or "auto").ground_mask
+        t3 = time.perf_counter()
+        from lidarqa.ground import relabel_classification
 
-        name, _, preset = method.partition("@")
-        ground = classify_ground(cloud, method=name, preset=preset or "auto").ground_mask
-    t2 = time.perf_counter()
-    from lidarqa.ground import relabel_classification
-
-    cls = cloud.fields.get("classification", np.zeros(len(cloud), dtype=np.uint8))
-    cloud.fields["classification"] = relabel_classification(cls, ground)
-    lidarqa.write(cloud, out, overwrite=True)
-    t3 = time.perf_counter()
+        cls = cloud.fields.get("classification", np.zeros(len(cloud), dtype=np.uint8))
+        cloud.fields["classification"] = relabel_classification(cls, ground)
+        lidarqa.write(cloud, out.replace(".laz", f"-{k}.laz"), overwrite=True)
+        t4 = time.perf_counter()
+        times["read_s"] += t2 - t1
+        times["filter_s"] += t3 - t2
+        times["write_s"] += t4 - t3
+        n += len(cloud)
+        n_ground += int(ground.sum())
     return {
         "method": method,
-        "n": len(cloud),
-        "read_s": t1 - t0,
-        "filter_s": t2 - t1,
-        "write_s": t3 - t2,
-        "total_s": t3 - t0,
-        "n_ground": int(ground.sum()),
+        "n": n,
+        **times,
+        "total_s": time.perf_counter() - t0,
+        "cpu_s": _cpu() - c0,
+        "n_ground": n_ground,
         "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
     }
 
@@ -109,22 +154,29 @@ def main() -> None:
         print(json.dumps(one(a.one[0], a.one[1], a.one[2], float(a.one[3]))))
         return
     tmp = Path(tempfile.mkdtemp(prefix="lidarqa-ground-speed-"))
-    datasets = []
-    if SHARED.exists() and a.only in (None, "fsite5", "sites"):
-        datasets.append(("FSite5_orig (628 k)", SHARED, 1.0))
-    if SHARED.exists() and a.only == "sites":
+    datasets: list[tuple[str, str, float]] = []
+    only = (a.only or "fsite5,2m").split(",")
+    if SHARED.exists() and ("fsite5" in only or "sites" in only):
+        datasets.append(("FSite5_orig (628 k)", str(SHARED), 1.0))
+    if SHARED.exists() and "sites" in only:
         for site in ("CSite2_orig", "CSite3_orig", "CSite4_orig"):
             f = SHARED.parent / f"{site}-utm.laz"
             if f.exists():
-                datasets.append((site, f, 1.0))
-    if a.only in (None, "2m"):
+                datasets.append((site, str(f), 1.0))
+    if "2m" in only:
         syn = tmp / "synthetic-2m.laz"
         make_2m(syn)
-        datasets.append(("synthetic 2 M", syn, 0.5))
+        datasets.append(("synthetic 2 M", str(syn), 0.5))
+    bcts = DATA / "lasR-bcts" / "bcts_2.laz"
+    if "bcts2" in only and bcts.exists():
+        datasets.append(("bcts_2 (forest)", str(bcts), 1.0))
+    oak = sorted((DATA / "oakland-mls").glob("*.laz"))
+    if "oakland" in only and oak:
+        datasets.append((f"Oakland MLS ({len(oak)})", ";".join(map(str, oak)), 1.0))
     methods = a.methods.split(",")
     print(
         f"{'dataset':<22}{'method':<16}{'points':>10}{'read s':>8}{'filter s':>10}{'write s':>9}"
-        f"{'total s':>9}{'peak MB':>9}{'ground':>10}"
+        f"{'total s':>9}{'CPU s':>8}{'peak MB':>9}{'ground':>10}"
     )
     for name, src, cloth in datasets:
         res: dict[str, list[dict]] = {}
@@ -132,7 +184,7 @@ def main() -> None:
             for m in methods:  # interleaved: every method once per round
                 out = tmp / f"out-{m}.laz"
                 p = subprocess.run(
-                    [sys.executable, __file__, "--one", m, str(src), str(out), str(cloth)],
+                    [sys.executable, __file__, "--one", m, src, str(out), str(cloth)],
                     capture_output=True,
                     text=True,
                     env=os.environ.copy(),
@@ -144,18 +196,22 @@ def main() -> None:
                 res.setdefault(m, []).append(r)
                 print(
                     f"{name:<22}{m:<16}{r['n']:>10,}{r['read_s']:>8.1f}{r['filter_s']:>10.1f}"
-                    f"{r['write_s']:>9.1f}{r['total_s']:>9.1f}{r['peak_rss_mb']:>9.0f}"
-                    f"{r['n_ground']:>10,}",
+                    f"{r['write_s']:>9.1f}{r['total_s']:>9.1f}{r['cpu_s']:>8.1f}{r['peak_rss_mb']:>9.0f}"
+                    f"{r['n_ground']:>10,}   load {os.getloadavg()[0]:.1f}",
                     flush=True,
                 )
         med = {m: statistics.median(r["total_s"] for r in rs) for m, rs in res.items()}
+        cpu = {m: statistics.median(r["cpu_s"] for r in rs) for m, rs in res.items()}
+        for m in med:
+            print(f"{'':<22}{m}: median wall {med[m]:.2f} s, median CPU {cpu[m]:.2f} s")
         for ref in ("csf", "csf05"):
             if ref not in med:
                 continue
             for m, t in med.items():
                 if not m.startswith("csf"):
                     print(
-                        f"{'':<22}{m} / {ref} median total time ratio: {t / med[ref]:.2f}"
+                        f"{'':<22}{m} / {ref} median ratio: wall {t / med[ref]:.2f}, "
+                        f"CPU {cpu[m] / cpu[ref]:.2f}"
                         + ("   (PDAL filters.csf defaults)" if ref == "csf" else "   (0.5 m cloth)")
                     )
 

@@ -525,16 +525,18 @@ def surface_growing_kernel(pts, trial_order, knn, knn_k, method, seed_dist, min_
 
 @njit(cache=True)
 def _knn_one(pts, i, k, rmax, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, order, cand, dist,
-             out):
+             out, r0=1):
     """Exact k nearest neighbours of pts[i] (including i) by expanding cube rings.
 
+    Starts at ring `r0` (a caller that found ring 1 too small passes 2).
     Returns True on success; False if more than `rmax` rings would be needed.
     """
     ncell = cell_keys.shape[0]
     px = pts[i, 0]
     py = pts[i, 1]
     pz = pts[i, 2]
-    for r in range(1, rmax + 1):
+    best = np.empty(k)
+    for r in range(r0, rmax + 1):
         m = 0
         for dx in range(-r, r + 1):
             for dy in range(-r, r + 1):
@@ -565,9 +567,20 @@ def _knn_one(pts, i, k, rmax, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, 
                         m += 1
                     c += 1
         if m >= k:
-            # np.sort, not np.partition: same k-th value, and numba compiles its sort
-            # several times faster than its partition (first-run cost; this is a rare path)
-            kth = np.sort(dist[:m])[k - 1]
+            # the k-th smallest distance: the k best kept sorted by insertion (most
+            # candidates fail the first comparison), not a sort of all m
+            for a in range(k):
+                best[a] = np.inf
+            for a in range(m):
+                d = dist[a]
+                if d >= best[k - 1]:
+                    continue
+                q = k - 1
+                while q > 0 and best[q - 1] > d:
+                    best[q] = best[q - 1]
+                    q -= 1
+                best[q] = d
+            kth = best[k - 1]
             if kth <= (r * cell) ** 2:
                 c = 0
                 for a in range(m):  # strictly closer first, then ties in gather order
@@ -662,8 +675,10 @@ def knn_grid(pts, k, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, order, rm
                             out[i, t] = besti[t]
                         ok = True
                 if not ok:
+                    # ring 1 is what was just gathered: when it did not overflow,
+                    # the search goes on from ring 2
                     if _knn_one(pts, i, k, rmax, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start,
-                                order, cand2, dist, row):
+                                order, cand2, dist, row, 1 if overflow else 2):
                         for t in range(k):
                             out[i, t] = row[t]
     return out

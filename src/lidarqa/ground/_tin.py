@@ -16,6 +16,8 @@ from scipy.spatial import Delaunay, QhullError
 from .._arrays import colmax, colmin
 
 EPS = 1e-9
+#: vertex numbers below this fit the 21-bit fields of a facet key (judge_points(keys=True))
+KEY_VERTICES = 1 << 21
 
 __all__ = [
     "EPS",
@@ -229,6 +231,20 @@ class _MergedVertices(Exception):
     """startinpy merged two vertices closer than its snap tolerance."""
 
 
+def build_tin(xyz: np.ndarray, real_idx: np.ndarray, virtual: np.ndarray) -> TIN:
+    """A TIN of `real_idx` and the `virtual` vertices, by insertion (startinpy).
+
+    Four times faster than Qhull on tens of thousands of vertices; falls back to
+    :class:`TIN` (Qhull) when startinpy would merge vertices closer than 1e-7 m.
+    Co-circular vertices may get the other diagonal than Qhull's, in a canonical
+    (spatial, then coordinate) insertion order that does not depend on the input order.
+    """
+    try:
+        return IncrementalTIN(xyz, real_idx, virtual).snapshot()
+    except _MergedVertices:
+        return TIN(xyz, real_idx, virtual)
+
+
 def screen_seeds(
     xyz: np.ndarray,
     seeds: np.ndarray,
@@ -276,6 +292,12 @@ class PointTest:
     frozen_ok: np.ndarray  # (M,) bool, in a frozen triangle and within d of its facet
     mirrored: np.ndarray  # (M,) bool, passed only by mirroring
     dist: np.ndarray  # (M,) distance to the facet plane (inf outside)
+    # (M,) int64, with ``keys=True``: the point's facet as its sorted vertex triple
+    # packed in 21 bits each (:data:`KEY_VERTICES`), -1 when the point lies on an edge
+    # or outside (its facet then depends on the triangle numbering); and the facet of
+    # its mirrored point the same way, -2 when no mirrored point was located
+    tri_key: np.ndarray | None = None
+    mirror_key: np.ndarray | None = None
 
 
 def judge_points(
@@ -285,6 +307,7 @@ def judge_points(
     *,
     check_frozen: bool = True,
     presorted: bool = False,
+    keys: bool = False,
 ) -> PointTest:
     """Run the densification tests of :ref:`alg-ptd` for candidate points `p` (M, 3) against `tin`.
 
@@ -293,6 +316,9 @@ def judge_points(
     mirroring through the nearest real vertex (the mirrored point is walked to
     from the point's own facet). ``presorted=True``: `p` is in
     :func:`spatial_order` already (saves a sort per call in the densification).
+    ``keys=True`` also returns the facet keys of :class:`PointTest` (the TIN must have
+    fewer than :data:`KEY_VERTICES` vertices): a point whose keys name facets that
+    are still in a later TIN gets the same result there.
     """
     m = p.shape[0]
     order = None if presorted or m < 2 else spatial_order(p[:, :2])
@@ -315,7 +341,10 @@ def judge_points(
         bool(crit.mirror),
         float(crit.mirror_max_distance),
         max(1, min(4 * get_num_threads(), m // 2048)),
+        bool(keys),
     )
+    if not keys:
+        out = out[:-2]
     if order is not None:
         inv = np.empty_like(order)
         inv[order] = np.arange(m)
@@ -550,21 +579,30 @@ def _locate_kernel(pts, vxy, simp, nb, n_virtual):  # pragma: no cover - numba
 
 
 @njit(cache=True)
-def _facet_test(px, py, pz, vxyz, simp, normal, t):  # pragma: no cover - numba
-    """Distance of P to the plane of facet t and the largest vertex angle beta (rad)."""
+def _facet_dist(px, py, pz, vxyz, simp, normal, t):  # pragma: no cover - numba
+    """Distance of P to the plane of facet t."""
     i0 = simp[t, 0]
-    dist = abs(
+    return abs(
         (px - vxyz[i0, 0]) * normal[t, 0]
         + (py - vxyz[i0, 1]) * normal[t, 1]
         + (pz - vxyz[i0, 2]) * normal[t, 2]
     )
-    beta = 0.0
+
+
+@njit(cache=True)
+def _facet_beta(px, py, pz, dist, vxyz, simp, t):  # pragma: no cover - numba
+    """The largest vertex angle beta (rad) of P at distance `dist` from facet t.
+
+    asin is increasing, so the largest angle is the asin of the largest sine: one
+    asin instead of three.
+    """
+    smax = 0.0
     for j in range(3):
         v = simp[t, j]
         pv = math.sqrt((px - vxyz[v, 0]) ** 2 + (py - vxyz[v, 1]) ** 2 + (pz - vxyz[v, 2]) ** 2)
         s = dist / pv if pv > EPS else 1.0
-        beta = max(beta, math.asin(min(max(s, 0.0), 1.0)))
-    return dist, beta
+        smax = max(smax, s)
+    return math.asin(min(max(smax, 0.0), 1.0))
 
 
 @njit(cache=True, parallel=True)
@@ -586,6 +624,7 @@ def _judge_kernel(
     mirror,
     mirror_max,
     n_chunks,
+    keys,
 ):  # pragma: no cover - numba
     """The densification tests (:ref:`alg-ptd`) of each point against the TIN."""
     m = p.shape[0]
@@ -599,6 +638,8 @@ def _judge_kernel(
     frozen_ok = np.zeros(m, np.bool_)
     mirrored = np.zeros(m, np.bool_)
     dist_out = np.full(m, np.inf)
+    tkey = np.full(m if keys else 0, -1, np.int64)
+    mkey = np.full(m if keys else 0, -2, np.int64)
     vxy = vxyz[:, :2]
     d_tol = iter_dist + 1e-12
     cos_max = math.cos(max_angle) - 1e-12
@@ -613,6 +654,8 @@ def _judge_kernel(
             if t < 0:
                 continue
             start = t
+            if keys:
+                tkey[i] = _facet_key(px, py, t, vxy, simp)
             theta = iter_angle
             is_frozen = False
             if check_frozen and min_edge > 0.0 and edge_max[t] < min_edge:
@@ -633,12 +676,16 @@ def _judge_kernel(
             is_dup = dmin < EPS
             dup[i] = is_dup
             dup_ok[i] = is_dup and abs(pz - vxyz[simp[t, jmin], 2]) <= d_tol
-            dist, beta = _facet_test(px, py, pz, vxyz, simp, normal, t)
+            dist = _facet_dist(px, py, pz, vxyz, simp, normal, t)
             dist_out[i] = dist
             frozen_ok[i] = is_frozen and not is_dup and dist <= d_tol
             if is_dup or is_frozen:
                 continue
-            ok = dist <= d_tol and beta <= theta + 1e-12
+            ok = False
+            beta = np.inf
+            if dist <= d_tol:  # the angle only matters within the distance
+                beta = _facet_beta(px, py, pz, dist, vxyz, simp, t)
+                ok = beta <= theta + 1e-12
             if ok:
                 # sub-facets (P,A,B), (P,B,C), (P,C,A) no steeper than max_angle;
                 # those with XY area < EPS (P on an edge) are ignored
@@ -685,13 +732,80 @@ def _judge_kernel(
             t2 = _locate_one(mx, my, t, vxy, simp, nb, n_virtual)
             if t2 < 0:
                 continue
-            d2, b2 = _facet_test(mx, my, mz, vxyz, simp, normal, t2)
-            if d2 <= d_tol and b2 <= theta + 1e-12:
+            if keys:
+                mkey[i] = _facet_key(mx, my, t2, vxy, simp)
+            d2 = _facet_dist(mx, my, mz, vxyz, simp, normal, t2)
+            if d2 > d_tol:
+                continue
+            b2 = _facet_beta(mx, my, mz, d2, vxyz, simp, t2)
+            if b2 <= theta + 1e-12:
                 passed[i] = True
                 mirrored[i] = True
                 score[i] = d2
                 beta_out[i] = b2
-    return tri, passed, score, beta_out, dup_ok, dup, frozen, frozen_ok, mirrored, dist_out
+    return (
+        tri, passed, score, beta_out, dup_ok, dup, frozen, frozen_ok, mirrored, dist_out, tkey, mkey
+    )
+
+
+@njit(cache=True)
+def _facet_key(px, py, t, vxy, simp):  # pragma: no cover - numba
+    """Sorted vertex triple of facet `t` in 21 bits each; -1 when (px, py) is on an edge.
+
+    On an edge the point's facet is chosen by triangle number (:func:`_locate_one`),
+    which another TIN may number differently: such a point is always judged again.
+    """
+    a, b, c = simp[t, 0], simp[t, 1], simp[t, 2]
+    for j in range(3):
+        if _orient(vxy, simp[t, (j + 1) % 3], simp[t, (j + 2) % 3], px, py) == 0.0:
+            return -1
+    if a > b:
+        a, b = b, a
+    if b > c:
+        b, c = c, b
+    if a > b:
+        a, b = b, a
+    return (a << 42) | (b << 21) | c
+
+
+def facets_present(tin: TIN, keys: np.ndarray) -> np.ndarray:
+    """Which `keys` (as in :class:`PointTest`) name a facet of `tin`; negative keys never do."""
+    return _facets_present(tin.simplices, np.ascontiguousarray(keys, dtype=np.int64))
+
+
+@njit(cache=True)
+def _facets_present(simp, keys):  # pragma: no cover - numba
+    # open-addressing hash set of the facets' keys, then one probe per query
+    size = 1
+    while size < 2 * simp.shape[0] + 2:
+        size *= 2
+    mask = size - 1
+    table = np.full(size, -1, np.int64)
+    for t in range(simp.shape[0]):
+        a, b, c = simp[t, 0], simp[t, 1], simp[t, 2]
+        if a > b:
+            a, b = b, a
+        if b > c:
+            b, c = c, b
+        if a > b:
+            a, b = b, a
+        k = (a << 42) | (b << 21) | c
+        h = (k * -7046029254386353131) >> 17 & mask
+        while table[h] >= 0 and table[h] != k:
+            h = (h + 1) & mask
+        table[h] = k
+    out = np.zeros(keys.size, np.bool_)
+    for i in range(keys.size):
+        k = keys[i]
+        if k < 0:
+            continue
+        h = (k * -7046029254386353131) >> 17 & mask
+        while table[h] >= 0:
+            if table[h] == k:
+                out[i] = True
+                break
+            h = (h + 1) & mask
+    return out
 
 
 def supported_lowest_per_cell(

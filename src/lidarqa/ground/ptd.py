@@ -20,12 +20,14 @@ from .._validate import as_points, check_choice, check_positive, check_range
 from ..errors import InvalidPointsError
 from ._prefilter import low_outliers
 from ._tin import (
+    KEY_VERTICES,
     TIN,
     Criteria,
     IncrementalTIN,
     _MergedVertices,
     best_per_triangle,
     distance_to_tin,
+    facets_present,
     judge_points,
     mirror_point,
     screen_seeds,
@@ -317,13 +319,18 @@ def densify(
     max_iter: int,
     min_gain_frac: float = 0.0,
     progress: ProgressCallback | None = None,
-) -> TIN:
+    reuse: bool = True,
+    final_tin: bool = True,
+) -> TIN | None:
     """Point-wise progressive densification (:ref:`alg-ptd`) of `st`; returns the final TIN.
 
     The TIN grows by insertion (startinpy) instead of being rebuilt each iteration;
     if startinpy merges two vertices (closer than 1e-7 m) it falls back to rebuilding.
     `progress` receives an estimate of the fraction done after each sweep (the
     gains shrink about geometrically, see :func:`lidarqa._progress.geometric_fraction`).
+    ``reuse=False`` judges every open candidate in every sweep (the same result, slower;
+    kept for the tests). ``final_tin=False``: the caller does not need the final TIN,
+    which may then not be built (None is returned).
     """
     inc: IncrementalTIN | None
     try:
@@ -337,16 +344,35 @@ def densify(
     # candidates in spatial order once: each sweep walks the TIN along this order
     todo = np.flatnonzero(st.open_)
     todo = todo[spatial_order(xyz[todo, :2])]
+    # Each sweep judges only the candidates whose facet (or mirrored point's facet)
+    # changed since they were last judged: a candidate left open keeps its result
+    # while its facets stand, as the tests depend on nothing else. Facets are named by
+    # their vertices, which keep their numbers while the TIN grows by insertion.
+    tkey = np.full(todo.size, -1, dtype=np.int64)
+    mkey = np.full(todo.size, -2, dtype=np.int64)
     for k in range(1, int(max_iter) + 1):
         st.n_iter = k
         tin = current()
-        todo = todo[st.open_[todo]]
-        oi = todo
-        if oi.size == 0:
+        live = st.open_[todo]
+        todo, tkey, mkey = todo[live], tkey[live], mkey[live]
+        if todo.size == 0:
             st.added.append(0)
             st.stop = "no_gain"
             return tin
-        res = judge_points(tin, xyz[oi], crit, presorted=True)
+        keyed = reuse and inc is not None and tin.vxyz.shape[0] < KEY_VERTICES
+        if keyed:
+            here = facets_present(tin, np.concatenate([tkey, mkey]))
+            dirty = ~here[: tkey.size] | ((mkey != -2) & ~here[tkey.size :])
+            sel = np.flatnonzero(dirty)
+        else:
+            sel = np.arange(todo.size)
+        oi = todo[sel]
+        res = judge_points(tin, xyz[oi], crit, presorted=True, keys=keyed)
+        if keyed:
+            tkey[sel] = res.tri_key
+            mkey[sel] = res.mirror_key
+        else:
+            tkey[:] = -1
         # XY duplicates of vertices: ground or not, never inserted, decided once
         st.ground[oi[res.duplicate_ok]] = True
         st.open_[oi[res.duplicate]] = False
@@ -381,7 +407,7 @@ def densify(
             break
         if k == max_iter:
             st.stop = "max_iter"
-    return current()
+    return current() if final_tin else None
 
 
 def final_pass(xyz: np.ndarray, st: DensifyState, tin: TIN, distance: float) -> int:
@@ -424,6 +450,7 @@ def _ptd(
         min_gain_frac=par.min_gain_frac,
         progress=stage(progress, 0.1, 0.95),
     )
+    assert tin is not None  # final_tin=True
     final_pass(xyz, st, tin, par.final_distance)
     tris = tin.real_triangles()
     return PTDResult(

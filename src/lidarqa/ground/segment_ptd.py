@@ -25,7 +25,7 @@ from .._validate import as_points, check_choice, check_positive, check_range
 from ..errors import DegenerateGeometryWarning, InvalidPointsError, OptionError
 from ..geometry._kernels import centred_moments, grid_keys
 from ._perched import perched_mask
-from ._tin import TIN, tree_workers, virtual_hull
+from ._tin import TIN, build_tin, tree_workers, virtual_hull
 from .features import (
     _segment_planes,
     detect_object_segments,
@@ -757,7 +757,7 @@ def _on_terrain(
     if ti.size < 3:
         return ground | terrain
     virtual = virtual_hull(xyz, ti, 1.0, colmin(xyz[ti]), colmax(xyz[ti]))
-    h = _height_above_tin(TIN(xyz, ti, virtual), xyz[gi])
+    h = _height_above_tin(build_tin(xyz, ti, virtual), xyz[gi])
     # facets with a virtual corner reach past the hull of the terrain points: there
     # the nearest terrain point (XY) is the terrain (a level extension)
     rest = np.flatnonzero(np.isnan(h))
@@ -819,7 +819,7 @@ def _height_above_ground(
     xyz: np.ndarray, ground: np.ndarray, idx: np.ndarray, thin_cell: float, virtual: Any
 ) -> np.ndarray:
     """Height of points `idx` above the TIN of `ground` (thinned like the densification TIN)."""
-    tin = TIN(xyz, _thin(xyz, np.flatnonzero(ground), thin_cell), virtual)
+    tin = build_tin(xyz, _thin(xyz, np.flatnonzero(ground), thin_cell), virtual)
     return _height_above_tin(tin, xyz[idx])
 
 
@@ -1046,8 +1046,9 @@ def _segment_ptd(
             max_iter=int(par.max_iter),
             min_gain_frac=float(par.min_gain_frac),
             progress=span,
+            final_tin=par.final_distance > 0,
         )
-        if par.final_distance > 0:
+        if par.final_distance > 0 and tin is not None:
             final_pass(xyz, st, tin, par.final_distance)
         passed = st.ground & ~ground
         unseg_ground = passed & unseg_pt
