@@ -222,14 +222,22 @@ def grid_neighbours(pts, q, r2, cx, cy, cz, nyz, nz, cell_keys, cell_start, orde
     return m
 
 
-def build_grid(pts: np.ndarray, cell: float):
+def build_grid(pts: np.ndarray, cell: float, offset: np.ndarray | None = None):
     """A hashed voxel grid of cell size `cell` (m) over `pts` (NumPy, vectorised).
 
     Returns (cx, cy, cz, nyz, nz, cell_keys, cell_start, order, max_count).
     Cells are keyed (ix+1)*nyz + (iy+1)*nz + iz so the +-1 neighbours never wrap.
+    With `offset` (what was subtracted from the original coordinates), the grid
+    lines lie at multiples of `cell` in the original coordinates: any subset of a
+    cloud (a chunk of a catalog) puts its points in the same cells, so a search
+    visits neighbours in the same order whatever else was read. Points of a cell
+    are in their order in `pts`.
     """
-    lo = colmin(pts)
-    ijk = np.floor((pts - lo) / cell).astype(np.int64)
+    if offset is None:
+        ijk = np.floor((pts - colmin(pts)) / cell).astype(np.int64)
+    else:
+        ijk = np.floor((pts + np.asarray(offset, dtype=np.float64)) / cell).astype(np.int64)
+        ijk -= colmin(ijk)
     cx = ijk[:, 0] + 1
     cy = ijk[:, 1] + 1
     cz = ijk[:, 2]
@@ -569,17 +577,24 @@ def _knn_one(pts, i, k, rmax, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, 
             # several times faster than its partition (first-run cost; this is a rare path)
             kth = np.sort(dist[:m])[k - 1]
             if kth <= (r * cell) ** 2:
+                # the k first by (distance, index), in that order (as knn_grid): ties do not
+                # depend on the grid
+                sel = np.empty(m, dtype=np.int64)
                 c = 0
-                for a in range(m):  # strictly closer first, then ties in gather order
-                    if dist[a] < kth:
-                        out[c] = cand[a]
-                        c += 1
                 for a in range(m):
-                    if c >= k:
-                        break
-                    if dist[a] == kth:
-                        out[c] = cand[a]
+                    if dist[a] <= kth:
+                        sel[c] = a
                         c += 1
+                for x in range(1, c):
+                    v = sel[x]
+                    y = x - 1
+                    while y >= 0 and (dist[sel[y]] > dist[v]
+                                      or (dist[sel[y]] == dist[v] and cand[sel[y]] > cand[v])):
+                        sel[y + 1] = sel[y]
+                        y -= 1
+                    sel[y + 1] = v
+                for t in range(k):
+                    out[t] = cand[sel[t]]
                 return True
     return False
 
@@ -644,14 +659,17 @@ def knn_grid(pts, k, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, order, rm
                     nb = 0
                     for t in range(m):
                         d = (cxyz[t, 0] - px) ** 2 + (cxyz[t, 1] - py) ** 2 + (cxyz[t, 2] - pz) ** 2
+                        # ordered by (distance, index): ties do not depend on the grid
+                        j = cand[t]
                         if nb < k:
                             q = nb
                             nb += 1
-                        elif d < bestd[k - 1]:
+                        elif d < bestd[k - 1] or (d == bestd[k - 1] and j < besti[k - 1]):
                             q = k - 1
                         else:
                             continue
-                        while q > 0 and bestd[q - 1] > d:
+                        while q > 0 and (bestd[q - 1] > d
+                                         or (bestd[q - 1] == d and besti[q - 1] > j)):
                             bestd[q] = bestd[q - 1]
                             besti[q] = besti[q - 1]
                             q -= 1
@@ -698,8 +716,12 @@ def knn(pts: np.ndarray, k: int) -> np.ndarray:
     if len(bad):
         from scipy.spatial import cKDTree
 
-        _, idx = cKDTree(pts).query(pts[bad], k=k)
-        out[bad] = np.asarray(idx, dtype=np.int64).reshape(len(bad), k)
+        kk = min(k + 8, n)  # a few more, to order ties by index as the grid search does
+        d, idx = cKDTree(pts).query(pts[bad], k=kk)
+        d = np.asarray(d, dtype=np.float64).reshape(len(bad), kk)
+        idx = np.asarray(idx, dtype=np.int64).reshape(len(bad), kk)
+        o = np.lexsort((idx, d), axis=-1)[:, :k]
+        out[bad] = np.take_along_axis(idx, o, axis=1)
     return out
 
 
