@@ -105,8 +105,10 @@ def catalog_features(
         Point selection (e.g. ``(6,)`` for buildings).
     segment_options, options : dict, optional
         Plane segmentation and edge/corner options. Data-driven defaults
-        (growing radius, support distance) are measured once on one chunk and
-        used for every chunk.
+        (growing radius, support distance) are measured once on the source's
+        central sample window and used for every chunk. The default buffer is
+        the task's (:func:`~lidarqa.tiling.jobs_vector.feature_buffer`: the
+        largest plane of the sample window plus a few point spacings).
     tolerance : float, default 0.05
         Near-duplicate distance (m) of the merge.
     **common
@@ -114,16 +116,20 @@ def catalog_features(
         ``retries``, ``skip_failed``, ``order_seed`` (shuffled submission, for
         tests), ``skip_bad``, ``crs``.
     """
-    from .jobs_vector import VectorTask, fixed_auto_options, merge_vector_parts
+    from .jobs_vector import VectorTask, feature_buffer, fixed_auto_options, merge_vector_parts
 
     open_opts, chunk_opts, run_opts = _split(dict(common))
     catalog = open_sources(sources, classes=classes or None, source_id=source_id or None,
                            z_to_metres=False, **open_opts)
-    chunks = region_chunks(catalog, **chunk_opts)
-    seg_opts, opts = fixed_auto_options(_sample_points(catalog, chunks), kind=kind,
+    sample = _sample_points(catalog, ())
+    seg_opts, opts = fixed_auto_options(sample, kind=kind,
                                         segment_options=segment_options, options=options)
+    margin = None
+    if chunk_opts["buffer"] is None and (catalog.is_catalog or chunk_opts["chunk_size"]):
+        margin = feature_buffer(sample, segment_options=seg_opts)
     task = VectorTask(kind=kind, segment_options=seg_opts,
-                      options=opts, bounds=_bounds2d(catalog))
+                      options=opts, bounds=_bounds2d(catalog), margin=margin)
+    chunks = region_chunks(catalog, task, **chunk_opts)
     outcomes, parts = _run(catalog, chunks, task, run_opts, f"{kind.capitalize()}")
     value = merge_vector_parts(parts, tolerance=tolerance, crs=catalog.crs)
     return CatalogRun(value, catalog, tuple(chunks), tuple(outcomes),
