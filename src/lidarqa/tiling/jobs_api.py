@@ -274,20 +274,40 @@ def catalog_repeatability(
 ) -> CatalogRun:
     """Line repeatability of every pair of flight strips (point_source_id) over the block.
 
+    One file (without `chunk_size` or `buffer`) is one region: the same code
+    gives the file answer and the catalog answer. Each strip's data-driven
+    defaults and point spacing are measured once on its points in the central
+    sample window (:func:`~lidarqa.tiling.jobs_lines.strip_samples`).
+
     ``value`` is the list of pair rows (as ``lidarqa repeatability``);
     ``extra["strips"]`` the whole-block edges of each strip and
     ``extra["strip_chunks"]`` the chunks where each strip gave edges.
+    `match_options` may hold ``shared_threshold`` (see
+    :func:`~lidarqa.tiling.jobs_lines.strip_pairs`).
     """
-    from .jobs_lines import StripEdgesTask, merge_strip_edges, strip_pairs
-    from .jobs_vector import fixed_auto_options
+    from .jobs_lines import (
+        StripEdgesTask,
+        merge_strip_edges,
+        strip_options,
+        strip_pairs,
+        strip_samples,
+    )
+    from .jobs_vector import feature_buffer
 
     open_opts, chunk_opts, run_opts = _split(dict(common))
     catalog = open_sources(sources, classes=classes or None, source_id=source_id or None,
                            z_to_metres=False, **open_opts)
-    chunks = region_chunks(catalog, **chunk_opts)
-    seg_opts, e_opts = fixed_auto_options(_sample_points(catalog, chunks),
-                                          segment_options=segment_options, options=edge_options)
-    task = StripEdgesTask(segment_options=seg_opts, edge_options=e_opts)
+    samples = strip_samples(catalog)
+    fixed = strip_options(samples, segment_options=segment_options, edge_options=edge_options)
+    margin = None
+    if chunk_opts["buffer"] is None and (catalog.is_catalog or chunk_opts["chunk_size"]):
+        margin = max((feature_buffer(samples[s], segment_options=fixed[s][0])
+                      for s in samples), default=None)
+    seg_opts = dict(segment_options or {})
+    e_opts = dict(edge_options or {})
+    task = StripEdgesTask(segment_options=seg_opts, edge_options=e_opts, strips=fixed,
+                          margin=margin)
+    chunks = region_chunks(catalog, task, **chunk_opts)
     outcomes, parts = _run(catalog, chunks, task, run_opts, "Strip edges")
     strips = merge_strip_edges(parts, tolerance=tolerance)
     rows = strip_pairs(strips, **(match_options or {}))
@@ -296,9 +316,14 @@ def catalog_repeatability(
         if p is not None:
             for s in p[1]:
                 where.setdefault(int(s), []).append(p[0])
+    # the options of the strips, for the run's record (the first strip's when they differ)
+    first = next(iter(fixed.values()), ({}, {}, float("nan")))
     return CatalogRun(rows, catalog, tuple(chunks), tuple(outcomes),
                       {"strips": strips, "strip_chunks": where,
-                       "segment_options": seg_opts, "edge_options": e_opts})
+                       "segment_options": {**seg_opts, **first[0]},
+                       "edge_options": {**e_opts, **first[1]},
+                       "strip_options": {int(k): {**v[0], **v[1], "point_spacing": v[2]}
+                                         for k, v in fixed.items()}})
 
 
 def _bounds2d(catalog: Any) -> tuple[float, float, float, float]:

@@ -233,8 +233,9 @@ def fixed_auto_options(
 ) -> tuple[dict[str, Any], dict[str, Any]]:
     """Fix the data-driven defaults once for a whole catalog.
 
-    Plane segmentation's growing radius (2 x the point spacing) and the edges'
-    support distance (1.2 x the spacing) default to values measured on the
+    Plane segmentation's growing radius (2 x the point spacing), the edges'
+    support distance (1.2 x the spacing) and, with step edges, their point
+    spacing default to values measured on the
     points at hand; measured per chunk they would differ slightly from chunk to
     chunk, and so would the features. This measures the spacing once on
     `points` (e.g. the selected points of one chunk) and returns copies of
@@ -256,6 +257,9 @@ def fixed_auto_options(
         seg["grow_radius"] = float(np.clip(2.0 * sp, 0.5, 3.0)) if np.isfinite(sp) else 0.5
     if kind == "edges" and opts.get("near_dist") is None:
         opts["near_dist"] = float(np.clip(1.2 * sp, 0.15, 1.0)) if np.isfinite(sp) else 0.15
+    if kind == "edges" and opts.get("steps") and opts.get("point_spacing") is None \
+            and np.isfinite(sp):
+        opts["point_spacing"] = float(sp)  # the step edges' scale
     return seg, opts
 
 
