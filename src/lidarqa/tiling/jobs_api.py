@@ -281,8 +281,9 @@ def catalog_repeatability(
 
     ``value`` is the list of pair rows (as ``lidarqa repeatability``);
     ``extra["strips"]`` the whole-block edges of each strip and
-    ``extra["strip_chunks"]`` the chunks where each strip gave edges.
-    `match_options` may hold ``shared_threshold`` (see
+    ``extra["strip_chunks"]`` the chunks where each strip gave edges,
+    ``extra["strip_options"]`` each strip's fixed ``segment_options``,
+    ``edge_options`` and ``point_spacing`` (m). `match_options` may hold ``shared_threshold`` (see
     :func:`~lidarqa.tiling.jobs_lines.strip_pairs`).
     """
     from .jobs_lines import (
@@ -322,7 +323,8 @@ def catalog_repeatability(
                       {"strips": strips, "strip_chunks": where,
                        "segment_options": {**seg_opts, **first[0]},
                        "edge_options": {**e_opts, **first[1]},
-                       "strip_options": {int(k): {**v[0], **v[1], "point_spacing": v[2]}
+                       "strip_options": {int(k): {"segment_options": v[0], "edge_options": v[1],
+                                                  "point_spacing": v[2]}
                                          for k, v in fixed.items()}})
 
 
