@@ -533,7 +533,7 @@ def surface_growing_kernel(pts, trial_order, knn, knn_k, method, seed_dist, min_
 
 @njit(cache=True)
 def _knn_one(pts, i, k, rmax, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, order, cand, dist,
-             out):
+             out, by_index=False):
     """Exact k nearest neighbours of pts[i] (including i) by expanding cube rings.
 
     Returns True on success; False if more than `rmax` rings would be needed.
@@ -576,6 +576,19 @@ def _knn_one(pts, i, k, rmax, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, 
             # np.sort, not np.partition: same k-th value, and numba compiles its sort
             # several times faster than its partition (first-run cost; this is a rare path)
             kth = np.sort(dist[:m])[k - 1]
+            if kth <= (r * cell) ** 2 and not by_index:
+                c = 0
+                for a in range(m):  # strictly closer first, then ties in gather order
+                    if dist[a] < kth:
+                        out[c] = cand[a]
+                        c += 1
+                for a in range(m):
+                    if c >= k:
+                        break
+                    if dist[a] == kth:
+                        out[c] = cand[a]
+                        c += 1
+                return True
             if kth <= (r * cell) ** 2:
                 # the k first by (distance, index), in that order (as knn_grid): ties do not
                 # depend on the grid
@@ -601,7 +614,7 @@ def _knn_one(pts, i, k, rmax, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, 
 
 @njit(cache=True, parallel=True)
 def knn_grid(pts, k, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, order, rmax, max_cand,
-             n_chunks):
+             n_chunks, by_index=False):
     """The k nearest neighbours of every point (N, k); rows that failed are all -1.
 
     Works cell by cell: the points of the 27 cells around a cell are gathered once
@@ -659,17 +672,20 @@ def knn_grid(pts, k, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, order, rm
                     nb = 0
                     for t in range(m):
                         d = (cxyz[t, 0] - px) ** 2 + (cxyz[t, 1] - py) ** 2 + (cxyz[t, 2] - pz) ** 2
-                        # ordered by (distance, index): ties do not depend on the grid
+                        # by_index: ordered by (distance, index), ties do not depend on the
+                        # grid; else ties in gather order
                         j = cand[t]
                         if nb < k:
                             q = nb
                             nb += 1
-                        elif d < bestd[k - 1] or (d == bestd[k - 1] and j < besti[k - 1]):
+                        elif d < bestd[k - 1] or (by_index and d == bestd[k - 1]
+                                                  and j < besti[k - 1]):
                             q = k - 1
                         else:
                             continue
                         while q > 0 and (bestd[q - 1] > d
-                                         or (bestd[q - 1] == d and besti[q - 1] > j)):
+                                         or (by_index and bestd[q - 1] == d
+                                             and besti[q - 1] > j)):
                             bestd[q] = bestd[q - 1]
                             besti[q] = besti[q - 1]
                             q -= 1
@@ -681,14 +697,17 @@ def knn_grid(pts, k, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, order, rm
                         ok = True
                 if not ok:
                     if _knn_one(pts, i, k, rmax, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start,
-                                order, cand2, dist, row):
+                                order, cand2, dist, row, by_index):
                         for t in range(k):
                             out[i, t] = row[t]
     return out
 
 
-def knn(pts: np.ndarray, k: int) -> np.ndarray:
+def knn(pts: np.ndarray, k: int, *, by_index: bool = False) -> np.ndarray:
     """Exact k nearest neighbours (including the point itself) of every point, (N, k) int64.
+
+    `by_index`: rows ordered by (distance, index), so ties do not depend on the grid
+    (the same neighbours for a point in any subset holding them, in the same order).
 
     A hashed grid sized from the occupied-cell density answers most queries in one
     ring of cells (numba, parallel); the few points that need more rings are
@@ -711,17 +730,21 @@ def knn(pts: np.ndarray, k: int) -> np.ndarray:
     cx, cy, cz, nyz, nz, cell_keys, cell_start, order, max_cell = g
     max_cand = int(min(max(343 * max_cell, k), 2_000_000))
     out = knn_grid(pts, k, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, order, 3, max_cand,
-                   8 * get_num_threads())
+                   8 * get_num_threads(), by_index)
     bad = np.flatnonzero(out[:, 0] < 0)
     if len(bad):
         from scipy.spatial import cKDTree
 
-        kk = min(k + 8, n)  # a few more, to order ties by index as the grid search does
-        d, idx = cKDTree(pts).query(pts[bad], k=kk)
-        d = np.asarray(d, dtype=np.float64).reshape(len(bad), kk)
-        idx = np.asarray(idx, dtype=np.int64).reshape(len(bad), kk)
-        o = np.lexsort((idx, d), axis=-1)[:, :k]
-        out[bad] = np.take_along_axis(idx, o, axis=1)
+        if not by_index:
+            _, idx = cKDTree(pts).query(pts[bad], k=k)
+            out[bad] = np.asarray(idx, dtype=np.int64).reshape(len(bad), k)
+        else:
+            kk = min(k + 8, n)  # a few more, to order ties by index as the grid search does
+            d, idx = cKDTree(pts).query(pts[bad], k=kk)
+            d = np.asarray(d, dtype=np.float64).reshape(len(bad), kk)
+            idx = np.asarray(idx, dtype=np.int64).reshape(len(bad), kk)
+            o = np.lexsort((idx, d), axis=-1)[:, :k]
+            out[bad] = np.take_along_axis(idx, o, axis=1)
     return out
 
 

@@ -38,7 +38,7 @@ def _check_int(value: Any, name: str, lo: int) -> int:
     return v
 
 
-def canonical_points(points: np.ndarray, cell: float | None = None
+def canonical_points(points: np.ndarray, cell: float | None = None, *, anchored: bool = False
                      ) -> tuple[np.ndarray, np.ndarray]:
     """An input-order-free, spatially coherent permutation and the centred sorted points.
 
@@ -46,23 +46,27 @@ def canonical_points(points: np.ndarray, cell: float | None = None
     centred on the bounding-box middle, which, unlike the mean, does not depend on
     the summation order.
 
-    The voxels are cells of a power-of-two side on a grid through the origin of the
-    coordinates (not through the points' own corner), so the relative order of two
-    points is the same in any subset of a cloud that gets the same side: a chunk
-    of a catalog and the whole area order (and tie-break) their common points
-    alike. `cell` (m) fixes the side (the next power of two at or above it; e.g.
-    from the growing radius); default: from the density of `points`.
+    The voxels are cells of the kNN grid from the points' own corner; with `anchored`,
+    cells of a power-of-two side on a grid through the origin of the coordinates, so
+    the relative order of two points is the same in any subset of a cloud that gets
+    the same side: a chunk of a catalog and the whole area order (and tie-break) their
+    common points alike. `cell` (m) then fixes the side (the next power of two at or
+    above it; e.g. from the growing radius); default: from the density of `points`.
     """
     if len(points) == 0:
         return np.zeros(0, dtype=np.int64), points.copy()
     lo = colmin(points)
     hi = colmax(points)
-    if cell is None or not np.isfinite(cell) or cell <= 0:
+    if not anchored:
         cell = K.cell_size(hi - lo, len(points), 20)
-    cell = max(float(cell), float(np.max(hi - lo)) / 1e5, 1e-9)
-    cell = 2.0 ** math.ceil(math.log2(cell))
-    ijk = np.floor(points / cell).astype(np.int64)
-    ijk -= colmin(ijk)
+        ijk = np.floor((points - lo) / cell).astype(np.int64)
+    else:
+        if cell is None or not np.isfinite(cell) or cell <= 0:
+            cell = K.cell_size(hi - lo, len(points), 20)
+        cell = max(float(cell), float(np.max(hi - lo)) / 1e5, 1e-9)
+        cell = 2.0 ** math.ceil(math.log2(cell))
+        ijk = np.floor(points / cell).astype(np.int64)
+        ijk -= colmin(ijk)
     dims = colmax(ijk) + 1
     key = (ijk[:, 0] * dims[1] + ijk[:, 1]) * dims[2] + ijk[:, 2]
     perm = np.argsort(key, kind="stable")
@@ -171,12 +175,11 @@ def surface_growing(
     labels_out = np.full(n, -1, dtype=np.int64)
     if n < 3:
         return labels_out
-    perm, pts = canonical_points(pts_in, _canonical_cell(grow_radius))
+    perm, pts = canonical_points(pts_in)
     _check_neighbourhood(pts, grow_radius, "grow_radius")
     labels_out[perm] = _grow_sorted(pts, k_seed, seed_dist, min_seed_points, hough_angle_step,
                                     grow_radius, grow_dist, refit_growth, min_segment_size,
-                                    seed_method, seed, refine_boundaries, progress=progress,
-                                    offset=_centre(pts_in))
+                                    seed_method, seed, refine_boundaries, progress=progress)
     report(progress, 1.0)
     return labels_out
 
@@ -493,8 +496,10 @@ def segment_planes(
                            grow_radius or 1.0, grow_dist, refit_growth, min_segment_size,
                            seed_method, seed)
     n = len(pts_in)
-    perm, pts = canonical_points(pts_in, _canonical_cell(grow_radius))
-    knn = K.knn(pts, min(k_seed, n)) if n >= 3 else None
+    # frame-free: grids and order through the coordinates' origin, kNN ties by index, so a
+    # chunk of a catalog segments its planes as one run over the whole area (issue #26)
+    perm, pts = canonical_points(pts_in, _canonical_cell(grow_radius), anchored=True)
+    knn = K.knn(pts, min(k_seed, n), by_index=True) if n >= 3 else None
     spacing = _spacing_from_knn(pts, knn) if knn is not None else float("nan")
     if grow_radius is None:
         grow_radius = float(np.clip(2.0 * spacing, 0.5, 3.0)) if np.isfinite(spacing) else 0.5
