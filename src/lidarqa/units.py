@@ -117,7 +117,7 @@ KEY_UNITS: dict[str, str] = {
         min_seed_points min_contacts min_tested min_facade_points connect_min_size k_feat
         k_seed seed_support max_iter points_per_segment_median chunk_size workers
         accepted_per_iter added_per_iter max_points min_support sigma_classes
-        kernels_compiled kernels_loaded""",
+        kernels_compiled kernels_loaded failed retried skipped attempts""",
     ),
     # ratios between 0 and 1
     **_keys(

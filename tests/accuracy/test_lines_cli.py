@@ -275,8 +275,9 @@ def strips_laz(tmp_path, monkeypatch):
 
     monkeypatch.setattr(_lines_io, "extract_segments", fake_extract)
 
-    # a cloud's edges go through the area engine (one region for one file)
-    from lidarqa.tiling import jobs_vector
+    # a cloud's edges go through the area engine (one region for one file); jobs_lines is
+    # imported before jobs_vector is patched (it binds vector_features at import)
+    from lidarqa.tiling import jobs_lines, jobs_vector
 
     def fake_features(points, *, kind, core=None, crs=None, box=None, **options):
         seg = fake_extract(points, crs=crs)
@@ -284,6 +285,7 @@ def strips_laz(tmp_path, monkeypatch):
         return seg if core is None else jobs_vector.keep_anchored(seg, core)
 
     monkeypatch.setattr(jobs_vector, "vector_features", fake_features)
+    monkeypatch.setattr(jobs_lines, "vector_features", fake_features)  # strips of one cloud
     return path, s
 
 
@@ -310,18 +312,22 @@ def test_lines_two_strips_of_one_cloud(strips_laz, tmp_path):
 
 def test_repeatability_by_source_id(strips_laz, tmp_path):
     path, s = strips_laz
-    res = run(
-        "repeatability", path, "--by-source-id", "--classes", "6", "--json", tmp_path / "rep.json"
-    )
+    # the stand-in edges are not sampled from the strips: the plain knee, not the sampling band
+    res = run("repeatability", path, "--by-source-id", "--classes", "6", "--auto-threshold",
+              "knee", "--json", tmp_path / "rep.json")
     assert res.exit_code == 0, res.output
-    assert "strips.laz: 706 - 707" in res.output
-    rows = json.loads((tmp_path / "rep.json").read_text())["results"]
+    assert "706 - 707" in res.output
+    # one cloud goes through the catalog job (one region): the catalog's JSON shape
+    res_json = json.loads((tmp_path / "rep.json").read_text())["results"]
+    rows = res_json["pairs"]
     assert len(rows) == 1
     row = rows[0]
-    assert (row["file"], row["test"], row["model"]) == ("strips.laz", "706", "707")
+    assert (row["test"], row["model"]) == ("706", "707")
+    assert res_json["strips"] == {"706": len(s.model), "707": len(s.test)}
+    assert res_json["catalog"]["n_chunks"] == 1
     assert (row["p"], row["q"]) == (len(s.model), len(s.test))
     assert row["lhd"] == max(row["olhd_tm"], row["olhd_mt"]) < 0.3
     res = CliRunner().invoke(
         cli, ["repeatability", str(path), "--by-source-id", "--source-id", "706", "--classes", "6"]
     )
-    assert res.exit_code == 1 and "two passes" in res.output, res.output
+    assert res.exit_code == 1 and "two strips" in res.output, res.output

@@ -51,7 +51,7 @@ def test_repeatability_cli_on_an_ign_tile(strips, tmp_path):
          "--json", str(out)],
     )
     assert res.exit_code == 0, res.output
-    rows = json.loads(out.read_text())["results"]
+    rows = json.loads(out.read_text())["results"]["pairs"]
     assert len(rows) == 1
     assert (rows[0]["test"], rows[0]["model"], rows[0]["p"], rows[0]["q"]) == (
         "706",

@@ -96,7 +96,7 @@ def test_outlines_raise_strip_pairs_on_an_ign_tile(tmp_path):
             ],
         )
         assert r.exit_code == 0, r.output
-        (row,) = json.loads(out.read_text())["results"]
+        (row,) = json.loads(out.read_text())["results"]["pairs"]
         counts.append(row["n_pairs_tm"])
         assert row["lhd"] < 0.5
     assert counts[1] >= 10 > counts[0]

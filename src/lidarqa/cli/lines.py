@@ -424,11 +424,14 @@ def repeatability(
     --pool, across all files: neighbouring tiles of a survey hold too few shared edges
     each for a stable automatic threshold). The final LHD of each pair is marked with *.
 
-    With --by-source-id, FILES may be a catalog (several clouds, a folder, a
-    glob, a .vpc): the strips are then compared over the whole block, each
-    strip's edges found chunk by chunk (an edge once, by its midpoint's chunk).
+    With --by-source-id, FILES may be one cloud or a catalog (several clouds, a
+    folder, a glob, a .vpc): the strips are then compared over the whole area by
+    one job (a catalog's strip edges found chunk by chunk, an edge once, by its
+    midpoint's chunk; one file is one region), so a file and a folder of its tiles
+    give the same figures and the same JSON results: ``{"pairs": [rows],
+    "strips": {strip: n_edges}, "catalog": {...}}``.
     """
-    from ..accuracy._lines_io import load_passes, pool_passes
+    from ..accuracy._lines_io import is_segment_file, load_passes, pool_passes
     from ..accuracy.lines import match_segments, match_strips
     from ..errors import CRSMismatchError, LidarQAError, OptionError
 
@@ -438,23 +441,27 @@ def repeatability(
     if pool and not by_source_id:
         raise OptionError("--pool joins the strips of several files and needs --by-source-id")
     # Several named files without catalog options keep the per-file (or --pool) comparison;
-    # a folder, a glob, a .vpc or any catalog option compares the strips over the whole block.
+    # one cloud, a folder, a glob, a .vpc or any catalog option compares the strips over the
+    # whole area through one job (one file is one region): the same code and JSON either way.
     named_files = len(files) > 1 and not catalog_options_given(cat_opts)
-    if by_source_id and wants_catalog(files, cat_opts) and not named_files:
+    one_cloud = len(files) == 1 and not is_segment_file(files[0])
+    if by_source_id and (wants_catalog(files, cat_opts) or one_cloud) and not named_files:
         from ..tiling.jobs_api import catalog_repeatability
 
-        if outlines or shared_threshold:
-            raise OptionError(
-                "--outlines and --shared-threshold are not available on a catalog yet"
-            )
+        if shared_threshold and threshold is not None:
+            raise OptionError("--shared-threshold computes the threshold; do not also give "
+                              "--threshold")
+        if one_cloud and not catalog_options_given(cat_opts):
+            cat_opts = {**cat_opts, "workers": 1}  # one region: in this process, no Dask
         match_options = {"weight": weight, "sensitivity": sensitivity, "threshold": threshold,
-                         "rotate": rotate, "denominator": denominator, "auto": auto}
+                         "rotate": rotate, "denominator": denominator, "auto": auto,
+                         "shared_threshold": shared_threshold}
         prepare_outputs(inputs=tuple(files))
         source = open_catalog_source(files, cat_opts, crs=given, z_to_metres=False)
         with catalog_engine(cat_opts) as eng:
             run = catalog_repeatability(source, classes=classes, source_id=source_id,
                                         match_options=match_options,
-                                        edge_options={"steps": step_edges},
+                                        edge_options={"steps": step_edges, "outlines": outlines},
                                         **job_options(cat_opts, eng))
         if not run.value:
             raise OptionError(f"repeatability needs at least two strips with edges, got "

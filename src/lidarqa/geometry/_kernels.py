@@ -222,14 +222,22 @@ def grid_neighbours(pts, q, r2, cx, cy, cz, nyz, nz, cell_keys, cell_start, orde
     return m
 
 
-def build_grid(pts: np.ndarray, cell: float):
+def build_grid(pts: np.ndarray, cell: float, offset: np.ndarray | None = None):
     """A hashed voxel grid of cell size `cell` (m) over `pts` (NumPy, vectorised).
 
     Returns (cx, cy, cz, nyz, nz, cell_keys, cell_start, order, max_count).
     Cells are keyed (ix+1)*nyz + (iy+1)*nz + iz so the +-1 neighbours never wrap.
+    With `offset` (what was subtracted from the original coordinates), the grid
+    lines lie at multiples of `cell` in the original coordinates: any subset of a
+    cloud (a chunk of a catalog) puts its points in the same cells, so a search
+    visits neighbours in the same order whatever else was read. Points of a cell
+    are in their order in `pts`.
     """
-    lo = colmin(pts)
-    ijk = np.floor((pts - lo) / cell).astype(np.int64)
+    if offset is None:
+        ijk = np.floor((pts - colmin(pts)) / cell).astype(np.int64)
+    else:
+        ijk = np.floor((pts + np.asarray(offset, dtype=np.float64)) / cell).astype(np.int64)
+        ijk -= colmin(ijk)
     cx = ijk[:, 0] + 1
     cy = ijk[:, 1] + 1
     cz = ijk[:, 2]
@@ -525,7 +533,7 @@ def surface_growing_kernel(pts, trial_order, knn, knn_k, method, seed_dist, min_
 
 @njit(cache=True)
 def _knn_one(pts, i, k, rmax, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, order, cand, dist,
-             out, r0=1):
+             out, r0=1, by_index=False):
     """Exact k nearest neighbours of pts[i] (including i) by expanding cube rings.
 
     Starts at ring `r0` (a caller that found ring 1 too small passes 2).
@@ -581,7 +589,7 @@ def _knn_one(pts, i, k, rmax, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, 
                     q -= 1
                 best[q] = d
             kth = best[k - 1]
-            if kth <= (r * cell) ** 2:
+            if kth <= (r * cell) ** 2 and not by_index:
                 c = 0
                 for a in range(m):  # strictly closer first, then ties in gather order
                     if dist[a] < kth:
@@ -594,12 +602,32 @@ def _knn_one(pts, i, k, rmax, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, 
                         out[c] = cand[a]
                         c += 1
                 return True
+            if kth <= (r * cell) ** 2:
+                # the k first by (distance, index), in that order (as knn_grid): ties do not
+                # depend on the grid
+                sel = np.empty(m, dtype=np.int64)
+                c = 0
+                for a in range(m):
+                    if dist[a] <= kth:
+                        sel[c] = a
+                        c += 1
+                for x in range(1, c):
+                    v = sel[x]
+                    y = x - 1
+                    while y >= 0 and (dist[sel[y]] > dist[v]
+                                      or (dist[sel[y]] == dist[v] and cand[sel[y]] > cand[v])):
+                        sel[y + 1] = sel[y]
+                        y -= 1
+                    sel[y + 1] = v
+                for t in range(k):
+                    out[t] = cand[sel[t]]
+                return True
     return False
 
 
 @njit(cache=True, parallel=True)
 def knn_grid(pts, k, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, order, rmax, max_cand,
-             n_chunks):
+             n_chunks, by_index=False):
     """The k nearest neighbours of every point (N, k); rows that failed are all -1.
 
     Works cell by cell: the points of the 27 cells around a cell are gathered once
@@ -657,14 +685,20 @@ def knn_grid(pts, k, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, order, rm
                     nb = 0
                     for t in range(m):
                         d = (cxyz[t, 0] - px) ** 2 + (cxyz[t, 1] - py) ** 2 + (cxyz[t, 2] - pz) ** 2
+                        # by_index: ordered by (distance, index), ties do not depend on the
+                        # grid; else ties in gather order
+                        j = cand[t]
                         if nb < k:
                             q = nb
                             nb += 1
-                        elif d < bestd[k - 1]:
+                        elif d < bestd[k - 1] or (by_index and d == bestd[k - 1]
+                                                  and j < besti[k - 1]):
                             q = k - 1
                         else:
                             continue
-                        while q > 0 and bestd[q - 1] > d:
+                        while q > 0 and (bestd[q - 1] > d
+                                         or (by_index and bestd[q - 1] == d
+                                             and besti[q - 1] > j)):
                             bestd[q] = bestd[q - 1]
                             besti[q] = besti[q - 1]
                             q -= 1
@@ -678,14 +712,17 @@ def knn_grid(pts, k, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, order, rm
                     # ring 1 is what was just gathered: when it did not overflow,
                     # the search goes on from ring 2
                     if _knn_one(pts, i, k, rmax, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start,
-                                order, cand2, dist, row, 1 if overflow else 2):
+                                order, cand2, dist, row, 1 if overflow else 2, by_index):
                         for t in range(k):
                             out[i, t] = row[t]
     return out
 
 
-def knn(pts: np.ndarray, k: int) -> np.ndarray:
+def knn(pts: np.ndarray, k: int, *, by_index: bool = False) -> np.ndarray:
     """Exact k nearest neighbours (including the point itself) of every point, (N, k) int64.
+
+    `by_index`: rows ordered by (distance, index), so ties do not depend on the grid
+    (the same neighbours for a point in any subset holding them, in the same order).
 
     A hashed grid sized from the occupied-cell density answers most queries in one
     ring of cells (numba, parallel); the few points that need more rings are
@@ -708,13 +745,21 @@ def knn(pts: np.ndarray, k: int) -> np.ndarray:
     cx, cy, cz, nyz, nz, cell_keys, cell_start, order, max_cell = g
     max_cand = int(min(max(343 * max_cell, k), 2_000_000))
     out = knn_grid(pts, k, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, order, 3, max_cand,
-                   8 * get_num_threads())
+                   8 * get_num_threads(), by_index)
     bad = np.flatnonzero(out[:, 0] < 0)
     if len(bad):
         from scipy.spatial import cKDTree
 
-        _, idx = cKDTree(pts).query(pts[bad], k=k)
-        out[bad] = np.asarray(idx, dtype=np.int64).reshape(len(bad), k)
+        if not by_index:
+            _, idx = cKDTree(pts).query(pts[bad], k=k)
+            out[bad] = np.asarray(idx, dtype=np.int64).reshape(len(bad), k)
+        else:
+            kk = min(k + 8, n)  # a few more, to order ties by index as the grid search does
+            d, idx = cKDTree(pts).query(pts[bad], k=kk)
+            d = np.asarray(d, dtype=np.float64).reshape(len(bad), kk)
+            idx = np.asarray(idx, dtype=np.int64).reshape(len(bad), kk)
+            o = np.lexsort((idx, d), axis=-1)[:, :k]
+            out[bad] = np.take_along_axis(idx, o, axis=1)
     return out
 
 

@@ -396,6 +396,7 @@ def extract_edges(
     crs: Any = None,
     outlines: bool = False,
     steps: bool = False,
+    point_spacing: float | None = None,
     **segment_options: Any,
 ) -> Segments:
     """3D edges of a cloud: intersections of adjacent planes bounded by their support.
@@ -436,6 +437,9 @@ def extract_edges(
         `outlines`, along an outline side) are dropped.
 
         .. versionadded:: 0.2
+    point_spacing : float or None, default None
+        Point spacing (m) the step edges are scaled by; None: the segmentation's
+        ``point_spacing``. A catalog run fixes it once for every chunk.
     **segment_options
         Passed to :func:`~lidarqa.geometry.segmentation.segment_planes`.
 
@@ -467,7 +471,10 @@ def extract_edges(
     if outlines:
         edges = _with_extra(edges, outline_segments(pts, segmentation), near_dist, "outline")
     if steps:
-        edges = _with_extra(edges, step_segments(pts, segmentation), near_dist, "step")
+        if point_spacing is not None:
+            point_spacing = check_positive(point_spacing, "point_spacing")
+        edges = _with_extra(edges, step_segments(pts, segmentation, point_spacing=point_spacing),
+                            near_dist, "step")
     return edges
 
 
@@ -599,6 +606,7 @@ def step_segments(
     min_points: int = 6,
     max_slope: float = 75.0,
     seed: int = 0,
+    point_spacing: float | None = None,
 ) -> list[tuple[np.ndarray, np.ndarray, int, int]]:
     """Step edges of roof planes: ``[(start, end, plane, n_points)]``.
 
@@ -624,11 +632,14 @@ def step_segments(
     edge; both strips of a survey share that bias, which is what matters for
     strip-to-strip repeatability. `seed` makes the RANSAC sampling
     reproducible; points are put in a canonical order first, so the result
-    does not depend on the input order.
+    does not depend on the input order. Each plane's sampling is seeded with
+    `seed` and its first point (in x, y, z order), not with its number: a chunk
+    of a catalog that sees the same roof draws the same samples. `point_spacing`
+    (m) scales the radii; default the segmentation's ``point_spacing``.
     """
     from scipy.spatial import cKDTree
 
-    sp = seg.parameters.get("point_spacing")
+    sp = seg.parameters.get("point_spacing") if point_spacing is None else point_spacing
     sp = float(sp) if sp is not None and np.isfinite(sp) else 0.5
     radius = 2.0 * sp
     nz_min = math.cos(math.radians(max_slope))
@@ -674,7 +685,7 @@ def step_segments(
         sxy = xy[bidx[step]]
         if len(sxy) < min_points:
             continue
-        rng = np.random.default_rng([seed, k])
+        rng = np.random.default_rng([seed, *points[idx[0]].astype(np.float64).view(np.uint64)])
         for a, b, cnt in _fit_lines_2d(sxy, tolerance=0.5 * sp, min_points=min_points,
                                        max_gap=3.0 * sp, min_length=min_length, rng=rng):
             ends = np.array([a, b])

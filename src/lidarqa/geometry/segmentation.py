@@ -7,6 +7,7 @@ adds a least-squares plane per segment and the segment adjacency.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -37,19 +38,35 @@ def _check_int(value: Any, name: str, lo: int) -> int:
     return v
 
 
-def canonical_points(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def canonical_points(points: np.ndarray, cell: float | None = None, *, anchored: bool = False
+                     ) -> tuple[np.ndarray, np.ndarray]:
     """An input-order-free, spatially coherent permutation and the centred sorted points.
 
-    Points are sorted by a voxel key (cells of the kNN grid, for memory
-    locality), then x, y, z; they are centred on the bounding-box middle, which,
-    unlike the mean, does not depend on the summation order.
+    Points are sorted by a voxel key (for memory locality), then x, y, z; they are
+    centred on the bounding-box middle, which, unlike the mean, does not depend on
+    the summation order.
+
+    The voxels are cells of the kNN grid from the points' own corner; with `anchored`,
+    cells of a power-of-two side on a grid through the origin of the coordinates, so
+    the relative order of two points is the same in any subset of a cloud that gets
+    the same side: a chunk of a catalog and the whole area order (and tie-break) their
+    common points alike. `cell` (m) then fixes the side (the next power of two at or
+    above it; e.g. from the growing radius); default: from the density of `points`.
     """
     if len(points) == 0:
         return np.zeros(0, dtype=np.int64), points.copy()
     lo = colmin(points)
     hi = colmax(points)
-    cell = K.cell_size(hi - lo, len(points), 20)
-    ijk = np.floor((points - lo) / cell).astype(np.int64)
+    if not anchored:
+        cell = K.cell_size(hi - lo, len(points), 20)
+        ijk = np.floor((points - lo) / cell).astype(np.int64)
+    else:
+        if cell is None or not np.isfinite(cell) or cell <= 0:
+            cell = K.cell_size(hi - lo, len(points), 20)
+        cell = max(float(cell), float(np.max(hi - lo)) / 1e5, 1e-9)
+        cell = 2.0 ** math.ceil(math.log2(cell))
+        ijk = np.floor(points / cell).astype(np.int64)
+        ijk -= colmin(ijk)
     dims = colmax(ijk) + 1
     key = (ijk[:, 0] * dims[1] + ijk[:, 1]) * dims[2] + ijk[:, 2]
     perm = np.argsort(key, kind="stable")
@@ -171,11 +188,14 @@ def _grow_sorted(pts: np.ndarray, k_seed: int, seed_dist: float, min_seed_points
                  hough_angle_step: float, grow_radius: float, grow_dist: float,
                  refit_growth: float, min_segment_size: int, seed_method: str, seed: int,
                  refine_boundaries: bool, knn: np.ndarray | None = None,
-                 progress: ProgressCallback | None = None) -> np.ndarray:
+                 progress: ProgressCallback | None = None,
+                 offset: np.ndarray | None = None) -> np.ndarray:
     """Surface growing on canonically sorted, centred points (validated options).
 
     `progress` gets coarse stage fractions (the growing itself is one compiled call):
-    neighbours 0-0.35, planarity 0.4, growing 0.9, boundary refinement 1.
+    neighbours 0-0.35, planarity 0.4, growing 0.9, boundary refinement 1. `offset` is
+    what was subtracted from the points (their grids are then laid through the origin
+    of the original coordinates, the same for a chunk and the whole area).
     """
     n = len(pts)
     if n < 3 or _fewer_than_3_distinct(pts):
@@ -188,7 +208,7 @@ def _grow_sorted(pts: np.ndarray, k_seed: int, seed_dist: float, min_seed_points
     report(progress, 0.4)
     trial_order = np.lexsort((np.arange(n), planarity)).astype(np.int64)
 
-    grid = K.build_grid(pts, grow_radius)
+    grid = K.build_grid(pts, grow_radius, offset=offset)
     dirs = K.hough_directions(hough_angle_step) if seed_method == "hough" else np.zeros((1, 3))
     labels = K.surface_growing_kernel(
         pts, trial_order, knn, k, _METHOD_CODE[seed_method], seed_dist, min_seed_points, dirs,
@@ -202,6 +222,16 @@ def _grow_sorted(pts: np.ndarray, k_seed: int, seed_dist: float, min_seed_points
 # A neighbourhood radius is local: past this mean number of neighbours per point the
 # growing and contact searches become quadratic (minutes and gigabytes on a small tile).
 MAX_MEAN_NEIGHBOURS = 1000
+
+
+def _centre(points: np.ndarray) -> np.ndarray:
+    """The offset :func:`canonical_points` subtracts (the bounding-box middle)."""
+    return (colmin(points) + colmax(points)) / 2.0
+
+
+def _canonical_cell(grow_radius: float | None) -> float | None:
+    """Voxel side of the canonical order for a growing radius (m): two radii, for locality."""
+    return None if grow_radius is None else 2.0 * float(grow_radius)
 
 
 def _check_neighbourhood(pts: np.ndarray, radius: float, name: str) -> None:
@@ -466,8 +496,10 @@ def segment_planes(
                            grow_radius or 1.0, grow_dist, refit_growth, min_segment_size,
                            seed_method, seed)
     n = len(pts_in)
-    perm, pts = canonical_points(pts_in)
-    knn = K.knn(pts, min(k_seed, n)) if n >= 3 else None
+    # frame-free: grids and order through the coordinates' origin, kNN ties by index, so a
+    # chunk of a catalog segments its planes as one run over the whole area (issue #26)
+    perm, pts = canonical_points(pts_in, _canonical_cell(grow_radius), anchored=True)
+    knn = K.knn(pts, min(k_seed, n), by_index=True) if n >= 3 else None
     spacing = _spacing_from_knn(pts, knn) if knn is not None else float("nan")
     if grow_radius is None:
         grow_radius = float(np.clip(2.0 * spacing, 0.5, 3.0)) if np.isfinite(spacing) else 0.5
@@ -486,11 +518,12 @@ def segment_planes(
                                   grow_radius, grow_dist, refit_growth, min_segment_size,
                                   seed_method, seed)
     report(progress, 0.3)
-    labels = _grow_sorted(pts, *opts, True, knn, progress=stage(progress, 0.3, 0.9))
+    offset = _centre(pts_in)
+    labels = _grow_sorted(pts, *opts, True, knn, progress=stage(progress, 0.3, 0.9),
+                          offset=offset)
     if labels.max(initial=-1) < 0:
         report(progress, 1.0)
         return _empty_segmentation(n, params)
-    offset = (colmin(pts_in) + colmax(pts_in)) / 2.0
     n_labels = int(labels.max()) + 1
     cnt, mean, normal, rmse, c4, w = _plane_stats(pts, labels, n_labels)
     inl = labels >= 0
@@ -516,7 +549,7 @@ def segment_planes(
     n_seg = int(keep.sum())
 
     # adjacency from point pairs within adjacency_dist (numba over a hashed grid)
-    grid = K.build_grid(pts, adjacency_dist)
+    grid = K.build_grid(pts, adjacency_dist, offset=offset)
     cx, cy, cz, nyz, nz, cell_keys, cell_start, order, _ = grid
     ci, cj = K.contact_pairs(pts, labels, adjacency_dist**2, cx, cy, cz, nyz, nz, cell_keys,
                              cell_start, order)

@@ -245,11 +245,16 @@ class RunContext:
     def edges(self, cloud: str, classes: Any, source_id: Any, options: dict[str, Any]) -> Any:
         """Edges extracted from a cloud selection (cached on selection + options)."""
         key = (cloud, _norm_ids(classes), _norm_ids(source_id), _freeze(options))
-        if key not in self._edges and self.is_catalog(cloud):  # chunk by chunk, each edge once
-            label = selection_label(cloud, classes, source_id)
-            with self.step(f"Extracting edges ({label}, catalog)"):
-                path = self.config.inputs[cloud].path
-                self._edges[key] = _catalog_edges(path, classes, source_id, options)
+        spec = self.config.inputs.get(cloud)
+        if key not in self._edges and spec is not None and spec.kind == "clouds":
+            # one job for a file (one region) and a catalog (chunk by chunk, each edge once):
+            # the same data-driven defaults (the central sample window), the same edges
+            catalog = self.is_catalog(cloud)
+            if catalog or str(spec.path).lower().endswith((".las", ".laz")):
+                label = selection_label(cloud, classes, source_id)
+                how = "catalog" if catalog else "one region"
+                with self.step(f"Extracting edges ({label}, {how})"):
+                    self._edges[key] = _catalog_edges(spec.path, classes, source_id, options)
         if key not in self._edges:
             extract_edges = library_attr("lidarqa.geometry.edges", "extract_edges", "edges")
             sub = self.select(cloud, classes, source_id)
@@ -278,12 +283,15 @@ class RunContext:
 
 def _catalog_edges(path: Any, classes: Any, source_id: Any, options: dict[str, Any]) -> Any:
     """The edges of a catalog selection, each edge once (chunk by chunk)."""
+    import inspect
+
     from ..errors import AnalysisError
+    from ..geometry.segmentation import segment_planes
     from ..tiling.jobs_api import catalog_features
 
     params = dict(options)
-    keys = ("grow_radius", "grow_dist", "seed_method", "min_segment_size", "max_rmse")
-    seg_opts: dict[str, Any] = {k: params.pop(k) for k in keys if k in params}
+    keys = set(inspect.signature(segment_planes).parameters) - {"points", "progress"}
+    seg_opts: dict[str, Any] = {k: params.pop(k) for k in sorted(keys) if k in params}
     run = catalog_features(str(path), kind="edges", classes=classes, source_id=source_id,
                            segment_options=seg_opts, options=params)
     if run.failed:

@@ -100,8 +100,10 @@ def catalog_features(
         Point selection (e.g. ``(6,)`` for buildings).
     segment_options, options : dict, optional
         Plane segmentation and edge/corner options. Data-driven defaults
-        (growing radius, support distance) are measured once on one chunk and
-        used for every chunk.
+        (growing radius, support distance) are measured once on the source's
+        central sample window and used for every chunk. The default buffer is
+        the task's (:func:`~lidarqa.tiling.jobs_vector.feature_buffer`: the
+        largest plane of the sample window plus a few point spacings).
     tolerance : float, default 0.05
         Near-duplicate distance (m) of the merge.
     **common
@@ -110,16 +112,20 @@ def catalog_features(
         tests), ``skip_bad``, ``crs``, ``work_dir`` and ``resume`` (see
         :func:`~lidarqa.tiling.apply.apply`).
     """
-    from .jobs_vector import VectorTask, fixed_auto_options, merge_vector_parts
+    from .jobs_vector import VectorTask, feature_buffer, fixed_auto_options, merge_vector_parts
 
     open_opts, chunk_opts, run_opts = _split(dict(common))
     catalog = open_sources(sources, classes=classes or None, source_id=source_id or None,
                            z_to_metres=False, **open_opts)
-    chunks = region_chunks(catalog, **chunk_opts)
-    seg_opts, opts = fixed_auto_options(catalog.sample().xyz, kind=kind,
+    sample = catalog.sample().xyz
+    seg_opts, opts = fixed_auto_options(sample, kind=kind,
                                         segment_options=segment_options, options=options)
+    margin = None
+    if chunk_opts["buffer"] is None and (catalog.is_catalog or chunk_opts["chunk_size"]):
+        margin = feature_buffer(sample, segment_options=seg_opts)
     task = VectorTask(kind=kind, segment_options=seg_opts,
-                      options=opts, bounds=catalog.area_bounds)
+                      options=opts, bounds=catalog.area_bounds, margin=margin)
+    chunks = region_chunks(catalog, task, **chunk_opts)
     outcomes, parts = _run(catalog, chunks, task, run_opts, f"{kind.capitalize()}")
     value = merge_vector_parts(parts, tolerance=tolerance, crs=catalog.crs)
     return CatalogRun(value, catalog, tuple(chunks), tuple(outcomes),
@@ -265,20 +271,41 @@ def catalog_repeatability(
 ) -> CatalogRun:
     """Line repeatability of every pair of flight strips (point_source_id) over the block.
 
+    One file (without `chunk_size` or `buffer`) is one region: the same code
+    gives the file answer and the catalog answer. Each strip's data-driven
+    defaults and point spacing are measured once on its points in the central
+    sample window (:func:`~lidarqa.tiling.jobs_lines.strip_samples`).
+
     ``value`` is the list of pair rows (as ``lidarqa repeatability``);
     ``extra["strips"]`` the whole-block edges of each strip and
-    ``extra["strip_chunks"]`` the chunks where each strip gave edges.
+    ``extra["strip_chunks"]`` the chunks where each strip gave edges,
+    ``extra["strip_options"]`` each strip's fixed ``segment_options``,
+    ``edge_options`` and ``point_spacing`` (m). `match_options` may hold ``shared_threshold`` (see
+    :func:`~lidarqa.tiling.jobs_lines.strip_pairs`).
     """
-    from .jobs_lines import StripEdgesTask, merge_strip_edges, strip_pairs
-    from .jobs_vector import fixed_auto_options
+    from .jobs_lines import (
+        StripEdgesTask,
+        merge_strip_edges,
+        strip_options,
+        strip_pairs,
+        strip_samples,
+    )
+    from .jobs_vector import feature_buffer
 
     open_opts, chunk_opts, run_opts = _split(dict(common))
     catalog = open_sources(sources, classes=classes or None, source_id=source_id or None,
                            z_to_metres=False, **open_opts)
-    chunks = region_chunks(catalog, **chunk_opts)
-    seg_opts, e_opts = fixed_auto_options(catalog.sample().xyz,
-                                          segment_options=segment_options, options=edge_options)
-    task = StripEdgesTask(segment_options=seg_opts, edge_options=e_opts)
+    samples = strip_samples(catalog)
+    fixed = strip_options(samples, segment_options=segment_options, edge_options=edge_options)
+    margin = None
+    if chunk_opts["buffer"] is None and (catalog.is_catalog or chunk_opts["chunk_size"]):
+        margin = max((feature_buffer(samples[s], segment_options=fixed[s][0])
+                      for s in samples), default=None)
+    seg_opts = dict(segment_options or {})
+    e_opts = dict(edge_options or {})
+    task = StripEdgesTask(segment_options=seg_opts, edge_options=e_opts, strips=fixed,
+                          margin=margin)
+    chunks = region_chunks(catalog, task, **chunk_opts)
     outcomes, parts = _run(catalog, chunks, task, run_opts, "Strip edges")
     strips = merge_strip_edges(parts, tolerance=tolerance)
     rows = strip_pairs(strips, **(match_options or {}))
@@ -287,6 +314,13 @@ def catalog_repeatability(
         if p is not None:
             for s in p[1]:
                 where.setdefault(int(s), []).append(p[0])
+    # the options of the strips, for the run's record (the first strip's when they differ)
+    first = next(iter(fixed.values()), ({}, {}, float("nan")))
     return CatalogRun(rows, catalog, tuple(chunks), tuple(outcomes),
                       {"strips": strips, "strip_chunks": where,
-                       "segment_options": seg_opts, "edge_options": e_opts})
+                       "segment_options": {**seg_opts, **first[0]},
+                       "edge_options": {**e_opts, **first[1]},
+                       "strip_options": {int(k): {"segment_options": v[0], "edge_options": v[1],
+                                                  "point_spacing": v[2]}
+                                         for k, v in fixed.items()}})
+

@@ -5,6 +5,10 @@ Poreba & Goulette's repeatability compares the edges of each flight strip
 into tiles a strip crosses many tiles and a pair of strips overlaps over
 many chunks, so the comparison is done in two steps:
 
+0. once (:func:`strip_samples`, :func:`strip_options`): each strip's
+   data-driven defaults (growing radius, support distance) and point spacing,
+   measured on the strip's points in the source's central sample window, so
+   every chunk uses the same ones and a file (one region) gets them too;
 1. per chunk (:class:`StripEdgesTask`): the edges of each strip present in
    the chunk's buffered points, kept by the anchor-in-core rule (the chunk
    whose core holds the segment midpoint, see :mod:`lidarqa.tiling.jobs_vector`);
@@ -31,7 +35,67 @@ from ..errors import CRSMismatchError, InvalidPointsError, LidarQAError
 from ..io.vector import Segments
 from .jobs_vector import merge_vector_parts, vector_features
 
-__all__ = ["StripEdgesTask", "merge_strip_edges", "strip_pairs"]
+__all__ = ["StripEdgesTask", "merge_strip_edges", "strip_options", "strip_pairs",
+           "strip_samples"]
+
+
+def strip_samples(source: Any, *, side: float = 100.0, min_points: int = 100,
+                  max_side: float = 1600.0) -> dict[int, np.ndarray]:
+    """``{strip id: x, y, z}``: each strip's selected points in the sample window.
+
+    Windows centred on the area (:func:`~lidarqa.tiling.source.sample_boxes`: side
+    `side`, doubled until the window covers the area) are read in turn; a strip
+    takes the first window holding `min_points` of its points. Growing stops at
+    the window that covers the area, or past `max_side` once every strip seen
+    has its sample. The windows do not depend on the chunking: a file and a
+    folder of its tiles get the same samples.
+    """
+    from .source import sample_boxes
+
+    out: dict[int, np.ndarray] = {}
+    last: dict[int, np.ndarray] = {}
+    for box in sample_boxes(source.area_bounds, side=side):
+        cloud = source.read_chunk(source.window(box)).cloud
+        sid = cloud.point_source_id
+        if sid is None:
+            raise InvalidPointsError("the source has no point_source_id field: no strips")
+        sid = np.asarray(sid)
+        xyz = cloud.xyz
+        for s in np.unique(sid).tolist():
+            if int(s) in out:
+                continue
+            pts = xyz[sid == s]
+            if len(pts) >= min_points:
+                out[int(s)] = pts
+            else:
+                last[int(s)] = pts
+        if box[2] - box[0] > max_side and all(k in out for k in last):
+            break
+    for k, v in last.items():
+        out.setdefault(k, v)
+    return dict(sorted(out.items()))
+
+
+def strip_options(samples: dict[int, np.ndarray], *,
+                  segment_options: dict[str, Any] | None = None,
+                  edge_options: dict[str, Any] | None = None,
+                  ) -> dict[int, tuple[dict[str, Any], dict[str, Any], float]]:
+    """Per strip: (segment options, edge options, point spacing m) fixed from its sample.
+
+    The growing radius and support distance left unset are measured on the
+    strip's sample (:func:`~lidarqa.tiling.jobs_vector.fixed_auto_options`), and
+    the point spacing (median distance to the 10th neighbour) bounds the pairs'
+    automatic thresholds (:func:`lidarqa.accuracy.lines.sampling_threshold_range`).
+    """
+    from ..geometry.segmentation import point_spacing
+    from .jobs_vector import fixed_auto_options
+
+    out = {}
+    for s, pts in samples.items():
+        seg, opts = fixed_auto_options(pts, segment_options=segment_options, options=edge_options)
+        sp = point_spacing(np.asarray(pts, dtype=np.float64)) if len(pts) else float("nan")
+        out[int(s)] = (seg, opts, float(sp))
+    return out
 
 
 @dataclass(frozen=True)
@@ -48,6 +112,13 @@ class StripEdgesTask:
         As in :func:`lidarqa.tiling.jobs_vector.vector_features`.
     min_points : int, default 30
         A strip with fewer selected points in a chunk gives no edges there.
+    strips : dict, optional
+        Per strip ``(segment options, edge options, point spacing)`` from
+        :func:`strip_options`; a strip not listed measures its defaults on the
+        chunk's points.
+    margin : float, optional
+        The buffer the job needs (m); default
+        :data:`~lidarqa.tiling.chunks.DEFAULT_BUFFER`.
     """
 
     classes: tuple[int, ...] | None = None
@@ -55,8 +126,19 @@ class StripEdgesTask:
     segment_options: dict[str, Any] = field(default_factory=dict)
     edge_options: dict[str, Any] = field(default_factory=dict)
     min_points: int = 30
+    strips: dict[int, tuple[dict[str, Any], dict[str, Any], float]] = field(
+        default_factory=dict)
+    margin: float | None = None
+
+    def buffer(self, source: Any) -> float:
+        """The margin (m) read around each chunk (:attr:`margin`)."""
+        from .chunks import DEFAULT_BUFFER
+
+        return float(DEFAULT_BUFFER if self.margin is None else self.margin)
 
     def __call__(self, chunk_data: Any) -> tuple[str, dict[int, Segments]]:
+        from .jobs_vector import fixed_auto_options
+
         cloud = chunk_data.cloud
         if self.classes:
             cloud = cloud.select(classes=self.classes)
@@ -72,14 +154,23 @@ class StripEdgesTask:
             xyz = cloud.xyz[sid == s]
             if len(xyz) < self.min_points:
                 continue
+            fixed = self.strips.get(int(s))
+            if fixed is None:
+                seg_opts, e_opts = fixed_auto_options(xyz, segment_options=self.segment_options,
+                                                      options=self.edge_options)
+            else:
+                seg_opts, e_opts = fixed[0], fixed[1]
             try:
-                seg = vector_features(xyz, kind="edges", core=core,
-                                      segment_options=self.segment_options,
-                                      options=self.edge_options, crs=cloud.crs)
+                seg = vector_features(xyz, kind="edges", core=core, segment_options=seg_opts,
+                                      options=e_opts, crs=cloud.crs)
             except LidarQAError:
                 continue  # no usable planes for this strip here: no edges
             if len(seg):
-                out[int(s)] = with_point_spacing(cast(Segments, seg), xyz)
+                if fixed is None:
+                    seg = with_point_spacing(cast(Segments, seg), xyz)
+                else:
+                    seg.attributes["point_spacing"] = np.full(len(seg), fixed[2])
+                out[int(s)] = cast(Segments, seg)
         return chunk_data.chunk.id, out
 
 
@@ -100,13 +191,17 @@ def merge_strip_edges(
     }
 
 
-def strip_pairs(strips: dict[int, Segments], **match_options: Any) -> list[dict[str, Any]]:
+def strip_pairs(strips: dict[int, Segments], *, shared_threshold: bool = False,
+                **match_options: Any) -> list[dict[str, Any]]:
     """Match every pair of strips both ways: rows like ``lidarqa repeatability``.
 
     Parameters
     ----------
     strips : dict of strip id to Segments
         From :func:`merge_strip_edges`.
+    shared_threshold : bool, default False
+        One threshold for every pair: the median of the pairs' automatic
+        thresholds (knees) in both directions (``--shared-threshold``).
     **match_options
         Passed to :func:`lidarqa.accuracy.lines.match_segments` (weight,
         sensitivity, threshold, rotate, denominator), and ``auto``:
@@ -120,11 +215,35 @@ def strip_pairs(strips: dict[int, Segments], **match_options: Any) -> list[dict[
         ``test``, ``model`` (strip ids as text) and the ``LineMatch.to_dict()``
         figures, or ``error`` when a pair cannot be matched. Pairs in
         increasing strip order.
-    """
-    from ..accuracy.lines import match_strips
 
+    Raises
+    ------
+    OptionError
+        `shared_threshold` with a fixed threshold, or no pair with a knee.
+    """
+    from ..accuracy.lines import match_segments, match_strips
+    from ..errors import OptionError
+
+    pairs = list(combinations(sorted(strips), 2))
+    if shared_threshold:
+        if match_options.get("threshold") is not None:
+            raise OptionError("--shared-threshold computes the threshold; do not also give "
+                              "--threshold")
+        knee_opts = {k: match_options[k] for k in ("weight", "sensitivity", "rotate")
+                     if k in match_options}
+        knees = []
+        for a, b in pairs:
+            try:
+                r0 = match_segments(strips[a], strips[b], **knee_opts)
+            except LidarQAError:
+                continue
+            knees += [t for t, ok in ((r0.threshold_tm, r0.threshold_found_tm),
+                                      (r0.threshold_mt, r0.threshold_found_mt)) if ok]
+        if not knees:
+            raise OptionError("--shared-threshold: no pair has an automatic threshold (no knee)")
+        match_options = {**match_options, "threshold": float(np.median(knees))}
     rows: list[dict[str, Any]] = []
-    for a, b in combinations(sorted(strips), 2):
+    for a, b in pairs:
         row: dict[str, Any] = {"test": str(a), "model": str(b)}
         try:
             row.update(match_strips(strips[a], strips[b], **match_options))

@@ -47,6 +47,7 @@ __all__ = [
     "VectorTask",
     "dedupe_points",
     "dedupe_segments",
+    "feature_buffer",
     "fixed_auto_options",
     "in_core",
     "keep_anchored",
@@ -232,8 +233,9 @@ def fixed_auto_options(
 ) -> tuple[dict[str, Any], dict[str, Any]]:
     """Fix the data-driven defaults once for a whole catalog.
 
-    Plane segmentation's growing radius (2 x the point spacing) and the edges'
-    support distance (1.2 x the spacing) default to values measured on the
+    Plane segmentation's growing radius (2 x the point spacing), the edges'
+    support distance (1.2 x the spacing) and, with step edges, their point
+    spacing default to values measured on the
     points at hand; measured per chunk they would differ slightly from chunk to
     chunk, and so would the features. This measures the spacing once on
     `points` (e.g. the selected points of one chunk) and returns copies of
@@ -255,7 +257,69 @@ def fixed_auto_options(
         seg["grow_radius"] = float(np.clip(2.0 * sp, 0.5, 3.0)) if np.isfinite(sp) else 0.5
     if kind == "edges" and opts.get("near_dist") is None:
         opts["near_dist"] = float(np.clip(1.2 * sp, 0.15, 1.0)) if np.isfinite(sp) else 0.15
+    if kind == "edges" and opts.get("steps") and opts.get("point_spacing") is None \
+            and np.isfinite(sp):
+        opts["point_spacing"] = float(sp)  # the step edges' scale
     return seg, opts
+
+
+def feature_buffer(
+    points: Any,
+    *,
+    segment_options: dict[str, Any] | None = None,
+    spacings: float = 4.0,
+    cap: float | None = None,
+) -> float:
+    """The margin (m) a chunk of a planes/edges/corners job reads around its core.
+
+    A feature is kept by the chunk that holds its anchor (plane centroid, edge
+    midpoint, corner), and is the same as in one whole-area run when the chunk
+    saw its planes whole, and their neighbours: the buffer is the largest
+    horizontal extent (bounding-box diagonal) of the planes segmented in
+    `points` (the source's central sample window, segmented with the run's
+    fixed `segment_options`) plus `spacings` point spacings, at most `cap`
+    (default :data:`~lidarqa.tiling.chunks.DEFAULT_BUFFER`, the margin every
+    job got before it declared its own) and at least 20 point spacings.
+
+    Parameters
+    ----------
+    points : ndarray of shape (N, 3)
+        The selected points of the sample window, x, y, z in metres.
+    segment_options : dict, optional
+        As :func:`lidarqa.geometry.segmentation.segment_planes` (with the
+        growing radius fixed for the run).
+    spacings : float, default 4
+        Point spacings added to the plane extent.
+    cap : float, optional
+        Largest margin returned (m).
+
+    Returns
+    -------
+    float
+        The margin, m.
+    """
+    from .._validate import as_points
+    from ..geometry.segmentation import segment_planes
+    from .chunks import DEFAULT_BUFFER
+
+    top = float(DEFAULT_BUFFER if cap is None else cap)
+    pts = as_points(points) if len(points) else np.zeros((0, 3))
+    if len(pts) < 30:
+        return top
+    seg = segment_planes(pts, **(segment_options or {}))
+    sp = seg.parameters.get("point_spacing")
+    sp = float(sp) if sp is not None and np.isfinite(sp) else 1.0
+    extent = 0.0
+    if seg.n_segments:
+        lab = np.asarray(seg.labels)
+        ok = lab >= 0
+        n = int(seg.n_segments)
+        lo = np.full((n, 2), np.inf)
+        hi = np.full((n, 2), -np.inf)
+        np.minimum.at(lo, lab[ok], pts[ok, :2])
+        np.maximum.at(hi, lab[ok], pts[ok, :2])
+        extent = float(np.max(np.hypot(*(hi - lo).T)))
+    return float(min(top, max(extent + spacings * sp, 20.0 * sp)))
 
 
 
@@ -386,6 +450,9 @@ class VectorTask:
         As in :func:`vector_features`.
     bounds : (xmin, ymin, xmax, ymax), optional
         The catalog's extent (for the ``at_buffer_edge`` column: no data beyond it).
+    margin : float, optional
+        The buffer the job needs (m, :func:`feature_buffer`); default
+        :data:`~lidarqa.tiling.chunks.DEFAULT_BUFFER`.
     """
 
     kind: str
@@ -394,6 +461,13 @@ class VectorTask:
     segment_options: dict[str, Any] = field(default_factory=dict)
     options: dict[str, Any] = field(default_factory=dict)
     bounds: tuple[float, float, float, float] | None = None
+    margin: float | None = None
+
+    def buffer(self, source: Any) -> float:
+        """The margin (m) read around each chunk: :attr:`margin` (see :func:`feature_buffer`)."""
+        from .chunks import DEFAULT_BUFFER
+
+        return float(DEFAULT_BUFFER if self.margin is None else self.margin)
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:

@@ -1,0 +1,91 @@
+"""File vs catalog parity of ground labels (issue #26: >= 99.9 % of the labels equal).
+
+One in-memory run of a file against the catalog run of the same points cut into chunks
+(``--chunk-size`` smaller than the area, the default buffer: one seed cell). Measured
+when written: the six IGN 50 m tiles as a folder in chunks of 100 m or 50 m (6 chunks:
+0 of 405,937 labels differ) agree on >= 99.99 % of the labels; a 100 x 100 m forest block
+of ``lasR-bcts/bcts_2`` in 4 chunks of 50 m on 98.2 % (all of bcts_2 in 9 chunks of
+100 m: 98.2-98.4 %), short of the issue's 99.9 %: segment-PTD's TIN densification under
+forest is sensitive to points far outside the chunk's core (removing a 20 m strip 180 m
+away changes labels), which a buffer does not bound. That test records the floor and is
+an expected failure against the target until the filter is made local.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from datapaths import SHARED, needs_shared
+
+from lidarqa.cli.main import cli
+
+pytestmark = [needs_shared, pytest.mark.slow]
+
+TARGET = 0.999  # issue #26: ground labels >= 99.9 % equal
+
+
+def _ground(tmp: Path, src: Path, *extra: object) -> np.ndarray:
+    """The ground mask (class 2 in the outputs) of ``lidarqa ground SRC``, in input order."""
+    import laspy
+
+    out = tmp / ("o" if Path(src).is_dir() or extra else "o.laz")
+    res = CliRunner().invoke(cli, ["-q", "ground", str(src), "-o", str(out),
+                                   *[str(e) for e in extra]])
+    assert res.exit_code == 0, res.output
+    files = sorted(out.glob("*.laz")) if out.is_dir() else [out]
+    return np.concatenate([np.asarray(laspy.read(f).classification) == 2 for f in files])
+
+
+def _merge(files: list[Path], path: Path) -> None:
+    import laspy
+
+    las = [laspy.read(f) for f in files]
+    merged = laspy.LasData(las[0].header)
+    merged.points = laspy.ScaleAwarePointRecord(
+        np.concatenate([x.points.array for x in las]), las[0].header.point_format,
+        las[0].header.scales, las[0].header.offsets)
+    merged.update_header()
+    merged.write(path)
+
+
+def test_ground_labels_of_the_ign_file_and_the_chunked_folder_agree(tmp_path):
+    files = sorted((SHARED / "ign-lidarhd").glob("test_data_770*.laz"))
+    assert len(files) == 6
+    folder = tmp_path / "tiles"
+    folder.mkdir()
+    for f in files:
+        (folder / f.name).symlink_to(f)
+    _merge(files, tmp_path / "merged.laz")
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    a = _ground(tmp_path / "a", tmp_path / "merged.laz")
+    b = _ground(tmp_path / "b", folder, "--chunk-size", "100", "--workers", "1")
+    assert len(a) == len(b) == 405937
+    assert 0.2 < a.mean() < 0.6  # a real ground/non-ground split
+    agree = float(np.mean(a == b))
+    assert agree >= TARGET, f"{agree:.5f} of the labels equal ({int((a != b).sum())} differ)"
+
+
+def test_ground_labels_of_a_forest_block_and_its_chunks(tmp_path):
+    """bcts_2 (BC forest), a 100 x 100 m block in memory and in 4 chunks of 50 m."""
+    import laspy
+
+    las = laspy.read(SHARED / "lasR-bcts" / "bcts_2.laz")
+    x, y = np.asarray(las.x), np.asarray(las.y)
+    keep = (x < 885100.0) & (y < 629500.0)
+    block = laspy.LasData(las.header)
+    block.points = las.points[keep]
+    block.update_header()
+    block.write(tmp_path / "block.laz")
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    a = _ground(tmp_path / "a", tmp_path / "block.laz")
+    b = _ground(tmp_path / "b", tmp_path / "block.laz", "--chunk-size", "50", "--workers", "1")
+    assert len(a) == len(b) == int(keep.sum()) > 50_000
+    agree = float(np.mean(a == b))
+    assert agree >= 0.98, agree  # the floor measured when this test was written
+    if agree < TARGET:
+        pytest.xfail(f"forest: {agree:.4f} of the labels equal, the issue asks {TARGET}")
