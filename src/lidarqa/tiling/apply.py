@@ -78,6 +78,7 @@ class CatalogRun:
         return [chunk_status(o) for o in self.outcomes]
 
     def to_dict(self) -> dict[str, Any]:
+        """The run as a JSON-ready dict: value, chunk counts by status and each chunk's status."""
         st = self.chunk_status()
         counts = {k: sum(1 for s in st if s["status"] == k)
                   for k in ("ok", "retried", "failed", "skipped", "resumed")}

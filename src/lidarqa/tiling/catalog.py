@@ -65,18 +65,22 @@ class TileInfo:
 
     @property
     def name(self) -> str:
+        """The file name of the tile (without its folder)."""
         return Path(self.path).name
 
     @property
     def bounds2d(self) -> tuple[float, float, float, float]:
+        """``(xmin, ymin, xmax, ymax)`` of the tile's header bounds."""
         return self.bounds[:4]
 
     @property
     def area(self) -> float:
+        """The tile's bounding-box area, in square CRS units."""
         xmin, ymin, xmax, ymax = self.bounds2d
         return max(xmax - xmin, 0.0) * max(ymax - ymin, 0.0)
 
     def to_dict(self) -> dict[str, Any]:
+        """The tile as a JSON-ready dict (path, point count, bounds, format)."""
         return {
             "path": self.path,
             "n_points": self.n_points,
@@ -115,6 +119,7 @@ class Catalog:
 
     @property
     def n_points(self) -> int:
+        """Total point count of the tiles (from their headers)."""
         return int(sum(t.n_points for t in self.tiles))
 
     @property
@@ -130,6 +135,7 @@ class Catalog:
 
     @property
     def zrange(self) -> tuple[float, float]:
+        """``(zmin, zmax)`` of the tiles' header bounds."""
         return (min(t.bounds[4] for t in self.tiles), max(t.bounds[5] for t in self.tiles))
 
     @property
@@ -229,6 +235,7 @@ class Catalog:
         ]
 
     def to_dict(self) -> dict[str, Any]:
+        """The catalog as a JSON-ready dict: extent, CRS, density, gaps, overlaps, tiles."""
         from ..io.crs import crs_epsg, crs_name
 
         return {

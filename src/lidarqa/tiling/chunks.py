@@ -137,6 +137,7 @@ class Chunk:
         return (gi == self.index[0]) & (gj == self.index[1])
 
     def to_dict(self) -> dict[str, Any]:
+        """The chunk as a JSON-ready dict (id, grid position, core and buffered boxes, tiles)."""
         return {
             "id": self.id,
             "row": self.row,

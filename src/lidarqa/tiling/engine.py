@@ -66,6 +66,7 @@ class ChunkOutcome:
     resumed: bool = False
 
     def to_dict(self) -> dict[str, Any]:
+        """The outcome as a JSON-ready dict (chunk id, status, timing, error; not the result)."""
         return {
             "chunk": self.chunk.id,
             "ok": self.ok,
@@ -127,10 +128,12 @@ class Engine:
 
     @property
     def serial(self) -> bool:
+        """True when chunks run one after the other in this process."""
         return self.scheduler == "serial"
 
     @property
     def dashboard_link(self) -> str | None:
+        """The dask dashboard's address, or None (serial, not started, no dashboard)."""
         if self.client is None:
             return None
         try:
@@ -141,6 +144,7 @@ class Engine:
 
     @property
     def n_workers(self) -> int:
+        """How many chunks run at once (1 when serial)."""
         if self.serial:
             return 1
         if self.client is not None:
@@ -151,6 +155,7 @@ class Engine:
         return self.workers or (os.cpu_count() or 1)
 
     def start(self) -> Engine:
+        """Start the dask cluster (nothing to do when serial or already started); returns self."""
         if self.serial or self.client is not None:
             return self
         distributed = _dask()
@@ -190,6 +195,7 @@ class Engine:
         return self
 
     def close(self) -> None:
+        """Shut the dask client and cluster down (when this engine started them)."""
         if self.client is not None:
             try:
                 self.client.close()

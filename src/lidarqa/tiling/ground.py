@@ -83,6 +83,7 @@ class GroundTask:
     ignore_classes: tuple[int, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
+        """The task's parameters as a JSON-ready dict."""
         return {
             "method": self.method,
             "last_returns_only": self.last_returns_only,
@@ -94,6 +95,7 @@ class GroundTask:
         }
 
     def __call__(self, data: Any) -> ChunkGround:
+        """Classify the ground of one chunk (with its buffer); the core points' result."""
         from ..errors import DataQualityWarning
         from ..ground import classify_ground
 
@@ -170,6 +172,7 @@ class CatalogGroundResult:
     warnings: tuple[str, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
+        """The result as a JSON-ready dict (outputs, counts, evaluation)."""
         d = {
             "outputs": list(self.outputs),
             "vpc": self.vpc,

@@ -98,6 +98,7 @@ class CheckSpacingTask:
     classes: tuple[int, ...] | None = (2,)
 
     def __call__(self, chunk_data: Any) -> tuple[np.ndarray, np.ndarray]:
+        """``(index, spacing)`` of the check points this chunk owns."""
         from scipy.spatial import cKDTree
 
         idx = np.flatnonzero(owned(self.check_xy, chunk_data.chunk))
@@ -162,6 +163,7 @@ class VerticalCheckTask:
     bounds: tuple[float, float, float, float] | None = None
 
     def __call__(self, chunk_data: Any) -> VerticalPart:
+        """The vertical check of the check points this chunk owns."""
         from ..accuracy.checkpoints import vertical_check
         from ..errors import TilingError
 
@@ -292,6 +294,7 @@ class HeightsTask:
             raise OptionError(f"heights on a catalog does not support {', '.join(bad)}")
 
     def __call__(self, chunk_data: Any) -> HeightsPart:
+        """Map-point heights and TIN values at the reference points this chunk owns."""
         from ..accuracy.heights import MAX_RADIUS, interpolate_tin, map_point_heights
         from ..errors import TilingError
 

@@ -98,6 +98,7 @@ class OccupancyTask:
     source_ids: tuple[int, ...] | None = None
 
     def __call__(self, data: Any) -> dict[int, tuple[int, np.ndarray]]:
+        """Occupied cells of each strip in the chunk's core."""
         from ..accuracy.swaths import strip_occupancy
 
         if len(data.cloud) == 0:
@@ -142,6 +143,7 @@ class SwathCellsTask:
     splits: tuple[int, ...]
 
     def __call__(self, data: Any) -> dict[int, _StripCells]:
+        """Per-strip plane fits of the chunk's core cells."""
         from ..accuracy import _swaths_kernels as K
         from ..accuracy.swaths import strip_planes
 

@@ -54,6 +54,7 @@ class ChunkData:
 
     @property
     def n_core(self) -> int:
+        """Number of core points (the chunk's own points, without its buffer)."""
         return int(self.core.sum())
 
 

@@ -105,6 +105,7 @@ class Selection:
         return ", ".join(parts)
 
     def to_dict(self) -> dict[str, Any]:
+        """The selection as a JSON-ready dict (classes, source ids; None when all kept)."""
         return {"classes": None if self.classes is None else list(self.classes),
                 "source_id": None if self.source_id is None else list(self.source_id)}
 
@@ -188,6 +189,7 @@ class Source:
 
     @property
     def n_tiles(self) -> int:
+        """Number of tiles (1 for an in-memory cloud)."""
         return len(self.catalog.tiles) if self.catalog is not None else 1
 
     @property
@@ -200,6 +202,7 @@ class Source:
         return replace(self, selection=Selection(classes, source_id))
 
     def to_dict(self) -> dict[str, Any]:
+        """The source as a JSON-ready dict (paths, tile count, CRS, height factor, selection)."""
         from ..io.crs import crs_name
 
         return {"paths": list(self.paths), "n_tiles": self.n_tiles,
