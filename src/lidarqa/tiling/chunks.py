@@ -58,6 +58,7 @@ from ..errors import OptionError
 
 if TYPE_CHECKING:
     from ._types import Tiles
+    from .engine import TileRef
 
 __all__ = [
     "Chunk",
@@ -214,7 +215,7 @@ def _one_chunk_side(
     return None
 
 
-def estimated_points(catalog: Tiles, chunk: Chunk) -> float:
+def estimated_points(catalog: Tiles, chunk: Chunk | TileRef) -> float:
     """Points in `chunk`'s buffered box, estimated from the tile headers (uniform density)."""
     x0, y0, x1, y1 = chunk.buffered
     total = 0.0
