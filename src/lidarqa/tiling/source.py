@@ -184,6 +184,10 @@ class Source:
             """The catalog's point count (from the headers)."""
 
         @property
+        def zrange(self) -> tuple[float, float]:
+            """The catalog's ``(zmin, zmax)``."""
+
+        @property
         def density(self) -> float:
             """The catalog's points per m² of tile area."""
 
@@ -375,7 +379,7 @@ class Source:
         lo, hi = xyz[:, :2].min(0), xyz[:, :2].max(0)
         return (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
 
-    def sample(self, *, side: float = 100.0, min_points: int = 100) -> PointCloud | None:
+    def sample(self, *, side: float = 100.0, min_points: int = 100) -> PointCloud:
         """Selected points of a square window at the centre of the area (a cloud).
 
         The same window whatever the chunking (:func:`sample_boxes`), so data-driven
@@ -388,7 +392,7 @@ class Source:
             cloud = self.read_chunk(self.window(box)).cloud
             if len(cloud) >= min_points:
                 break
-        return cloud
+        return cast("PointCloud", cloud)  # sample_boxes yields at least one box
 
     def chunks(self, *, chunk_size: float | None = None, buffer: float | None = None,
                origin: tuple[float, float] = (0.0, 0.0)) -> list[Chunk]:
