@@ -75,7 +75,7 @@ class CatalogRun(Generic[V_co]):
     catalog: Tiles
     chunks: tuple[Chunk, ...]
     outcomes: tuple[ChunkOutcome[Chunk, object], ...]
-    extra: dict[str, Any] = field(default_factory=dict)
+    extra: dict[str, object] = field(default_factory=dict)
 
     @property
     def failed(self) -> list[str]:
