@@ -101,11 +101,12 @@ def _on_catalog(kind: str, paths: tuple[str, ...], output: str, classes: Any, so
                    "there; widen --buffer", err=True)
     per_chunk = Counter(f.attributes["chunk"].tolist()) if len(f) else Counter()
     results["per_chunk"] = dict(sorted(per_chunk.items()))
+    extra: dict[str, Any] = run.extra  # the job's details
     echo(f"{len(f)} {kind} from {len(run.catalog.tiles)} tile(s) -> {output}")
     echo_run(run)
     c = run.chunks[0] if run.chunks else None
     finish(kind, inputs={"paths": list(paths), "classes": classes, "source_id": source_id},
-           parameters={**run.extra.get("segment_options", {}), **run.extra.get("options", {}),
+           parameters={**extra.get("segment_options", {}), **extra.get("options", {}),
                        "chunk_size": c.size if c else None,
                        "buffer": (c.buffered[2] - c.core[2]) if c else None,
                        "workers": cat.get("workers"), "scheduler": cat.get("scheduler"),

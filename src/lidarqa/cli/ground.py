@@ -273,7 +273,7 @@ def ground(
                 progress=not s.quiet,
                 **params,
             )
-        res = cres.to_dict()
+        res: dict = cres.to_dict()
         for msg in cres.warnings:
             click.echo(f"Warning: {msg}", err=True)
         echo(f"{len(catalog.tiles)} tile(s) -> {output}  ({cres.vpc})")

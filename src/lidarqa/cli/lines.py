@@ -463,17 +463,18 @@ def repeatability(
                                         match_options=match_options,
                                         edge_options={"steps": step_edges, "outlines": outlines},
                                         **job_options(cat_opts, eng))
+        extra: dict[str, Any] = run.extra  # the job's details
         if not run.value:
             raise OptionError(f"repeatability needs at least two strips with edges, got "
-                              f"{len(run.extra['strips'])}")
+                              f"{len(extra['strips'])}")
         _print_rows(run.value, threshold, pool=True)
         echo_run(run)
-        strips = {str(k): len(v) for k, v in run.extra["strips"].items()}
+        strips = {str(k): len(v) for k, v in extra["strips"].items()}
         echo("  strips          " + ", ".join(f"{k} ({n} edges)" for k, n in strips.items()))
         finish("repeatability", inputs={"files": list(files)},
                parameters={"by_source_id": True, "source_id": source_id, "classes": classes,
-                           **match_options, **run.extra["segment_options"],
-                           **run.extra["edge_options"],
+                           **match_options, **extra["segment_options"],
+                           **extra["edge_options"],
                            **{k: cat_opts.get(k) for k in ("chunk_size", "buffer", "workers",
                                                            "scheduler")}},
                results={"pairs": run.value, "strips": strips, "catalog": run_summary(run)})

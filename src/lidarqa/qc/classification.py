@@ -11,7 +11,7 @@ accuracy per delivery class (precision), and Cohen's κ is computed from the who
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -164,7 +164,7 @@ def reference_confusion(catalog: Any, reference: Any, *, tolerance: float, allow
         if not oc.ok:
             per_tile[path] = Check(FAIL, None, None, f"classification not compared: {oc.error}")
             continue
-        cm = oc.result
+        cm = cast(ConfusionMatrix, oc.result)  # ok: the task's result
         total = total + cm
         per_tile[path] = Check(PASS, _f(cm.overall), None,
                                f"overall accuracy {100 * cm.overall:.1f} %, κ {cm.kappa:.3f} "

@@ -14,7 +14,7 @@ import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -316,7 +316,7 @@ def run_qc(
                                                                     oc.error or "failed")}, hb,
                                       tile.n_points))
             continue
-        r: TileQC = oc.result
+        r = cast(TileQC, oc.result)  # ok: the task's result
         checks = dict(r.checks)
         if tile.path in mismatch:
             old = checks.get("crs")

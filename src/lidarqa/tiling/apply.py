@@ -31,16 +31,30 @@ import pickle
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, Generic, TypeVar, cast
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from ._types import CRSInput, IntsInput, PathInput, PathsInput, Tiles
+    from .catalog import Catalog
+    from .chunks import Chunk
+    from .engine import ChunkOutcome, Engine
+    from .reader import ChunkData
+    from .source import Source
+
+#: A chunk task's result (a part).
+R = TypeVar("R")
+#: A run's merged value.
+V = TypeVar("V")
+V_co = TypeVar("V_co", covariant=True)
 
 __all__ = ["CatalogRun", "ChunkStore", "apply", "chunk_status", "default_work_dir", "engine_for",
            "open_sources", "owned", "region_chunks"]
 
 
 @dataclass(frozen=True, eq=False)
-class CatalogRun:
+class CatalogRun(Generic[V_co]):
     """A merged catalog job: its ``value`` and how every chunk went.
 
     Attributes
@@ -57,11 +71,11 @@ class CatalogRun:
         Job-specific details (e.g. the strips' edge sets, the fixed parameters).
     """
 
-    value: Any
-    catalog: Any
-    chunks: tuple[Any, ...]
-    outcomes: tuple[Any, ...]
-    extra: dict[str, Any] = field(default_factory=dict)
+    value: V_co
+    catalog: Tiles
+    chunks: tuple[Chunk, ...]
+    outcomes: tuple[ChunkOutcome[Chunk, object], ...]
+    extra: dict[str, object] = field(default_factory=dict)
 
     @property
     def failed(self) -> list[str]:
@@ -73,11 +87,12 @@ class CatalogRun:
         """Ids of the chunks whose parts were re-used from an interrupted run."""
         return [o.chunk.id for o in self.outcomes if getattr(o, "resumed", False)]
 
-    def chunk_status(self) -> list[dict[str, Any]]:
+    def chunk_status(self) -> list[dict[str, object]]:
         """``[{"chunk", "status", "attempts", "error"}]``; ok, retried, failed, skipped, resumed."""
         return [chunk_status(o) for o in self.outcomes]
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, object]:
+        """The run as a JSON-ready dict: value, chunk counts by status and each chunk's status."""
         st = self.chunk_status()
         counts = {k: sum(1 for s in st if s["status"] == k)
                   for k in ("ok", "retried", "failed", "skipped", "resumed")}
@@ -87,7 +102,7 @@ class CatalogRun:
                 "chunk_status": counts, "failed_chunks": self.failed}
 
 
-def chunk_status(outcome: Any) -> dict[str, Any]:
+def chunk_status(outcome: ChunkOutcome[Chunk, object]) -> dict[str, object]:
     """One outcome's status: ok, retried (ok after > 1 attempt), failed, skipped or resumed."""
     attempts = int(getattr(outcome, "attempts", 1) or 1)
     if getattr(outcome, "resumed", False):
@@ -153,15 +168,15 @@ class ChunkStore:
     task : picklable
     """
 
-    def __init__(self, folder: Any, source: Any, task: Any) -> None:
+    def __init__(self, folder: PathInput, source: Source, task: object) -> None:
         self.folder = Path(folder)
         self.job = _digest((_fingerprint(source), task))[:24]
 
-    def path(self, chunk: Any) -> Path:
+    def path(self, chunk: Chunk) -> Path:
         """The file of `chunk`'s part."""
         return self.folder / f"{self.job}-{_digest(chunk)[:16]}.pkl"
 
-    def load(self, chunk: Any) -> tuple[bool, Any]:
+    def load(self, chunk: Chunk) -> tuple[bool, object]:
         """``(True, part)`` when `chunk`'s part is kept (and readable), else ``(False, None)``."""
         try:
             with open(self.path(chunk), "rb") as fh:
@@ -169,7 +184,7 @@ class ChunkStore:
         except Exception:  # missing, truncated or unreadable: compute the chunk again
             return False, None
 
-    def save(self, outcome: Any) -> None:
+    def save(self, outcome: ChunkOutcome[Chunk, object]) -> None:
         """Keep a finished chunk's part (atomic: a complete file or none)."""
         if not outcome.ok:
             return
@@ -180,14 +195,15 @@ class ChunkStore:
             pickle.dump(outcome.result, fh, protocol=pickle.HIGHEST_PROTOCOL)
         os.replace(tmp, path)
 
-    def clear(self, chunks: Sequence[Any]) -> None:
+    def clear(self, chunks: Sequence[Chunk]) -> None:
         """Remove the parts of `chunks`."""
         for c in chunks:
             self.path(c).unlink(missing_ok=True)
 
 
-def open_sources(sources: Any, *, skip_bad: bool = False, crs: Any = None,
-                 classes: Any = None, source_id: Any = None, z_to_metres: bool = True) -> Any:
+def open_sources(sources: PathsInput | Catalog | Source, *, skip_bad: bool = False,
+                 crs: CRSInput = None, classes: IntsInput = None, source_id: IntsInput = None,
+                 z_to_metres: bool = True) -> Source:
     """A :class:`~lidarqa.tiling.source.Source` (see :func:`~lidarqa.tiling.source.open_source`).
 
     A Source given keeps its CRS and units and takes the selection given here when
@@ -205,7 +221,7 @@ def open_sources(sources: Any, *, skip_bad: bool = False, crs: Any = None,
 
 
 
-def owned(xy: Any, chunk: Any) -> np.ndarray:
+def owned(xy: np.ndarray, chunk: Chunk) -> np.ndarray:
     """Mask of the points `xy` (N, 2+) whose owner is `chunk` (its half-open core rule).
 
     Every point of the plane is owned by exactly one chunk of a grid, whatever
@@ -218,8 +234,8 @@ def owned(xy: Any, chunk: Any) -> np.ndarray:
 
 
 @contextlib.contextmanager
-def engine_for(engine: Any = None, *, workers: int | None = None,
-               scheduler: str | None = None) -> Iterator[Any]:
+def engine_for(engine: Engine | None = None, *, workers: int | None = None,
+               scheduler: str | None = None) -> Iterator[Engine]:
     """The engine to run on, started and closed around the block.
 
     `engine` as is; else serial (``workers=1`` or nothing given) or a Dask LocalCluster or
@@ -238,9 +254,9 @@ def engine_for(engine: Any = None, *, workers: int | None = None,
         yield eng
 
 
-def region_chunks(source: Any, task: Any = None, *, chunk_size: float | None = None,
+def region_chunks(source: Source, task: object = None, *, chunk_size: float | None = None,
                   buffer: float | None = None, origin: tuple[float, float] = (0.0, 0.0),
-                  one_region: bool | None = None) -> list[Any]:
+                  one_region: bool | None = None) -> list[Chunk]:
     """The regions a job reads: one whole-area chunk for a single file, else the chunk grid.
 
     Parameters
@@ -264,16 +280,16 @@ def region_chunks(source: Any, task: Any = None, *, chunk_size: float | None = N
 
 
 def apply(
-    source: Any,
-    task: Callable[[Any], Any],
-    merge: Callable[[list[Any]], Any] | None = None,
+    source: PathsInput | Catalog | Source,
+    task: Callable[[ChunkData], R],
+    merge: Callable[[list[R | None]], V] | None = None,
     *,
-    chunks: Sequence[Any] | None = None,
+    chunks: Sequence[Chunk] | None = None,
     chunk_size: float | None = None,
     buffer: float | None = None,
     origin: tuple[float, float] = (0.0, 0.0),
     one_region: bool | None = None,
-    engine: Any = None,
+    engine: Engine | None = None,
     workers: int | None = None,
     scheduler: str | None = None,
     retries: int = 2,
@@ -281,10 +297,10 @@ def apply(
     progress: bool = False,
     description: str = "Chunks",
     order_seed: int | None = None,
-    extra: dict[str, Any] | None = None,
-    work_dir: Any = None,
+    extra: dict[str, object] | None = None,
+    work_dir: PathInput | None = None,
     resume: bool = False,
-) -> Any:
+) -> CatalogRun[V]:
     """Run `task` on every region of `source` and `merge` the parts.
 
     Parameters
@@ -346,5 +362,6 @@ def apply(
     if store is not None and all(o.ok for o in outcomes):
         store.clear(chunks)
     parts = [o.result if o.ok else None for o in outcomes]
-    value = merge(parts) if merge is not None else parts
+    # without `merge` the value is the list of parts (V is then list[R | None])
+    value = merge(parts) if merge is not None else cast("V", parts)
     return CatalogRun(value, source, tuple(chunks), tuple(outcomes), dict(extra or {}))

@@ -18,14 +18,19 @@ from __future__ import annotations
 
 import glob as _glob
 import os
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..errors import CatalogError, CRSMismatchError, ReadError  # noqa: F401
+
+if TYPE_CHECKING:
+    from pyproj import CRS
+
+    from ._types import CRSInput, PathsInput
 
 __all__ = ["Catalog", "TileInfo", "open_catalog", "CatalogError", "expand_sources"]
 
@@ -65,18 +70,22 @@ class TileInfo:
 
     @property
     def name(self) -> str:
+        """The file name of the tile (without its folder)."""
         return Path(self.path).name
 
     @property
     def bounds2d(self) -> tuple[float, float, float, float]:
+        """``(xmin, ymin, xmax, ymax)`` of the tile's header bounds."""
         return self.bounds[:4]
 
     @property
     def area(self) -> float:
+        """The tile's bounding-box area, in square CRS units."""
         xmin, ymin, xmax, ymax = self.bounds2d
         return max(xmax - xmin, 0.0) * max(ymax - ymin, 0.0)
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, object]:
+        """The tile as a JSON-ready dict (path, point count, bounds, format)."""
         return {
             "path": self.path,
             "n_points": self.n_points,
@@ -105,7 +114,7 @@ class Catalog:
     """
 
     tiles: tuple[TileInfo, ...]
-    crs: Any = None
+    crs: CRS | None = None
     bad: tuple[tuple[str, str], ...] = ()
     source_ids: tuple[int, ...] | None = None
     _meta: dict = field(default_factory=dict, compare=False, repr=False)
@@ -115,6 +124,7 @@ class Catalog:
 
     @property
     def n_points(self) -> int:
+        """Total point count of the tiles (from their headers)."""
         return int(sum(t.n_points for t in self.tiles))
 
     @property
@@ -130,6 +140,7 @@ class Catalog:
 
     @property
     def zrange(self) -> tuple[float, float]:
+        """``(zmin, zmax)`` of the tiles' header bounds."""
         return (min(t.bounds[4] for t in self.tiles), max(t.bounds[5] for t in self.tiles))
 
     @property
@@ -161,7 +172,7 @@ class Catalog:
         up = float(np.ceil(med - 1e-9))
         return up if up > 0 and up - med <= 0.005 * up else med
 
-    def overlaps(self, *, min_fraction: float = 0.5) -> list[dict[str, Any]]:
+    def overlaps(self, *, min_fraction: float = 0.5) -> list[dict[str, object]]:
         """Pairs of tiles whose bounding boxes overlap by at least `min_fraction`.
 
         Of the smaller one: duplicate coverage, e.g. a tile delivered twice under two names.
@@ -228,7 +239,8 @@ class Catalog:
             for r, c in zip(rows.tolist(), cols.tolist(), strict=True)
         ]
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, object]:
+        """The catalog as a JSON-ready dict: extent, CRS, density, gaps, overlaps, tiles."""
         from ..io.crs import crs_epsg, crs_name
 
         return {
@@ -249,7 +261,7 @@ class Catalog:
             "tiles": [t.to_dict() for t in self.tiles],
         }
 
-    def write_vpc(self, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
+    def write_vpc(self, path: str | os.PathLike[str], *, overwrite: bool = False) -> Path:
         """Write the catalog as a virtual point cloud (``.vpc``) that QGIS and PDAL open.
 
         See :func:`lidarqa.tiling.vpc.write_vpc`.
@@ -266,7 +278,7 @@ def _is_glob(s: str) -> bool:
     return any(ch in s for ch in "*?[")
 
 
-def expand_sources(sources: Any) -> tuple[list[str], list[tuple[str, str]]]:
+def expand_sources(sources: PathsInput) -> tuple[list[str], list[tuple[str, str]]]:
     """Files named by `sources` and problems found while expanding them.
 
     Returns ``(files, problems)``; ``files`` are absolute paths in the order found
@@ -384,10 +396,10 @@ def _crs_key(wkt: str | None) -> str | None:
 
 
 def open_catalog(
-    sources: str | os.PathLike | Iterable[str | os.PathLike],
+    sources: PathsInput,
     *,
     skip_bad: bool = False,
-    crs: Any = None,
+    crs: CRSInput = None,
 ) -> Catalog:
     """Build a :class:`Catalog` from files, folders, glob patterns or ``.vpc`` files.
 
@@ -464,7 +476,7 @@ def open_catalog(
 
         # the same CRS written in two WKT dialects is one CRS
         merged: dict[str, list[TileInfo]] = {}
-        reps: list[tuple[Any, str]] = []
+        reps: list[tuple[CRS, str]] = []
         for k, v in named.items():
             c = CRS.from_wkt(k)
             for rc, rk in reps:

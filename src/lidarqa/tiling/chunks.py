@@ -50,11 +50,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..errors import OptionError
+
+if TYPE_CHECKING:
+    from ._types import Tiles
+    from .engine import TileRef
 
 __all__ = [
     "Chunk",
@@ -136,7 +140,8 @@ class Chunk:
             gj = np.minimum(gj, self.last[1])
         return (gi == self.index[0]) & (gj == self.index[1])
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, object]:
+        """The chunk as a JSON-ready dict (id, grid position, core and buffered boxes, tiles)."""
         return {
             "id": self.id,
             "row": self.row,
@@ -148,7 +153,7 @@ class Chunk:
 
 
 def default_chunk_size(
-    catalog: Any, *, buffer: float = DEFAULT_BUFFER, origin: tuple[float, float] = (0.0, 0.0)
+    catalog: Tiles, *, buffer: float = DEFAULT_BUFFER, origin: tuple[float, float] = (0.0, 0.0)
 ) -> float:
     """The default chunk side for `catalog` (see the module documentation), m.
 
@@ -179,7 +184,7 @@ def default_chunk_size(
 
 
 def _one_chunk_side(
-    catalog: Any, side: float, tile: float, origin: tuple[float, float]
+    catalog: Tiles, side: float, tile: float, origin: tuple[float, float]
 ) -> float | None:
     """The smallest side <= `side` that puts the whole catalog in one chunk, or None.
 
@@ -210,7 +215,7 @@ def _one_chunk_side(
     return None
 
 
-def estimated_points(catalog: Any, chunk: Chunk) -> float:
+def estimated_points(catalog: Tiles, chunk: Chunk | TileRef) -> float:
     """Points in `chunk`'s buffered box, estimated from the tile headers (uniform density)."""
     x0, y0, x1, y1 = chunk.buffered
     total = 0.0
@@ -230,7 +235,7 @@ def _work(size: float, buffer: float) -> float:
 
 
 def make_chunks(
-    catalog: Any,
+    catalog: Tiles,
     *,
     chunk_size: float | None = None,
     buffer: float | None = None,

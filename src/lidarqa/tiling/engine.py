@@ -28,9 +28,22 @@ import os
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any, Generic, TypeVar, cast
 
 from ..errors import MissingDependencyError, OptionError, TilingError
+
+if TYPE_CHECKING:
+    from ._types import Tiles
+    from .catalog import Catalog, TileInfo
+    from .chunks import Chunk
+    from .reader import ChunkData
+
+#: What a task returns for one chunk (or tile).
+R = TypeVar("R")
+R_co = TypeVar("R_co", covariant=True)
+#: A unit of work: a :class:`~lidarqa.tiling.Chunk` or a :class:`TileRef`.
+C = TypeVar("C", bound="Chunk | TileRef")
+C_co = TypeVar("C_co", bound="Chunk | TileRef", covariant=True)
 
 __all__ = [
     "Engine",
@@ -54,18 +67,19 @@ class ChunkFailedError(TilingError):
 
 
 @dataclass(frozen=True)
-class ChunkOutcome:
-    """What became of one chunk."""
+class ChunkOutcome(Generic[C_co, R_co]):
+    """What became of one chunk (or tile: `chunk` is then a :class:`TileRef`)."""
 
-    chunk: Any
+    chunk: C_co
     ok: bool
-    result: Any = None
+    result: R_co | None = None
     error: str | None = None
     attempts: int = 1
     skipped: bool = False
     resumed: bool = False
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, object]:
+        """The outcome as a JSON-ready dict (chunk id, status, timing, error; not the result)."""
         return {
             "chunk": self.chunk.id,
             "ok": self.ok,
@@ -127,10 +141,12 @@ class Engine:
 
     @property
     def serial(self) -> bool:
+        """True when chunks run one after the other in this process."""
         return self.scheduler == "serial"
 
     @property
     def dashboard_link(self) -> str | None:
+        """The dask dashboard's address, or None (serial, not started, no dashboard)."""
         if self.client is None:
             return None
         try:
@@ -141,6 +157,7 @@ class Engine:
 
     @property
     def n_workers(self) -> int:
+        """How many chunks run at once (1 when serial)."""
         if self.serial:
             return 1
         if self.client is not None:
@@ -151,6 +168,7 @@ class Engine:
         return self.workers or (os.cpu_count() or 1)
 
     def start(self) -> Engine:
+        """Start the dask cluster (nothing to do when serial or already started); returns self."""
         if self.serial or self.client is not None:
             return self
         distributed = _dask()
@@ -190,6 +208,7 @@ class Engine:
         return self
 
     def close(self) -> None:
+        """Shut the dask client and cluster down (when this engine started them)."""
         if self.client is not None:
             try:
                 self.client.close()
@@ -206,11 +225,11 @@ class Engine:
     def __enter__(self) -> Engine:
         return self.start()
 
-    def __exit__(self, *exc: Any) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
 
-def run_task(catalog: Any, chunk: Any, task: Callable[[Any], Any]) -> Any:
+def run_task(catalog: Tiles, chunk: Chunk, task: Callable[[ChunkData], R]) -> R:
     """Read `chunk` and run `task` on it (what a worker does for one chunk).
 
     `catalog` is a :class:`~lidarqa.tiling.Catalog` (every point) or a
@@ -221,7 +240,7 @@ def run_task(catalog: Any, chunk: Any, task: Callable[[Any], Any]) -> Any:
         return task(reader(chunk))
     from .reader import read_chunk
 
-    return task(read_chunk(catalog, chunk))
+    return task(read_chunk(cast("Catalog", catalog), chunk))  # no read_chunk: a Catalog
 
 
 @dataclass(frozen=True)
@@ -246,7 +265,7 @@ class TileRef:
     buffered: tuple[float, ...]
 
 
-def run_tile_task(catalog: Any, ref: TileRef, task: Callable[[Any], Any]) -> Any:
+def run_tile_task(catalog: Tiles, ref: TileRef, task: Callable[[TileInfo], R]) -> R:
     """Run ``task(tile_info)`` on one tile (what a worker does for one tile)."""
     return task(catalog.tiles[ref.index])
 
@@ -301,20 +320,20 @@ class _Progress:
 
 
 def run_chunks(
-    catalog: Any,
-    chunks: Sequence[Any],
-    task: Callable[[Any], Any],
+    catalog: Tiles,
+    chunks: Sequence[C],
+    task: Callable[..., R],
     *,
     engine: Engine | None = None,
     progress: bool = True,
     retries: int = 2,
     skip_failed: bool = False,
-    on_outcome: Callable[[ChunkOutcome], Any] | None = None,
+    on_outcome: Callable[[ChunkOutcome[C, R]], object] | None = None,
     keep_results: bool = True,
     description: str = "Chunks",
     order_seed: int | None = None,
-    runner: Callable[[Any, Any, Callable[[Any], Any]], Any] = run_task,
-) -> list[ChunkOutcome]:
+    runner: Callable[..., R] = run_task,
+) -> list[ChunkOutcome[C, R]]:
     """Run ``task(read_chunk(catalog, chunk))`` on every chunk.
 
     Parameters
@@ -473,8 +492,8 @@ def _run_dask(engine, catalog, chunks, order, task, retries, record, bar, runner
 
 
 def run_tiles(
-    catalog: Any,
-    task: Callable[[Any], Any],
+    catalog: Tiles,
+    task: Callable[[TileInfo], R],
     *,
     tiles: Sequence[int] | None = None,
     engine: Engine | None = None,
@@ -482,7 +501,7 @@ def run_tiles(
     retries: int = 1,
     description: str = "Tiles",
     order_seed: int | None = None,
-) -> list[ChunkOutcome]:
+) -> list[ChunkOutcome[TileRef, R]]:
     """Run ``task(tile_info)`` on every tile of `catalog` (a job whose unit is the file).
 
     For per-file work that streams a tile itself (header checks, per-tile grids): the
@@ -531,14 +550,14 @@ def run_tiles(
 
 
 def run_tasks(
-    func: Callable[..., Any],
-    items: Sequence[tuple],
+    func: Callable[..., R],
+    items: Sequence[tuple[object, ...]],
     *,
     engine: Engine | None = None,
     progress: bool = False,
     description: str = "Tasks",
     names: Sequence[str] | None = None,
-) -> list[Any]:
+) -> list[R]:
     """Run ``func(*item)`` for every item, on the engine's workers; results in item order.
 
     For the work that follows the chunks (e.g. writing one output tile per input

@@ -35,14 +35,23 @@ import math
 import os
 import shutil
 import warnings
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from .._arrays import colmin
 from ..errors import OptionError, OutputExistsError, TilingError
+
+if TYPE_CHECKING:
+    from ..ground.auto import CloudMeasures
+    from ..ground.metrics import FilterErrors
+    from ._types import PathsInput, Tiles
+    from .catalog import Catalog
+    from .engine import Engine
+    from .reader import ChunkData
 
 __all__ = [
     "GroundTask",
@@ -78,11 +87,12 @@ class GroundTask:
     last_returns_only: bool = True
     exclude_classes: tuple[int, ...] = (7, 18)
     preset: str | None = None
-    params: tuple[tuple[str, Any], ...] = ()
+    params: tuple[tuple[str, object], ...] = ()
     evaluate: bool = False
     ignore_classes: tuple[int, ...] = ()
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, object]:
+        """The task's parameters as a JSON-ready dict."""
         return {
             "method": self.method,
             "last_returns_only": self.last_returns_only,
@@ -93,7 +103,8 @@ class GroundTask:
             "ignore_classes": list(self.ignore_classes),
         }
 
-    def __call__(self, data: Any) -> ChunkGround:
+    def __call__(self, data: ChunkData) -> ChunkGround:
+        """Classify the ground of one chunk (with its buffer); the core points' result."""
         from ..errors import DataQualityWarning
         from ..ground import classify_ground
 
@@ -103,13 +114,14 @@ class GroundTask:
             return ChunkGround(chunk.id, (), (), (), len(core))
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", DataQualityWarning)
+            params: dict[str, Any] = dict(self.params)
             res = classify_ground(
                 data.cloud,
                 method=self.method,
                 last_returns_only=self.last_returns_only,
                 exclude_classes=self.exclude_classes,
                 preset=self.preset,
-                **dict(self.params),
+                **params,
             )
         ground = np.asarray(res.ground_mask, dtype=bool)
         tiles, n_core, per_tile = [], [], []
@@ -164,13 +176,14 @@ class CatalogGroundResult:
     buffer: float
     failed: tuple[tuple[str, str], ...] = ()
     bad: tuple[tuple[str, str], ...] = ()
-    evaluation: Any = None
+    evaluation: FilterErrors | None = None
     parameters: dict = field(default_factory=dict)
     chunks: tuple[dict, ...] = ()
     warnings: tuple[str, ...] = ()
 
-    def to_dict(self) -> dict[str, Any]:
-        d = {
+    def to_dict(self) -> dict[str, object]:
+        """The result as a JSON-ready dict (outputs, counts, evaluation)."""
+        d: dict[str, object] = {
             "outputs": list(self.outputs),
             "vpc": self.vpc,
             "n_points": self.n_points,
@@ -293,7 +306,7 @@ def _assemble_tile(
     return int(mask.sum())
 
 
-def ground_buffer(catalog: Any = None, *, cell_size: float = 60.0) -> float:
+def ground_buffer(catalog: Tiles | None = None, *, cell_size: float = 60.0) -> float:
     """The margin (m) the ground job reads around each chunk of `catalog`.
 
     One seed cell of the filter (`cell_size`, 60 m by default and in every automatic
@@ -330,10 +343,10 @@ _AUTO_FIELDS = ("return_number", "number_of_returns", "scan_angle", "scan_angle_
 
 
 def _catalog_sample(
-    catalog: Any,
+    catalog: Tiles,
     *,
     last_returns_only: bool = True,
-    exclude_classes: Any = (7, 18),
+    exclude_classes: Iterable[int] | None = (7, 18),
     max_points: int = 4_000_000,
 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """Ground candidates (xyz and the fields the auto preset measures) of whole tiles.
@@ -380,10 +393,10 @@ def _catalog_sample(
 
 
 def catalog_grow_radius(
-    catalog: Any,
+    catalog: Tiles,
     *,
     last_returns_only: bool = True,
-    exclude_classes: Any = (7, 18),
+    exclude_classes: Iterable[int] | None = (7, 18),
     factor: float = 2.5,
     max_points: int = 4_000_000,
     sample: np.ndarray | None = None,
@@ -420,14 +433,14 @@ def catalog_grow_radius(
 
 
 def catalog_auto_parameters(
-    catalog: Any,
+    catalog: Tiles,
     method: str = "segment-ptd",
     *,
     sensor: str = "auto",
     last_returns_only: bool = True,
-    exclude_classes: Any = (7, 18),
+    exclude_classes: Iterable[int] | None = (7, 18),
     sample: tuple[np.ndarray, dict[str, np.ndarray]] | None = None,
-) -> tuple[dict[str, Any], Any, str]:
+) -> tuple[dict[str, object], CloudMeasures, str]:
     """``preset="auto"`` for a catalog: measure once, choose once, for every chunk.
 
     :func:`~lidarqa.ground.measure_cloud` on the catalog sample (:func:`_catalog_sample`)
@@ -472,20 +485,20 @@ def _output_names(catalog: Any, output_dir: Path) -> list[Path]:
 
 
 def ground_catalog(
-    sources: Any,
-    output_dir: str | os.PathLike,
+    sources: PathsInput | Catalog,
+    output_dir: str | os.PathLike[str],
     *,
     method: str = "segment-ptd",
     preset: str | None = "auto",
     sensor: str = "auto",
     last_returns_only: bool = True,
-    exclude_classes: Any = (7, 18),
+    exclude_classes: Iterable[int] | None = (7, 18),
     evaluate: bool = False,
-    ignore_classes: Any = None,
+    ignore_classes: Iterable[int] | None = None,
     chunk_size: float | None = None,
     buffer: float | None = None,
     origin: tuple[float, float] = (0.0, 0.0),
-    engine: Any = None,
+    engine: Engine | None = None,
     workers: int | None = None,
     scheduler: str | None = None,
     resume: bool = False,
@@ -495,7 +508,7 @@ def ground_catalog(
     progress: bool = False,
     vpc_name: str | None = None,
     order_seed: int | None = None,
-    **params: Any,
+    **params: object,
 ) -> CatalogGroundResult:
     """Classify ground over a catalog; write one output file per input tile and a ``.vpc``.
 
@@ -709,7 +722,7 @@ def ground_catalog(
             )
         )
     finally:
-        if own:
+        if own and engine is not None:
             engine.close()
     out_catalog = Catalog(
         tiles=tuple(

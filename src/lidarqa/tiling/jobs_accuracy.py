@@ -36,13 +36,23 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..errors import DegenerateGeometryError, InvalidPointsError, OptionError
 from ..io.vector import PointSet
 from .jobs_vector import in_core, open_box, owned
+
+if TYPE_CHECKING:
+    from ..accuracy.checkpoints import VerticalCheckReport
+    from ..accuracy.heights import HeightReport
+    from .chunks import Chunk
+    from .reader import ChunkData
+
+#: A chunk (kept as given).
+C = TypeVar("C", bound="Chunk")
 
 __all__ = [
     "CheckSpacingTask",
@@ -57,7 +67,7 @@ __all__ = [
 ]
 
 
-def chunks_with_points(chunks: Sequence[Any], xy: Any) -> tuple[Any, ...]:
+def chunks_with_points(chunks: Sequence[C], xy: np.ndarray) -> tuple[C, ...]:
     """The chunks whose core holds at least one of the points `xy` (the only ones to read)."""
     p = np.asarray(xy, dtype=np.float64).reshape(-1, np.shape(xy)[-1] if len(xy) else 2)
     return tuple(c for c in chunks if len(p) and owned(p, c).any())
@@ -72,7 +82,7 @@ def _metric_xy(xyz: np.ndarray, factor: float) -> np.ndarray:
     return out
 
 
-def _ground_xy(chunk_data: Any, classes: tuple[int, ...] | None) -> np.ndarray:
+def _ground_xy(chunk_data: ChunkData, classes: tuple[int, ...] | None) -> np.ndarray:
     cloud = chunk_data.cloud
     if classes is None:
         return cloud.xyz
@@ -97,7 +107,8 @@ class CheckSpacingTask:
     check_xy: np.ndarray
     classes: tuple[int, ...] | None = (2,)
 
-    def __call__(self, chunk_data: Any) -> tuple[np.ndarray, np.ndarray]:
+    def __call__(self, chunk_data: ChunkData) -> tuple[np.ndarray, np.ndarray]:
+        """``(index, spacing)`` of the check points this chunk owns."""
         from scipy.spatial import cKDTree
 
         idx = np.flatnonzero(owned(self.check_xy, chunk_data.chunk))
@@ -161,7 +172,8 @@ class VerticalCheckTask:
     xy_factor: float = 1.0
     bounds: tuple[float, float, float, float] | None = None
 
-    def __call__(self, chunk_data: Any) -> VerticalPart:
+    def __call__(self, chunk_data: ChunkData) -> VerticalPart:
+        """The vertical check of the check points this chunk owns."""
         from ..accuracy.checkpoints import vertical_check
         from ..errors import TilingError
 
@@ -206,7 +218,7 @@ def merge_vertical(
     max_edge: float,
     search_radius: float | None = None,
     checkpoint_rmse_v: float = 0.0,
-) -> Any:
+) -> VerticalCheckReport:
     """One :class:`~lidarqa.accuracy.checkpoints.VerticalCheckReport` from the chunk parts.
 
     A check point that no chunk owned (outside the catalog, or in a failed
@@ -282,7 +294,7 @@ class HeightsTask:
 
     map_xy: np.ndarray
     reference_xyz: np.ndarray
-    options: dict[str, Any] = field(default_factory=dict)
+    options: dict[str, object] = field(default_factory=dict)
     classes: tuple[int, ...] | None = None
     bounds: tuple[float, float, float, float] | None = None
 
@@ -291,7 +303,8 @@ class HeightsTask:
         if bad:
             raise OptionError(f"heights on a catalog does not support {', '.join(bad)}")
 
-    def __call__(self, chunk_data: Any) -> HeightsPart:
+    def __call__(self, chunk_data: ChunkData) -> HeightsPart:
+        """Map-point heights and TIN values at the reference points this chunk owns."""
         from ..accuracy.heights import MAX_RADIUS, interpolate_tin, map_point_heights
         from ..errors import TilingError
 
@@ -300,8 +313,8 @@ class HeightsTask:
         box = chunk.buffered
         mi = np.flatnonzero(in_core(self.map_xy, box))
         ri = np.flatnonzero(owned(self.reference_xyz, chunk))
-        opts = dict(self.options)
-        tin_opts = {"correlation": opts.pop("correlation", 0.0)}
+        opts: dict[str, Any] = dict(self.options)
+        tin_opts: dict[str, Any] = {"correlation": opts.pop("correlation", 0.0)}
         for k in ("sigma_ref", "alpha", "estimate_offset"):
             opts.pop(k, None)
         mp = map_point_heights(pts, self.map_xy[mi], **opts)
@@ -386,11 +399,11 @@ class HeightsTask:
 
 def merge_heights(
     parts: Sequence[HeightsPart | None],
-    map_xy: Any,
-    reference_xyz: Any,
+    map_xy: ArrayLike,
+    reference_xyz: ArrayLike,
     *,
-    options: dict[str, Any] | None = None,
-) -> Any:
+    options: dict[str, object] | None = None,
+) -> HeightReport:
     """One :class:`~lidarqa.accuracy.heights.HeightReport` from the chunk parts.
 
     Map points no chunk owned are reported failed (``"too_few_points"``, no
@@ -407,7 +420,7 @@ def merge_heights(
         w_test,
     )
 
-    opts = dict(options or {})
+    opts: dict[str, Any] = dict(options or {})
     mxy = np.asarray(map_xy, dtype=np.float64)[:, :2]
     ref = np.asarray(reference_xyz, dtype=np.float64).reshape(-1, 3)
     m, r = len(mxy), len(ref)

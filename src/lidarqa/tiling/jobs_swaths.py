@@ -29,11 +29,20 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..errors import InvalidPointsError, OptionError
+
+if TYPE_CHECKING:
+    from ..accuracy._swaths_kernels import Grid
+    from ..accuracy.swaths import SwathReport
+    from ._types import PathsInput
+    from .apply import CatalogRun
+    from .catalog import Catalog
+    from .reader import ChunkData
+    from .source import Source
 
 __all__ = [
     "MAX_SPLIT",
@@ -62,7 +71,7 @@ class _StripCells:
     extremes: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]
 
 
-def _strip_points(data: Any, by_source_id: bool, classes: Any, all_returns: bool,
+def _strip_points(data: ChunkData, by_source_id: bool, classes: Any, all_returns: bool,
                   source_ids: Any = None, core_only: bool = False,
                   ) -> tuple[np.ndarray, np.ndarray]:
     """The compared points of a chunk (z in metres) and their strip ids."""
@@ -97,7 +106,8 @@ class OccupancyTask:
     all_returns: bool
     source_ids: tuple[int, ...] | None = None
 
-    def __call__(self, data: Any) -> dict[int, tuple[int, np.ndarray]]:
+    def __call__(self, data: ChunkData) -> dict[int, tuple[int, np.ndarray]]:
+        """Occupied cells of each strip in the chunk's core."""
         from ..accuracy.swaths import strip_occupancy
 
         if len(data.cloud) == 0:
@@ -129,7 +139,7 @@ class SwathCellsTask:
         The splits of smooth cells into range cells to prepare.
     """
 
-    grid: Any
+    grid: Grid
     z0: float
     clamp: tuple[float, float, float, float]
     by_source_id: bool
@@ -141,7 +151,8 @@ class SwathCellsTask:
     max_slope: float
     splits: tuple[int, ...]
 
-    def __call__(self, data: Any) -> dict[int, _StripCells]:
+    def __call__(self, data: ChunkData) -> dict[int, _StripCells]:
+        """Per-strip plane fits of the chunk's core cells."""
         from ..accuracy import _swaths_kernels as K
         from ..accuracy.swaths import strip_planes
 
@@ -178,7 +189,7 @@ class SwathCellsTask:
 
 
 def catalog_swaths(
-    sources: Any,
+    sources: PathsInput | Catalog | Source,
     *,
     by_source_id: bool = False,
     classes: Sequence[int] | None = None,
@@ -189,8 +200,8 @@ def catalog_swaths(
     min_points: int = 8,
     max_roughness: float = 0.05,
     max_slope: float = 10.0,
-    **options: Any,
-) -> Any:
+    **options: object,
+) -> CatalogRun[SwathReport]:
     """:func:`~lidarqa.accuracy.swaths.assess_swaths` over a catalog of tiles.
 
     Parameters
@@ -231,9 +242,10 @@ def catalog_swaths(
     from . import make_chunks
     from .jobs_api import COMMON_KEYS, CatalogRun, _run, _split, open_sources
 
-    common = {k: options.pop(k) for k in list(options) if k in COMMON_KEYS}
+    opts: dict[str, Any] = options  # the same dict: what is left are assess_swaths options
+    common = {k: opts.pop(k) for k in list(opts) if k in COMMON_KEYS}
     assess_options(min_points=min_points, max_roughness=max_roughness, max_slope=max_slope,
-                   range_cell=range_cell, cell_size=cell_size, **options)
+                   range_cell=range_cell, cell_size=cell_size, **opts)
     open_opts, chunk_opts, run_opts = _split(common)
     catalog = open_sources(sources, **open_opts)
     cls = tuple(int(c) for c in classes) if classes else None
@@ -317,7 +329,7 @@ def catalog_swaths(
 
     value = swaths_from_planes(grid, z0, ids, planes, extremes, min_points=int(min_points),
                                max_roughness=float(max_roughness), max_slope=float(max_slope),
-                               range_cell=range_cell, **options)
+                               range_cell=range_cell, **opts)
     return CatalogRun(value, catalog, tuple(chunks), tuple(outcomes),
                       {"labels": {int(k): v for k, v in labels.items() if k in set(ids.tolist())},
                        "cell_size": float(cell_size), "buffer": float(chunk_opts["buffer"])})

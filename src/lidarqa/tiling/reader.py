@@ -14,9 +14,14 @@ half-open grid cells), never by the reader.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from ..io.pointcloud import PointCloud
+    from .catalog import Catalog
+    from .chunks import Chunk
 
 __all__ = ["ChunkData", "read_chunk", "READ_STEP"]
 
@@ -43,17 +48,18 @@ class ChunkData:
     chunk : Chunk
     """
 
-    cloud: Any
+    cloud: PointCloud
     core: np.ndarray
     tile_index: np.ndarray
     point_index: np.ndarray
-    chunk: Any
+    chunk: Chunk
 
     def __len__(self) -> int:
         return len(self.core)
 
     @property
     def n_core(self) -> int:
+        """Number of core points (the chunk's own points, without its buffer)."""
         return int(self.core.sum())
 
 
@@ -111,7 +117,7 @@ def _read_tile_box(
     return xyz, fields, idx
 
 
-def read_chunk(catalog: Any, chunk: Any) -> ChunkData:
+def read_chunk(catalog: Catalog, chunk: Chunk) -> ChunkData:
     """Read the points of `chunk` (core + buffer) from every tile it touches.
 
     Parameters

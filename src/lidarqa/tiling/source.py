@@ -26,11 +26,20 @@ import os
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
 from ..errors import OptionError
+
+if TYPE_CHECKING:
+    from pyproj import CRS
+
+    from ..io.pointcloud import PointCloud
+    from ._types import CRSInput, IntsInput, PathsInput
+    from .catalog import Catalog, TileInfo
+    from .chunks import Chunk
+    from .reader import ChunkData
 
 __all__ = ["Selection", "Source", "open_source", "is_catalog_input", "sample_boxes",
            "sample_points"]
@@ -38,7 +47,7 @@ __all__ = ["Selection", "Source", "open_source", "is_catalog_input", "sample_box
 _LAS = {".las", ".laz"}
 
 
-def _ints(value: Any, name: str) -> tuple[int, ...] | None:
+def _ints(value: object, name: str) -> tuple[int, ...] | None:
     if value is None:
         return None
     vals = np.atleast_1d(np.asarray(value)).ravel().tolist()
@@ -72,7 +81,7 @@ class Selection:
     def __bool__(self) -> bool:
         return self.classes is not None or self.source_id is not None
 
-    def mask(self, cloud: Any) -> np.ndarray | None:
+    def mask(self, cloud: PointCloud) -> np.ndarray | None:
         """Boolean mask of the selected points of `cloud`, or None when every point is kept.
 
         Raises
@@ -104,7 +113,8 @@ class Selection:
             parts.append("source ids " + ", ".join(map(str, self.source_id)))
         return ", ".join(parts)
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, object]:
+        """The selection as a JSON-ready dict (classes, source ids; None when all kept)."""
         return {"classes": None if self.classes is None else list(self.classes),
                 "source_id": None if self.source_id is None else list(self.source_id)}
 
@@ -149,16 +159,55 @@ class Source:
         The points of a non-LAS input (one in-memory region).
     """
 
-    catalog: Any
+    catalog: Catalog | None
     selection: Selection = field(default_factory=Selection)
     z_factor: float = 1.0
     xy_factor: float = 1.0
     paths: tuple[str, ...] = ()
-    cloud: Any = None
-    given_crs: Any = None
+    cloud: PointCloud | None = None
+    given_crs: CRS | None = None
 
     # -------------------------------------------------------------- catalog view
-    def __getattr__(self, name: str) -> Any:
+    if TYPE_CHECKING:
+        # the catalog's header properties, delegated at run time by __getattr__ (typed
+        # here only: as properties of the dataclass they would change its fields)
+        @property
+        def tiles(self) -> tuple[TileInfo, ...]:
+            """The catalog's tiles."""
+
+        @property
+        def bounds(self) -> tuple[float, float, float, float]:
+            """The catalog's ``(xmin, ymin, xmax, ymax)``."""
+
+        @property
+        def n_points(self) -> int:
+            """The catalog's point count (from the headers)."""
+
+        @property
+        def zrange(self) -> tuple[float, float]:
+            """The catalog's ``(zmin, zmax)``."""
+
+        @property
+        def density(self) -> float:
+            """The catalog's points per m² of tile area."""
+
+        @property
+        def bad(self) -> tuple[tuple[str, str], ...]:
+            """The catalog's files left out, ``(path, reason)``."""
+
+        @property
+        def source_ids(self) -> tuple[int, ...] | None:
+            """The catalog's file source ids."""
+
+        def tile_size(self) -> float:
+            """The catalog's median tile side."""
+
+    @property
+    def _memory(self) -> PointCloud:
+        # the in-memory cloud (set whenever `catalog` is None)
+        return cast("PointCloud", self.cloud)
+
+    def __getattr__(self, name: str) -> object:
         # delegate the catalog's header properties (tiles, bounds, density, bad...)
         if name.startswith("_") or name in ("catalog", "cloud"):
             raise AttributeError(name)
@@ -168,7 +217,7 @@ class Source:
         return getattr(cat, name)
 
     @property
-    def crs(self) -> Any:
+    def crs(self) -> CRS | None:
         """The CRS of the points as read (the horizontal part when heights were converted)."""
         crs = self.native_crs
         if self.z_factor != 1.0 and crs is not None and crs.is_compound:
@@ -176,9 +225,9 @@ class Source:
         return crs
 
     @property
-    def native_crs(self) -> Any:
+    def native_crs(self) -> CRS | None:
         """The files' CRS (with its vertical part); the given one when they declare none."""
-        crs = self.catalog.crs if self.catalog is not None else self.cloud.crs
+        crs = self.catalog.crs if self.catalog is not None else self._memory.crs
         return crs if crs is not None else self.given_crs
 
     @property
@@ -188,6 +237,7 @@ class Source:
 
     @property
     def n_tiles(self) -> int:
+        """Number of tiles (1 for an in-memory cloud)."""
         return len(self.catalog.tiles) if self.catalog is not None else 1
 
     @property
@@ -195,11 +245,13 @@ class Source:
         """The inputs as the user gave them, for messages."""
         return ", ".join(self.paths) if self.paths else "the source"
 
-    def select(self, *, classes: Any = None, source_id: Any = None) -> Source:
+    def select(self, *, classes: IntsInput = None, source_id: IntsInput = None) -> Source:
         """The same tiles with another selection (e.g. one side of a comparison)."""
-        return replace(self, selection=Selection(classes, source_id))
+        return replace(self, selection=Selection(_ints(classes, "classes"),
+                                                  _ints(source_id, "source_id")))
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, object]:
+        """The source as a JSON-ready dict (paths, tile count, CRS, height factor, selection)."""
         from ..io.crs import crs_name
 
         return {"paths": list(self.paths), "n_tiles": self.n_tiles,
@@ -207,7 +259,7 @@ class Source:
                 "z_factor": self.z_factor, **self.selection.to_dict()}
 
     # -------------------------------------------------------------- reading
-    def _finish(self, cloud: Any) -> tuple[Any, np.ndarray | None]:
+    def _finish(self, cloud: PointCloud) -> tuple[PointCloud, np.ndarray | None]:
         """Selection and unit conversion of freshly read points: (cloud, kept mask)."""
         keep = self.selection.mask(cloud)
         if keep is not None:
@@ -220,7 +272,7 @@ class Source:
         cloud.crs = self.crs
         return cloud, keep
 
-    def read_chunk(self, chunk: Any) -> Any:
+    def read_chunk(self, chunk: Chunk) -> ChunkData:
         """The selected points of one chunk with its buffer (heights in metres).
 
         Returns
@@ -231,7 +283,7 @@ class Source:
         from .reader import ChunkData, read_chunk
 
         if self.catalog is None:
-            cloud = self.cloud.copy()
+            cloud = self._memory.copy()
             n = len(cloud)
             data = ChunkData(cloud=cloud, core=chunk.core_mask(cloud.xyz),
                              tile_index=np.zeros(n, dtype=np.int32),
@@ -245,7 +297,7 @@ class Source:
         return ChunkData(cloud=cloud, core=data.core[keep], tile_index=data.tile_index[keep],
                          point_index=data.point_index[keep], chunk=chunk)
 
-    def read(self, *, require_points: bool = True) -> Any:
+    def read(self, *, require_points: bool = True) -> PointCloud:
         """All selected points in memory (one region), heights in metres.
 
         Parameters
@@ -261,7 +313,7 @@ class Source:
         from ..io import read as read_cloud
 
         if self.catalog is None:
-            cloud = self.cloud.copy()
+            cloud = self._memory.copy()
         elif len(self.catalog.tiles) == 1:
             cloud = read_cloud(self.catalog.tiles[0].path, crs=self.given_crs)
         else:
@@ -280,7 +332,7 @@ class Source:
         return cloud
 
     # -------------------------------------------------------------- regions
-    def whole_chunk(self) -> Any:
+    def whole_chunk(self) -> Chunk:
         """One chunk holding the whole area (the in-memory run's single region)."""
         from .chunks import Chunk
 
@@ -288,7 +340,7 @@ class Source:
             xmin, ymin, xmax, ymax = self.catalog.bounds
             tiles = tuple(range(len(self.catalog.tiles)))
         else:
-            xyz = self.cloud.xyz
+            xyz = self._memory.xyz
             if len(xyz):
                 xmin, ymin = (float(v) for v in xyz[:, :2].min(0))
                 xmax, ymax = (float(v) for v in xyz[:, :2].max(0))
@@ -301,7 +353,7 @@ class Source:
                      buffered=(box[0] - 1.0, box[1] - 1.0, box[2] + 1.0, box[3] + 1.0),
                      tiles=tiles, index=(0, 0), size=size, origin=(box[0], box[1]))
 
-    def window(self, box: Sequence[float]) -> Any:
+    def window(self, box: Sequence[float]) -> Chunk:
         """A region reading exactly `box` ``(xmin, ymin, xmax, ymax)`` (e.g. a sample)."""
         from .chunks import Chunk
 
@@ -321,13 +373,13 @@ class Source:
         """``(xmin, ymin, xmax, ymax)``: the tiles' header bounds (an in-memory cloud's extent)."""
         if self.catalog is not None:
             return _box4(self.catalog.bounds)
-        xyz = self.cloud.xyz
+        xyz = self._memory.xyz
         if not len(xyz):
             return (0.0, 0.0, 0.0, 0.0)
         lo, hi = xyz[:, :2].min(0), xyz[:, :2].max(0)
         return (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
 
-    def sample(self, *, side: float = 100.0, min_points: int = 100) -> Any:
+    def sample(self, *, side: float = 100.0, min_points: int = 100) -> PointCloud:
         """Selected points of a square window at the centre of the area (a cloud).
 
         The same window whatever the chunking (:func:`sample_boxes`), so data-driven
@@ -340,10 +392,10 @@ class Source:
             cloud = self.read_chunk(self.window(box)).cloud
             if len(cloud) >= min_points:
                 break
-        return cloud
+        return cast("PointCloud", cloud)  # sample_boxes yields at least one box
 
     def chunks(self, *, chunk_size: float | None = None, buffer: float | None = None,
-               origin: tuple[float, float] = (0.0, 0.0)) -> list[Any]:
+               origin: tuple[float, float] = (0.0, 0.0)) -> list[Chunk]:
         """The chunk grid of a catalog run (one whole-area chunk for an in-memory cloud)."""
         if self.catalog is None:
             return [self.whole_chunk()]
@@ -382,18 +434,18 @@ def sample_points(xyz: np.ndarray, bounds: Sequence[float], *, side: float = 100
     return out
 
 
-def _as_list(paths: Any) -> list[str]:
+def _as_list(paths: PathsInput) -> list[str]:
     if isinstance(paths, (str, os.PathLike)):
         return [os.fspath(paths)]
     return [os.fspath(p) for p in paths]
 
 
 def open_source(
-    paths: str | os.PathLike | Iterable[str | os.PathLike] | Any,
+    paths: PathsInput | Catalog | Source,
     *,
-    crs: Any = None,
-    classes: Any = None,
-    source_id: Any = None,
+    crs: CRSInput = None,
+    classes: IntsInput = None,
+    source_id: IntsInput = None,
     skip_bad: bool = False,
     z_to_metres: bool = True,
 ) -> Source:
@@ -429,7 +481,7 @@ def open_source(
     from ..io.crs import parse_crs, resolve_crs, z_to_metres_factor
     from .catalog import Catalog, open_catalog
 
-    sel = Selection(classes, source_id)
+    sel = Selection(_ints(classes, "classes"), _ints(source_id, "source_id"))
     if isinstance(paths, Source):
         src = paths
         return replace(src, selection=sel) if sel else src

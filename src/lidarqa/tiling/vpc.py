@@ -12,9 +12,12 @@ from __future__ import annotations
 import json
 import os
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ..errors import TilingError
+
+if TYPE_CHECKING:
+    from .catalog import Catalog
 
 __all__ = ["write_vpc", "read_vpc_hrefs", "vpc_document"]
 
@@ -35,7 +38,7 @@ def _to_wgs84(crs: Any, xs: list[float], ys: list[float]) -> tuple[list[float], 
     return [float(v) for v in lon], [float(v) for v in lat]
 
 
-def vpc_document(catalog: Any, base: str | os.PathLike) -> dict[str, Any]:
+def vpc_document(catalog: Catalog, base: str | os.PathLike[str]) -> dict[str, object]:
     """The ``.vpc`` JSON document of `catalog`, with hrefs relative to folder `base`."""
     from ..io.crs import crs_epsg
 
@@ -87,7 +90,7 @@ def vpc_document(catalog: Any, base: str | os.PathLike) -> dict[str, Any]:
     return {"type": "FeatureCollection", "features": features}
 
 
-def write_vpc(catalog: Any, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
+def write_vpc(catalog: Catalog, path: str | os.PathLike[str], *, overwrite: bool = False) -> Path:
     """Write `catalog` as a ``.vpc`` file (atomically); hrefs are relative to its folder."""
     from ..io import atomic_path
 
@@ -100,7 +103,7 @@ def write_vpc(catalog: Any, path: str | os.PathLike, *, overwrite: bool = False)
     return target
 
 
-def read_vpc_hrefs(path: str | os.PathLike) -> list[str]:
+def read_vpc_hrefs(path: str | os.PathLike[str]) -> list[str]:
     """Absolute paths of the files a ``.vpc`` lists (its ``data`` assets, else the first asset)."""
     from ..errors import CatalogError
 

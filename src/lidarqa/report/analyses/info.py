@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import cast
+
 import numpy as np
 
 from .._context import RunContext, SectionResult
@@ -127,8 +129,9 @@ def _run_on_catalog(ctx: RunContext, item: AnalysisItem) -> SectionResult:
     sec = catalog_section(run, title=f"{name}: catalog")
     d = cat.to_dict()
     results = {**sec["results"], "crs_name": d.get("crs_name"), "crs_epsg": d.get("crs_epsg"),
-               "density_per_m2": d.get("density_per_m2"), "gaps": len(d.get("gaps", [])),
-               "overlaps": len(d.get("overlaps", [])),
+               "density_per_m2": d.get("density_per_m2"),
+               "gaps": len(cast(list, d.get("gaps", []))),
+               "overlaps": len(cast(list, d.get("overlaps", []))),
                "chunk_size": chunks[0].size if chunks else None}
     rows = [["tiles", len(cat.tiles)], ["points", int(cat.n_points)],
             ["CRS", d.get("crs_name") or "none"], ["density (pts/m²)", d.get("density_per_m2")],
