@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from datapaths import SHARED, needs_shared
+from datapaths import SHARED, ign_block, needs_shared
 
 from lidarqa.cli.main import cli
 
@@ -43,23 +43,8 @@ def ign(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """The six IGN tiles as a folder, and merged into one file."""
     if not IGN.is_dir():
         pytest.skip("../shared/lidar-data is not present")
-    import laspy
-
     base = tmp_path_factory.mktemp("ign")
-    folder = base / "tiles"
-    folder.mkdir()
-    files = sorted(IGN.glob("test_data_770*.laz"))
-    assert len(files) == 6
-    for f in files:
-        (folder / f.name).symlink_to(f)
-    las = [laspy.read(f) for f in files]
-    assert all(np.array_equal(x.header.offsets, las[0].header.offsets) for x in las)
-    merged = laspy.LasData(las[0].header)
-    merged.points = laspy.ScaleAwarePointRecord(
-        np.concatenate([x.points.array for x in las]), las[0].header.point_format,
-        las[0].header.scales, las[0].header.offsets)
-    merged.update_header()
-    merged.write(base / "merged.laz")
+    folder, _, merged = ign_block(base)
     # check points: on the ground of strip 706 and 707 alike, on a 12 m grid (z = local median
     # of the ground points + a seeded offset), written as id,x,y,z
     xyz = np.column_stack([merged.x, merged.y, merged.z])

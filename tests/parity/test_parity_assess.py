@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from datapaths import SHARED, needs_shared
+from datapaths import ign_block, needs_shared
 
 pytestmark = [needs_shared, pytest.mark.slow]
 
@@ -50,25 +50,12 @@ def _leaves(d: Any, prefix: str = "") -> dict[str, Any]:
 
 @pytest.fixture(scope="module")
 def reports(tmp_path_factory: pytest.TempPathFactory) -> tuple[dict, dict]:
-    import laspy
     from scipy.spatial import cKDTree
 
     from lidarqa.report import run_assessment
 
-    files = sorted((SHARED / "ign-lidarhd").glob("test_data_770*.laz"))
-    assert len(files) == 6
     base = tmp_path_factory.mktemp("assess_parity")
-    folder = base / "tiles"
-    folder.mkdir()
-    for f in files:
-        (folder / f.name).symlink_to(f)
-    las = [laspy.read(f) for f in files]
-    merged = laspy.LasData(las[0].header)
-    merged.points = laspy.ScaleAwarePointRecord(
-        np.concatenate([x.points.array for x in las]), las[0].header.point_format,
-        las[0].header.scales, las[0].header.offsets)
-    merged.update_header()
-    merged.write(base / "merged.laz")
+    folder, _, merged = ign_block(base)
     # check points on the ground (12 m grid, local median height + noise), map points on a
     # jittered 20 m grid (a regular grid's Delaunay TIN is not unique)
     xyz = np.column_stack([merged.x, merged.y, merged.z])

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from datapaths import SHARED, needs_shared
+from datapaths import SHARED, ign_block, needs_shared
 from scipy.spatial import cKDTree
 
 from lidarqa.cli.main import cli
@@ -40,23 +40,9 @@ def _results(tmp: Path, *args: object) -> dict:
 @pytest.fixture(scope="module")
 def ign(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """The six IGN tiles as a folder, and merged into one file."""
-    import laspy
-
-    files = sorted(IGN.glob("test_data_770*.laz"))
-    assert len(files) == 6
     base = tmp_path_factory.mktemp("ign_geometry")
-    folder = base / "tiles"
-    folder.mkdir()
-    for f in files:
-        (folder / f.name).symlink_to(f)
-    las = [laspy.read(f) for f in files]
-    merged = laspy.LasData(las[0].header)
-    merged.points = laspy.ScaleAwarePointRecord(
-        np.concatenate([x.points.array for x in las]), las[0].header.point_format,
-        las[0].header.scales, las[0].header.offsets)
-    merged.update_header()
-    merged.write(base / "merged.laz")
-    return {"folder": folder, "file": base / "merged.laz", "base": base}
+    folder, file, _ = ign_block(base)
+    return {"folder": folder, "file": file, "base": base}
 
 
 def _table(path: Path, cols: tuple[str, ...]) -> np.ndarray:
