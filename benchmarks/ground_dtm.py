@@ -42,39 +42,11 @@ IGN_CLASSES = (2, 3, 4, 5, 6, 17)
 NOISE = (7, 18)
 
 
-def last_returns(cloud) -> np.ndarray:
-    """Last and single returns (every point when returns are not recorded)."""
-    rn = cloud.fields.get("return_number")
-    nr = cloud.fields.get("number_of_returns")
-    if rn is None or nr is None or not np.any(np.asarray(nr) > 0):
-        return np.ones(len(cloud), dtype=bool)
-    rn, nr = np.asarray(rn), np.asarray(nr)
-    return (rn == 0) | (nr == 0) | (rn >= nr)
-
-
 def csf_ground(cloud, *, smooth: bool) -> np.ndarray:
     """CSF at PDAL filters.csf defaults on the last returns (noise classes left out)."""
-    import CSF
+    from _peers import csf_ground as csf
 
-    cls = cloud.classification
-    use = last_returns(cloud)
-    if cls is not None:
-        use &= ~np.isin(np.asarray(cls), NOISE)
-    idx = np.flatnonzero(use)
-    csf = CSF.CSF()
-    csf.params.bSloopSmooth = smooth
-    csf.params.cloth_resolution = 1.0
-    csf.params.rigidness = 3
-    csf.params.time_step = 0.65
-    csf.params.class_threshold = 0.5
-    csf.params.interations = 500
-    xyz = cloud.xyz[idx]
-    csf.setPointCloud(xyz - xyz.min(axis=0))
-    g, ng = CSF.VecInt(), CSF.VecInt()
-    csf.do_filtering(g, ng, exportCloth=False)
-    ground = np.zeros(len(cloud), dtype=bool)
-    ground[idx[np.asarray(g, dtype=np.int64)]] = True
-    return ground
+    return csf(cloud, smooth=smooth)
 
 
 def run(method: str, cloud) -> tuple[np.ndarray, float]:

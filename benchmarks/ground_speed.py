@@ -60,27 +60,9 @@ def _cpu() -> float:
 
 def _csf(cloud, cloth: float):
     """CSF at PDAL filters.csf defaults on the last returns, noise left out."""
-    import CSF
-    import numpy as np
+    from _peers import csf_ground
 
-    from lidarqa.ground import ground_candidates
-
-    use = ground_candidates(cloud)[0]
-    idx = np.flatnonzero(use)
-    xyz = cloud.xyz[idx]
-    csf = CSF.CSF()
-    csf.params.bSloopSmooth = True
-    csf.params.cloth_resolution = cloth
-    csf.params.rigidness = 3
-    csf.params.time_step = 0.65
-    csf.params.class_threshold = 0.5
-    csf.params.interations = 500
-    csf.setPointCloud(xyz - xyz.min(axis=0))
-    g, ng = CSF.VecInt(), CSF.VecInt()
-    csf.do_filtering(g, ng, exportCloth=False)
-    ground = np.zeros(len(cloud), dtype=bool)
-    ground[idx[np.asarray(g, dtype=np.int64)]] = True
-    return ground
+    return csf_ground(cloud, cloth=cloth)
 
 
 def one(method: str, src: str, out: str, cloth: float = 0.5) -> dict:

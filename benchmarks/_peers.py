@@ -1,0 +1,34 @@
+"""The peers the benchmarks compare with, run as their users run them."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def csf_ground(cloud, *, cloth: float = 1.0, smooth: bool = True) -> np.ndarray:
+    """CSF (cloth-simulation-filter wheel) at PDAL ``filters.csf``'s defaults.
+
+    Last and single returns only, noise classes (7, 18) left out, as PDAL runs it; cloth
+    resolution 1 m, rigidness 3, time step 0.65, threshold 0.5, 500 iterations, slope
+    smoothing on. `cloth` and `smooth` change those two for the variants some tables
+    print. Returns the ground mask of every point of `cloud`.
+    """
+    import CSF
+
+    from lidarqa.ground import ground_candidates
+
+    idx = np.flatnonzero(ground_candidates(cloud)[0])
+    xyz = cloud.xyz[idx]
+    csf = CSF.CSF()
+    csf.params.bSloopSmooth = smooth
+    csf.params.cloth_resolution = cloth
+    csf.params.rigidness = 3
+    csf.params.time_step = 0.65
+    csf.params.class_threshold = 0.5
+    csf.params.interations = 500
+    csf.setPointCloud(xyz - xyz.min(axis=0))
+    g, ng = CSF.VecInt(), CSF.VecInt()
+    csf.do_filtering(g, ng, exportCloth=False)
+    ground = np.zeros(len(cloud), dtype=bool)
+    ground[idx[np.asarray(g, dtype=np.int64)]] = True
+    return ground
