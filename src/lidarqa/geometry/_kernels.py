@@ -11,7 +11,7 @@ import math
 import numpy as np
 from numba import get_num_threads, njit, prange
 
-from .._arrays import colmin
+from .._arrays import colmax, colmin
 
 # ----------------------------------------------------------------- eigen / fits
 
@@ -233,6 +233,11 @@ def build_grid(pts: np.ndarray, cell: float, offset: np.ndarray | None = None):
     visits neighbours in the same order whatever else was read. Points of a cell
     are in their order in `pts`.
     """
+    # at most 2**20 cells along the widest side: a tiny cell (a user's 1e-300 m radius)
+    # would overflow the integer keys and put every point in one cell (a search over
+    # all pairs); a wider cell only adds candidates, the callers test the distance
+    span = float(np.max(colmax(pts) - colmin(pts))) if len(pts) else 0.0
+    cell = max(float(cell), span / 2.0**20, 1e-9)
     if offset is None:
         ijk = np.floor((pts - colmin(pts)) / cell).astype(np.int64)
     else:
