@@ -4,11 +4,14 @@ One in-memory run of a file against the catalog run of the same points cut into 
 (``--chunk-size`` smaller than the area, the default buffer: one seed cell). Measured
 when written: the six IGN 50 m tiles as a folder in chunks of 100 m or 50 m (6 chunks:
 0 of 405,937 labels differ) agree on >= 99.99 % of the labels; a 100 x 100 m forest block
-of ``lasR-bcts/bcts_2`` in 4 chunks of 50 m on 98.2 % (all of bcts_2 in 9 chunks of
-100 m: 98.2-98.4 %), short of the issue's 99.9 %: segment-PTD's TIN densification under
-forest is sensitive to points far outside the chunk's core (removing a 20 m strip 180 m
-away changes labels), which a buffer does not bound. That test records the floor and is
-an expected failure against the target until the filter is made local.
+of ``lasR-bcts/bcts_2`` in 4 chunks of 50 m (each chunk's buffer reaches the whole block)
+on 100 %: it was 98.8 % while the terrain pass of a catalog grew its surfaces with the
+fine radius scaled and the in-memory run with its own estimate (the catalog now gives
+both radii). All of bcts_2 in 4 chunks of 150 m agrees on 98.39 %, short of the issue's 99.9 %: there segment-PTD's
+segments and TIN densification under canopy reach beyond a chunk's buffer (one
+segment of the terrain pass spans most of the tile, and its decision flips with the
+part a chunk sees). That test records the floor and is an expected failure against
+the target until the filter is made local.
 """
 
 from __future__ import annotations
@@ -85,7 +88,20 @@ def test_ground_labels_of_a_forest_block_and_its_chunks(tmp_path):
     a = _ground(tmp_path / "a", tmp_path / "block.laz")
     b = _ground(tmp_path / "b", tmp_path / "block.laz", "--chunk-size", "50", "--workers", "1")
     assert len(a) == len(b) == int(keep.sum()) > 50_000
+    assert 0.02 < a.mean() < 0.5  # a real ground/non-ground split
     agree = float(np.mean(a == b))
-    assert agree >= 0.98, agree  # the floor measured when this test was written
+    assert agree >= TARGET, f"{agree:.5f} of the labels equal ({int((a != b).sum())} differ)"
+
+
+def test_ground_labels_of_a_forest_tile_and_its_four_chunks(tmp_path):
+    """All of bcts_2 (BC forest, 193 x 300 m) in memory and in 4 chunks of 150 m."""
+    src = SHARED / "lasR-bcts" / "bcts_2.laz"
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    a = _ground(tmp_path / "a", src)
+    b = _ground(tmp_path / "b", src, "--chunk-size", "150", "--workers", "1")
+    assert len(a) == len(b) > 800_000
+    agree = float(np.mean(a == b))
+    assert agree >= 0.98, agree  # the floor measured when this test was written (98.39 %)
     if agree < TARGET:
-        pytest.xfail(f"forest: {agree:.4f} of the labels equal, the issue asks {TARGET}")
+        pytest.xfail(f"forest tile: {agree:.4f} of the labels equal, the issue asks {TARGET}")

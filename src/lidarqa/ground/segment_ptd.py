@@ -239,6 +239,12 @@ class SegmentPTD(TINParameters):
         parameters of dense airborne clouds set 0.5 (1.4 m cells).
     terrain_distance : float, default 0.3
         See `terrain_density` (m).
+    terrain_grow_radius : float or None, default None
+        Surface-growing radius of the terrain pass (m); None = `grow_radius` scaled
+        by the cell ratio sqrt(`filter_density` / `terrain_density`) when that is
+        given, else estimated on the terrain pass's own cells as `grow_radius` is on
+        the fine ones. A catalog gives both radii, estimated once on the whole
+        catalog, so every chunk grows the surfaces one in-memory run would.
     facade_distance : float, default 0.0
         Façade segments on trial (m; 0 = off, Lin & Zhang's rule: every point of a
         façade segment is an object). Points of segments flagged as façades by
@@ -312,6 +318,7 @@ class SegmentPTD(TINParameters):
     join_distance: float = 0.15
     terrain_density: float = 0.0
     terrain_distance: float = 0.3
+    terrain_grow_radius: float | None = None
     facade_distance: float = 0.0
     roof_ratio: float = 0.0
 
@@ -347,6 +354,8 @@ class SegmentPTD(TINParameters):
         check_positive(self.join_distance, "join_distance", allow_zero=True)
         check_range(self.terrain_density, "terrain_density", 0.0, MAX_FILTER_DENSITY)
         check_positive(self.terrain_distance, "terrain_distance", allow_zero=True)
+        if self.terrain_grow_radius is not None:
+            check_positive(self.terrain_grow_radius, "terrain_grow_radius")
         check_positive(self.facade_distance, "facade_distance", allow_zero=True)
         check_range(self.roof_ratio, "roof_ratio", 0.0, 1.0)
         if int(self.connect_min_size) != self.connect_min_size or self.connect_min_size < 0:
@@ -465,11 +474,12 @@ class SegmentPTD(TINParameters):
         fine = (0.0, 0.97)
         if 0 < self.terrain_density < self.filter_density:
             # a given growing radius is the fine cells'; the coarse cells are wider
-            gr = self.grow_radius
-            if gr is not None:
-                gr = gr * math.sqrt(self.filter_density / self.terrain_density)
+            gr = self.terrain_grow_radius
+            if gr is None and self.grow_radius is not None:
+                gr = self.grow_radius * math.sqrt(self.filter_density / self.terrain_density)
             coarse = replace(
-                self, filter_density=self.terrain_density, terrain_density=0.0, grow_radius=gr
+                self, filter_density=self.terrain_density, terrain_density=0.0, grow_radius=gr,
+                terrain_grow_radius=None,
             )
             terrain = coarse.run(pts, candidates=cand, progress=stage(progress, 0.0, 0.3))
             fine = (0.3, 0.97)

@@ -114,6 +114,7 @@ LABELS: dict[str, Label] = {
     "min_facade_points": _l("points a façade segment needs"),
     "grow_radius": _l("surface-growing radius", M),
     "grow_radius_factor": _l("surface-growing radius / point spacing"),
+    "terrain_grow_radius": _l("surface-growing radius of the terrain pass", M),
     "point_spacing": _l("point spacing (step edges' scale)", M),
     "max_segment_density": _l("cloud thinned for segmentation above", "pts/m²"),
     "grow_dist": _l("surface-growing distance to the plane", M),

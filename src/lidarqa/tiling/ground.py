@@ -580,17 +580,25 @@ def ground_catalog(
         raise OptionError(f"invalid parameter for method {method!r}: {exc}") from None
     if buffer is None:
         buffer = ground_buffer(catalog, cell_size=float(filt.cell_size))
-    if isinstance(filt, SegmentPTD) and filt.grow_radius is None:  # method segment-ptd
+    if isinstance(filt, SegmentPTD):  # method segment-ptd
         # one surface-growing radius for the whole catalog, as one in-memory run would
-        # estimate it, instead of one per chunk (see catalog_grow_radius)
-        full_params["grow_radius"] = catalog_grow_radius(
-            catalog,
-            last_returns_only=bool(last_returns_only),
-            exclude_classes=tuple(exclude_classes or ()),
-            factor=float(filt.grow_radius_factor),
-            sample=None if sample is None else sample[0],
-            filter_density=float(filt.filter_density),
-        )
+        # estimate it, instead of one per chunk (see catalog_grow_radius); the same for
+        # the terrain pass's radius, estimated on its own cells
+        def radius(density: float) -> float:
+            return catalog_grow_radius(
+                catalog,
+                last_returns_only=bool(last_returns_only),
+                exclude_classes=tuple(exclude_classes or ()),
+                factor=float(filt.grow_radius_factor),
+                sample=None if sample is None else sample[0],
+                filter_density=density,
+            )
+
+        terrain = 0 < filt.terrain_density < filt.filter_density
+        if (terrain and filt.terrain_grow_radius is None and filt.grow_radius is None):
+            full_params["terrain_grow_radius"] = radius(float(filt.terrain_density))
+        if filt.grow_radius is None:
+            full_params["grow_radius"] = radius(float(filt.filter_density))
     # Seed cells are laid from the south-west corner of the filter's input: snap every
     # buffered box to the seed grid of the whole catalog (see make_chunks).
     bx, by = catalog.bounds[:2]
