@@ -120,6 +120,7 @@ def test_network_with_a_loop_adjusts_redundant_pairs():
     assert np.abs(d13 - d12 - d23).max() < 0.01
 
 
+@pytest.mark.slow  # ~30 s: 1000 Monte Carlo strip pairs
 def test_sigma_calibrated_by_monte_carlo():
     """Reported σ over the empirical spread of 600 independent scenes: within [0.9, 1.1]."""
     truth = [[0.0, 0.0, 0.0], [0.03, -0.02, 0.02]]

@@ -63,6 +63,7 @@ def jobs(world, tmp_path_factory):
     return cmds, durations
 
 
+@pytest.mark.slow  # ~25 s: 12 jobs killed mid-run
 @settings(max_examples=12, deadline=None, suppress_health_check=list(HealthCheck))
 @given(
     name=st.sampled_from(["polar", "ground", "assess"]),

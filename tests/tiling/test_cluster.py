@@ -117,6 +117,7 @@ def _digests(paths) -> list[str]:
     return [hashlib.sha256(Path(p).read_bytes()).hexdigest() for p in paths]
 
 
+@pytest.mark.slow  # ~30 s: a scheduler, two workers, one killed
 def test_cluster_outputs_equal_local_runs_and_survive_a_killed_worker(
     scene_tiles, small_runs, cluster, tmp_path
 ):

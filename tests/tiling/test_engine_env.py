@@ -19,6 +19,7 @@ def test_workers_keep_glibc_malloc_thresholds_and_one_thread():
     if "MALLOC_TRIM_THRESHOLD_" in os.environ:
         pytest.skip("this process sets MALLOC_TRIM_THRESHOLD_ itself: workers inherit it")
     with Engine(workers=1) as eng:
+        eng.start()  # a LocalCluster starts on first use
         # os.getenv pickles by reference (a function of this test module would need the
         # workers to import the tests)
         env = {}

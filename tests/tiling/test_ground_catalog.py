@@ -187,7 +187,11 @@ def test_cli_ground_on_a_folder(scene_tiles, tmp_path):
     )
 
 
-@pytest.mark.parametrize("bad", [{"workers": -1}, {"scheduler": "tcp://127.0.0.1:1"}])
+@pytest.mark.parametrize("bad", [
+    {"workers": -1},
+    # ~20 s: the client tries the address until its 20 s connection timeout
+    pytest.param({"scheduler": "tcp://127.0.0.1:1"}, marks=pytest.mark.slow),
+])
 def test_bad_engine_options_leave_nothing_at_the_output(scene_tiles, tmp_path, bad):
     """Found by the fuzz suite: --workers -1 left OUT/.lidarqa-work/run.json behind."""
     from lidarqa.errors import LidarQAError

@@ -113,9 +113,7 @@ def catalog_engine(cat_opts: dict[str, Any]) -> Iterator[Any]:
     scheduler, workers = cat_opts.get("scheduler"), cat_opts.get("workers")
     eng = Engine("serial") if scheduler is None and workers == 1 else \
         Engine(scheduler, workers=workers)
-    with sigterm_as_interrupt(), eng:
-        if eng.dashboard_link and not settings().quiet:
-            click.echo(f"Dask dashboard: {eng.dashboard_link}", err=True)
+    with sigterm_as_interrupt(), eng:  # the progress bar prints the dashboard's address
         yield eng
 
 

@@ -223,7 +223,20 @@ class Engine:
         self.cluster = None
 
     def __enter__(self) -> Engine:
-        return self.start()
+        # a scheduler address is connected to at once (a bad address fails before any
+        # work); a LocalCluster starts when a job first has two or more items to run
+        return self.start() if self.scheduler not in (None, "serial") else self
+
+    def runs_here(self, n_items: int) -> bool:
+        """True when `n_items` run in this process rather than on Dask workers.
+
+        Serial engines always; a LocalCluster not yet started for one item (starting
+        worker processes costs seconds, one item gains nothing from them). The results
+        are the same either way.
+        """
+        return self.serial or (
+            n_items <= 1 and self.scheduler is None and self.client is None
+        )
 
     def __exit__(self, *exc: object) -> None:
         self.close()
@@ -399,11 +412,13 @@ def run_chunks(
             oc = ChunkOutcome(oc.chunk, oc.ok, None, oc.error, oc.attempts, oc.skipped)
         outcomes[i] = oc
 
+    here = engine.runs_here(len(chunks))
     try:
-        engine.start()
+        if not here:
+            engine.start()
         bar = _Progress(len(chunks), progress, description, engine.dashboard_link)
         try:
-            if engine.serial:
+            if here:
                 for i in order:
                     attempts = 0
                     while True:
@@ -571,11 +586,13 @@ def run_tasks(
     own = engine is None
     engine = engine or Engine("serial")
     results: list[Any] = [None] * len(items)
+    here = engine.runs_here(len(items))
     try:
-        engine.start()
+        if not here:
+            engine.start()
         bar = _Progress(len(items), progress, description, engine.dashboard_link)
         try:
-            if engine.serial:
+            if here:
                 for i, item in enumerate(items):
                     try:
                         results[i] = func(*item)
