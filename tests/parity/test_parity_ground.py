@@ -7,11 +7,11 @@ when written: the six IGN 50 m tiles as a folder in chunks of 100 m or 50 m (6 c
 of ``lasR-bcts/bcts_2`` in 4 chunks of 50 m (each chunk's buffer reaches the whole block)
 on 100 %: it was 98.8 % while the terrain pass of a catalog grew its surfaces with the
 fine radius scaled and the in-memory run with its own estimate (the catalog now gives
-both radii). All of bcts_2 in 4 chunks of 150 m agrees on 98.39 %, short of the issue's 99.9 %: there segment-PTD's
-segments and TIN densification under canopy reach beyond a chunk's buffer (one
-segment of the terrain pass spans most of the tile, and its decision flips with the
-part a chunk sees). That test records the floor and is an expected failure against
-the target until the filter is made local.
+both radii). All of bcts_2 in 4 chunks of 150 m agrees on 98.39 %, short of the
+issue's 99.9 %: there segment-PTD's segments and TIN densification under canopy reach
+beyond a chunk's buffer (one segment of the terrain pass spans most of the tile, and
+its decision flips with the part a chunk sees). That test records the floor and is an
+expected failure against the target until the filter is made local.
 """
 
 from __future__ import annotations

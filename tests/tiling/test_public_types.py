@@ -14,9 +14,9 @@ import lidarqa.tiling
 
 TILING = Path(lidarqa.tiling.__file__).parent
 
-# Being split by issue #26: their public signatures still use Any; drop each name here
-# when its module is typed.
-PENDING = {"jobs_api.py", "jobs_lines.py", "jobs_vector.py"}
+# Being split by issue #26: its public signatures still use Any; drop the name here
+# when the module is typed.
+PENDING = {"jobs_api.py"}
 
 
 def _public(name: str) -> bool:

@@ -26,7 +26,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from itertools import combinations
-from typing import Any, cast
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -35,11 +35,19 @@ from ..errors import CRSMismatchError, InvalidPointsError, LidarQAError
 from ..io.vector import Segments
 from .jobs_vector import merge_vector_parts, vector_features
 
+if TYPE_CHECKING:
+    from ._types import Tiles
+    from .engine import ChunkData
+    from .source import Source
+
+#: Per strip: (segment options, edge options, point spacing m), see :func:`strip_options`.
+StripOptions = dict[int, tuple[dict[str, object], dict[str, object], float]]
+
 __all__ = ["StripEdgesTask", "merge_strip_edges", "strip_options", "strip_pairs",
            "strip_samples"]
 
 
-def strip_samples(source: Any, *, side: float = 100.0, min_points: int = 100,
+def strip_samples(source: Source, *, side: float = 100.0, min_points: int = 100,
                   max_side: float = 1600.0) -> dict[int, np.ndarray]:
     """``{strip id: x, y, z}``: each strip's selected points in the sample window.
 
@@ -77,9 +85,9 @@ def strip_samples(source: Any, *, side: float = 100.0, min_points: int = 100,
 
 
 def strip_options(samples: dict[int, np.ndarray], *,
-                  segment_options: dict[str, Any] | None = None,
-                  edge_options: dict[str, Any] | None = None,
-                  ) -> dict[int, tuple[dict[str, Any], dict[str, Any], float]]:
+                  segment_options: dict[str, object] | None = None,
+                  edge_options: dict[str, object] | None = None,
+                  ) -> StripOptions:
     """Per strip: (segment options, edge options, point spacing m) fixed from its sample.
 
     The growing radius and support distance left unset are measured on the
@@ -90,7 +98,7 @@ def strip_options(samples: dict[int, np.ndarray], *,
     from ..geometry.segmentation import point_spacing
     from .jobs_vector import fixed_auto_options
 
-    out = {}
+    out: StripOptions = {}
     for s, pts in samples.items():
         seg, opts = fixed_auto_options(pts, segment_options=segment_options, options=edge_options)
         sp = point_spacing(np.asarray(pts, dtype=np.float64)) if len(pts) else float("nan")
@@ -123,20 +131,20 @@ class StripEdgesTask:
 
     classes: tuple[int, ...] | None = None
     source_ids: tuple[int, ...] | None = None
-    segment_options: dict[str, Any] = field(default_factory=dict)
-    edge_options: dict[str, Any] = field(default_factory=dict)
+    segment_options: dict[str, object] = field(default_factory=dict)
+    edge_options: dict[str, object] = field(default_factory=dict)
     min_points: int = 30
-    strips: dict[int, tuple[dict[str, Any], dict[str, Any], float]] = field(
-        default_factory=dict)
+    strips: StripOptions = field(default_factory=dict)
     margin: float | None = None
 
-    def buffer(self, source: Any) -> float:
+    def buffer(self, source: Tiles) -> float:
         """The margin (m) read around each chunk (:attr:`margin`)."""
         from .chunks import DEFAULT_BUFFER
 
         return float(DEFAULT_BUFFER if self.margin is None else self.margin)
 
-    def __call__(self, chunk_data: Any) -> tuple[str, dict[int, Segments]]:
+    def __call__(self, chunk_data: ChunkData) -> tuple[str, dict[int, Segments]]:
+        """Edges per strip of one chunk (its buffer read too), anchored in its core."""
         from .jobs_vector import fixed_auto_options
 
         cloud = chunk_data.cloud
@@ -192,7 +200,7 @@ def merge_strip_edges(
 
 
 def strip_pairs(strips: dict[int, Segments], *, shared_threshold: bool = False,
-                **match_options: Any) -> list[dict[str, Any]]:
+                **match_options: object) -> list[dict[str, object]]:
     """Match every pair of strips both ways: rows like ``lidarqa repeatability``.
 
     Parameters
@@ -224,13 +232,14 @@ def strip_pairs(strips: dict[int, Segments], *, shared_threshold: bool = False,
     from ..accuracy.lines import match_segments, match_strips
     from ..errors import OptionError
 
+    opts: dict[str, Any] = dict(match_options)  # checked by match_segments
     pairs = list(combinations(sorted(strips), 2))
     if shared_threshold:
-        if match_options.get("threshold") is not None:
+        if opts.get("threshold") is not None:
             raise OptionError("--shared-threshold computes the threshold; do not also give "
                               "--threshold")
-        knee_opts = {k: match_options[k] for k in ("weight", "sensitivity", "rotate")
-                     if k in match_options}
+        knee_opts = {k: opts[k] for k in ("weight", "sensitivity", "rotate")
+                     if k in opts}
         knees = []
         for a, b in pairs:
             try:
@@ -241,12 +250,12 @@ def strip_pairs(strips: dict[int, Segments], *, shared_threshold: bool = False,
                                       (r0.threshold_mt, r0.threshold_found_mt)) if ok]
         if not knees:
             raise OptionError("--shared-threshold: no pair has an automatic threshold (no knee)")
-        match_options = {**match_options, "threshold": float(np.median(knees))}
-    rows: list[dict[str, Any]] = []
+        opts = {**opts, "threshold": float(np.median(knees))}
+    rows: list[dict[str, object]] = []
     for a, b in pairs:
-        row: dict[str, Any] = {"test": str(a), "model": str(b)}
+        row: dict[str, object] = {"test": str(a), "model": str(b)}
         try:
-            row.update(match_strips(strips[a], strips[b], **match_options))
+            row.update(match_strips(strips[a], strips[b], **opts))
         except CRSMismatchError:
             raise
         except LidarQAError as exc:

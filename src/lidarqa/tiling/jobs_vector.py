@@ -35,13 +35,24 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.spatial import cKDTree
 
 from ..errors import InvalidPointsError, OptionError
 from ..io.vector import PointSet, Segments
+
+if TYPE_CHECKING:
+    from pyproj import CRS
+
+    from ._types import Tiles
+    from .chunks import Chunk
+    from .engine import ChunkData
+
+    #: A chunk, or a plain half-open core ``(xmin, ymin, xmax, ymax)``.
+    Where = Chunk | Sequence[float]
 
 __all__ = [
     "VectorTask",
@@ -59,7 +70,7 @@ __all__ = [
 KINDS = ("planes", "edges", "corners")
 
 
-def in_core(xy: Any, core: Sequence[float]) -> np.ndarray:
+def in_core(xy: ArrayLike, core: Sequence[float]) -> np.ndarray:
     """Mask of points inside a half-open core ``[xmin, xmax) x [ymin, ymax)``.
 
     Parameters
@@ -73,12 +84,13 @@ def in_core(xy: Any, core: Sequence[float]) -> np.ndarray:
     >>> in_core([[0, 0], [1, 0.5], [0.5, 1]], (0, 0, 1, 1)).tolist()
     [True, False, False]
     """
-    p = np.asarray(xy, dtype=np.float64).reshape(len(xy), -1) if len(xy) else np.empty((0, 2))
+    p = np.asarray(xy, dtype=np.float64)
+    p = p.reshape(len(p), -1) if p.size else np.empty((0, 2))
     x0, y0, x1, y1 = (float(v) for v in core)
     return (p[:, 0] >= x0) & (p[:, 0] < x1) & (p[:, 1] >= y0) & (p[:, 1] < y1)
 
 
-def owned(xy: Any, where: Any) -> np.ndarray:
+def owned(xy: ArrayLike, where: Where) -> np.ndarray:
     """Mask of the points `xy` owned by a chunk: in its core by the engine's own rule.
 
     `where` is a chunk (its ``core_mask`` decides, the rule the catalog engine
@@ -87,10 +99,10 @@ def owned(xy: Any, where: Any) -> np.ndarray:
     """
     p = np.asarray(xy, dtype=np.float64)
     p = p.reshape(len(p), -1) if len(p) else np.empty((0, 2))
-    mask = getattr(where, "core_mask", None)
-    if mask is not None:
-        return np.asarray(mask(p), dtype=bool)
-    return in_core(p, getattr(where, "core", where))
+    if isinstance(where, Sequence):
+        return in_core(p, where)
+    mask = getattr(where, "core_mask", None)  # anything with a `core` box will do
+    return np.asarray(mask(p), dtype=bool) if mask is not None else in_core(p, where.core)
 
 
 def _anchors(features: Segments | PointSet) -> np.ndarray:
@@ -99,7 +111,7 @@ def _anchors(features: Segments | PointSet) -> np.ndarray:
     return features.xyz
 
 
-def keep_anchored(features: Segments | PointSet, core: Any) -> Segments | PointSet:
+def keep_anchored(features: Segments | PointSet, core: Where) -> Segments | PointSet:
     """The features whose anchor (segment midpoint, or point) lies in `core` (see :func:`owned`)."""
     return features.subset(np.flatnonzero(owned(_anchors(features), core)))
 
@@ -167,7 +179,7 @@ def merge_vector_parts(
     parts: Sequence[tuple[str, Segments | PointSet] | None],
     *,
     tolerance: float = 0.05,
-    crs: Any = None,
+    crs: CRS | None = None,
 ) -> Segments | PointSet:
     """Concatenate per-chunk features (already anchored), dedupe and number them canonically.
 
@@ -225,12 +237,12 @@ def merge_vector_parts(
 
 
 def fixed_auto_options(
-    points: Any,
+    points: np.ndarray,
     *,
     kind: str = "edges",
-    segment_options: dict[str, Any] | None = None,
-    options: dict[str, Any] | None = None,
-) -> tuple[dict[str, Any], dict[str, Any]]:
+    segment_options: dict[str, object] | None = None,
+    options: dict[str, object] | None = None,
+) -> tuple[dict[str, object], dict[str, object]]:
     """Fix the data-driven defaults once for a whole catalog.
 
     Plane segmentation's growing radius (2 x the point spacing), the edges'
@@ -264,9 +276,9 @@ def fixed_auto_options(
 
 
 def feature_buffer(
-    points: Any,
+    points: np.ndarray,
     *,
-    segment_options: dict[str, Any] | None = None,
+    segment_options: dict[str, object] | None = None,
     spacings: float = 4.0,
     cap: float | None = None,
 ) -> float:
@@ -306,7 +318,8 @@ def feature_buffer(
     pts = as_points(points) if len(points) else np.zeros((0, 3))
     if len(pts) < 30:
         return top
-    seg = segment_planes(pts, **(segment_options or {}))
+    seg_kw: dict[str, Any] = dict(segment_options or {})  # checked by segment_planes
+    seg = segment_planes(pts, **seg_kw)
     sp = seg.parameters.get("point_spacing")
     sp = float(sp) if sp is not None and np.isfinite(sp) else 1.0
     extent = 0.0
@@ -339,10 +352,10 @@ def vector_features(
     points: np.ndarray,
     *,
     kind: str,
-    core: Any = None,
-    segment_options: dict[str, Any] | None = None,
-    options: dict[str, Any] | None = None,
-    crs: Any = None,
+    core: Where | None = None,
+    segment_options: dict[str, object] | None = None,
+    options: dict[str, object] | None = None,
+    crs: CRS | None = None,
     box: Sequence[float] | None = None,
 ) -> Segments | PointSet:
     """Planes, edges or corners of (buffered) points, keeping those anchored in `core`.
@@ -374,7 +387,8 @@ def vector_features(
 
     kind = check_choice(kind, KINDS, "kind")
     pts = as_points(points)
-    opts = dict(options or {})
+    opts: dict[str, Any] = dict(options or {})  # checked by the extractors
+    seg_kw: dict[str, Any] = dict(segment_options or {})
     if len(pts) < 3:
         empty: Segments | PointSet = (Segments(np.zeros(0, np.int64), np.zeros((0, 3)),
                                                np.zeros((0, 3)), crs=crs) if kind == "edges"
@@ -385,7 +399,7 @@ def vector_features(
         return empty
     from ..geometry.segmentation import segment_planes
 
-    seg = segment_planes(pts, **(segment_options or {}))
+    seg = segment_planes(pts, **seg_kw)
     if kind == "planes":
         feats: Segments | PointSet = _planes_pointset(seg, crs)
     elif kind == "edges":
@@ -458,12 +472,12 @@ class VectorTask:
     kind: str
     classes: tuple[int, ...] | None = None
     source_id: tuple[int, ...] | None = None
-    segment_options: dict[str, Any] = field(default_factory=dict)
-    options: dict[str, Any] = field(default_factory=dict)
+    segment_options: dict[str, object] = field(default_factory=dict)
+    options: dict[str, object] = field(default_factory=dict)
     bounds: tuple[float, float, float, float] | None = None
     margin: float | None = None
 
-    def buffer(self, source: Any) -> float:
+    def buffer(self, source: Tiles) -> float:
         """The margin (m) read around each chunk: :attr:`margin` (see :func:`feature_buffer`)."""
         from .chunks import DEFAULT_BUFFER
 
@@ -473,7 +487,8 @@ class VectorTask:
         if self.kind not in KINDS:
             raise OptionError(f"kind must be one of {', '.join(KINDS)}, got {self.kind!r}")
 
-    def __call__(self, chunk_data: Any) -> tuple[str, Segments | PointSet]:
+    def __call__(self, chunk_data: ChunkData) -> tuple[str, Segments | PointSet]:
+        """Features of one chunk (its buffer read too) anchored in its core, by chunk id."""
         cloud = chunk_data.cloud
         if self.classes or self.source_id:
             cloud = cloud.select(classes=self.classes, source_id=self.source_id)
