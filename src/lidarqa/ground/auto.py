@@ -74,7 +74,8 @@ __all__ = [
     "auto_parameters",
     "SENSORS",
     "DENSE_ALS",
-    "MLS_DENSITY",
+    "MLS_CONCENTRATION",
+    "CONCENTRATION_FACTOR",
     "FILTER_DENSITY",
     "FILTER_MIN_EDGE",
     "TERRAIN_DENSITY",
@@ -98,8 +99,14 @@ TERRAIN_DENSITY = 0.5
 #: minimum TIN edge (m) of the filter on the thinned cloud (TIN vertices on 1.4 m cells
 #: over its 0.5 m cells): the same decisions, 30 % less work than Table 1's 1 m
 FILTER_MIN_EDGE = 2.0
-#: points/m² above which a cloud without a scan angle is taken for a mobile scan
-MLS_DENSITY = 100.0
+#: a grid cell of the density grid is crowded when it holds more than this many times
+#: the median count of the occupied cells (two or three overlapping airborne strips
+#: give 2-3 times; see :attr:`CloudMeasures.concentration`)
+CONCENTRATION_FACTOR = 4.0
+#: share of the points in crowded cells above which a cloud without a scan angle is
+#: taken for a ground-based (mobile or terrestrial) scan: airborne files measure at
+#: most 0.17, ground-based ones at least 0.57 (see the module notes)
+MLS_CONCENTRATION = 1.0 / 3.0
 #: height (m) above the opened lowest-point surface from which a cell is "raised"
 _RAISED = 2.5
 #: opening window (m) for the terrain approximation of the footprint measure
@@ -120,6 +127,13 @@ class CloudMeasures:
         Mean point spacing 1/sqrt(density), m.
     occupied_area : float
         Area of the occupied grid cells, m².
+    concentration : float
+        Share of the points in crowded cells of the density grid: cells holding more
+        than :data:`CONCENTRATION_FACTOR` times the median count of the occupied
+        cells. Airborne strips sample the ground almost evenly (overlaps double the
+        count), so it is near 0; a ground-based scanner's density falls steeply with
+        the range from its trajectory or station, so most of its points lie in a few
+        crowded cells.
     has_returns : bool
         Return numbers were recorded.
     multi_return_share : float
@@ -140,6 +154,7 @@ class CloudMeasures:
     density: float
     spacing: float
     occupied_area: float
+    concentration: float
     has_returns: bool
     multi_return_share: float
     scan_angle_max: float
@@ -157,19 +172,23 @@ class CloudMeasures:
         }
 
 
-def _grid_density(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
-    """(density per m², occupied area m²) from a grid of about 50 points per cell.
+def _grid_density(x: np.ndarray, y: np.ndarray) -> tuple[float, float, float]:
+    """(density per m², occupied area m², concentration) from a grid of about 50 points per cell.
 
-    `x`, `y` are contiguous and start at 0.
+    `x`, `y` are contiguous and start at 0. The concentration is the share of the
+    points in cells holding more than :data:`CONCENTRATION_FACTOR` times the median
+    count of the occupied cells.
     """
     n = x.size
     span = max(float(x.max()), 1e-9) * max(float(y.max()), 1e-9)
     cell = math.sqrt(50.0 * span / n)
     if not cell > 0:
-        return math.nan, 0.0
+        return math.nan, 0.0, math.nan
     counts = np.bincount(grid_keys(x, y, cell, 0.0, 0.0, int(float(y.max()) / cell) + 1))
     counts = counts[counts > 0]
-    return float(np.median(counts)) / (cell * cell), float(counts.size * cell * cell)
+    med = float(np.median(counts))
+    crowded = float(counts[counts > CONCENTRATION_FACTOR * med].sum()) / float(counts.sum())
+    return med / (cell * cell), float(counts.size * cell * cell), crowded
 
 
 def _min_raster(x: np.ndarray, y: np.ndarray, z: np.ndarray, cell: float) -> np.ndarray:
@@ -226,13 +245,13 @@ def measure_cloud(points: Any, *, fields: dict | None = None) -> CloudMeasures:
     n = xyz.shape[0]
     nan = math.nan
     if n < 10:
-        return CloudMeasures(n, nan, nan, 0.0, False, nan, nan, "als", nan, nan, 0.0, 0.0)
+        return CloudMeasures(n, nan, nan, 0.0, nan, False, nan, nan, "als", nan, nan, 0.0, 0.0)
     x = np.ascontiguousarray(xyz[:, 0])
     y = np.ascontiguousarray(xyz[:, 1])
     z = np.ascontiguousarray(xyz[:, 2])
     x = x - x.min()  # new arrays: the input is never modified
     y = y - y.min()
-    density, area = _grid_density(x, y)
+    density, area, concentration = _grid_density(x, y)
     spacing = 1.0 / math.sqrt(density) if density > 0 else nan
     nr = fields.get("number_of_returns")
     rn = fields.get("return_number")
@@ -250,7 +269,7 @@ def measure_cloud(points: Any, *, fields: dict | None = None) -> CloudMeasures:
     if math.isfinite(angle_max) and angle_max > 0:
         sensor = "mls" if angle_max > 60.0 else "als"
     else:
-        sensor = "mls" if density > MLS_DENSITY else "als"
+        sensor = "mls" if concentration > MLS_CONCENTRATION else "als"
     # terrain slopes and object footprints from the lowest-point raster
     cell = max(1.0, 2.0 * spacing) if math.isfinite(spacing) else 1.0
     zmin = _min_raster(x, y, z, cell)
@@ -287,6 +306,7 @@ def measure_cloud(points: Any, *, fields: dict | None = None) -> CloudMeasures:
         density=float(density),
         spacing=float(spacing),
         occupied_area=area,
+        concentration=float(concentration),
         has_returns=bool(has_ret),
         multi_return_share=multi,
         scan_angle_max=angle_max,
@@ -378,7 +398,10 @@ def regime_reason(measures: CloudMeasures, regime: str, *, sensor: str = "auto")
         kind = f"measured scan angle up to {_fmt(m.scan_angle_max)}° ({cmp} 60°)"
     else:
         cmp = ">" if m.sensor == "mls" else "<="
-        kind = f"no scan angle, density {cmp} {MLS_DENSITY:g} pts/m²"
+        kind = (
+            f"no scan angle, {_fmt(m.concentration)} of the points in crowded cells "
+            f"({cmp} {MLS_CONCENTRATION:.2g})"
+        )
     if regime == "mls":
         return f"mobile scan ({kind}); {dens}"
     cmp = "<" if regime == "als-sparse" else ">="
