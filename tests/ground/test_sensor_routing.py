@@ -16,7 +16,7 @@ import pytest
 from datapaths import SHARED, needs_shared
 
 from lidarqa.ground import auto_parameters, classify_ground, measure_cloud
-from lidarqa.ground.auto import MLS_CONCENTRATION
+from lidarqa.ground.auto import MLS_CONCENTRATION, MLS_DENSITY
 from lidarqa.io.las import read_las
 from lidarqa.testing import make_scene, make_strip_scene
 
@@ -104,6 +104,16 @@ def test_reason_names_the_figure_and_a_scan_angle_still_decides_first():
     assert r.regime == "mls"
     assert "crowded cells" in r.regime_reason and "(> 33 %, MLS_CONCENTRATION)" in r.regime_reason
     assert r.to_dict()["measured"]["concentration"] == pytest.approx(r.measures.concentration)
+    # an even cloud denser than MLS_DENSITY is still taken for ground-based (a part of a
+    # scan far from the scanner), and the reason says which figure chose it
+    rng = np.random.default_rng(7)
+    even = np.column_stack([rng.uniform(0, 20, (60_000, 2)), rng.normal(0, 0.01, 60_000)])
+    m = measure_cloud(even)
+    assert m.density > MLS_DENSITY and m.concentration < 0.05 and m.sensor == "mls"
+    from lidarqa.ground.auto import regime_reason
+
+    assert "but density > 100 pts/m² (MLS_DENSITY)" in regime_reason(m, "mls")
+    assert ", density <= 100" in regime_reason(measure_cloud(even[:8000]), "als-dense")
     # a recorded airborne scan angle is direct evidence and wins over the figure
     narrow = measure_cloud(pts, fields={"scan_angle_rank": np.full(len(pts), 15, np.int8)})
     assert narrow.sensor == "als" and narrow.concentration > MLS_CONCENTRATION

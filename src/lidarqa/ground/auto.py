@@ -35,9 +35,12 @@ The rules, in short:
   filtered as mobile scans, mean total error 1.09 % to 0.99 % (now better than
   CSF at PDAL's defaults on every chunk: chunk ah 4.05 % to 1.31 %, CSF 2.53 %;
   six chunks lose 0.1–0.5 percentage points); every other family keeps its regime
-  and so its labels. It replaces a
-  density threshold (100 points/m² without a scan angle) that took every Oakland
-  chunk for airborne and would take a dense drone flight for a mobile scan. A
+  and so its labels. Denser clouds than :data:`MLS_DENSITY` (100 points/m²)
+  without a scan angle stay ground-based whatever their concentration, as they
+  were: a part of a scan far from the scanner can be even (a quarter of PDAL's
+  lone-star scan measures 0.15 at 517 points/m²; the octree nodes of its EPT copy,
+  thinned to an even density level by level, 0–0.4); a drone flight that dense
+  without a scan angle is taken for ground-based too (no such file measured). A
   `sensor` hint overrides the measurement.
 - **Density regime** (airborne). Below :data:`DENSE_ALS` points/m² a segment of a
   few points cannot show whether it is vegetation (scatterness needs about ten
@@ -95,6 +98,7 @@ __all__ = [
     "SENSORS",
     "DENSE_ALS",
     "MLS_CONCENTRATION",
+    "MLS_DENSITY",
     "CONCENTRATION_FACTOR",
     "FILTER_DENSITY",
     "FILTER_MIN_EDGE",
@@ -127,6 +131,9 @@ CONCENTRATION_FACTOR = 4.0
 #: taken for a ground-based (mobile or terrestrial) scan: airborne files measure at
 #: most 0.17, ground-based ones at least 0.57 (see the module notes)
 MLS_CONCENTRATION = 1.0 / 3.0
+#: points/m² above which a cloud without a scan angle is taken for a ground-based scan
+#: whatever its concentration (a part of a scan far from the scanner can be even)
+MLS_DENSITY = 100.0
 #: height (m) above the opened lowest-point surface from which a cell is "raised"
 _RAISED = 2.5
 #: opening window (m) for the terrain approximation of the footprint measure
@@ -289,7 +296,8 @@ def measure_cloud(points: Any, *, fields: dict | None = None) -> CloudMeasures:
     if math.isfinite(angle_max) and angle_max > 0:
         sensor = "mls" if angle_max > 60.0 else "als"
     else:
-        sensor = "mls" if concentration > MLS_CONCENTRATION else "als"
+        crowded = concentration > MLS_CONCENTRATION
+        sensor = "mls" if crowded or density > MLS_DENSITY else "als"
     # terrain slopes and object footprints from the lowest-point raster
     cell = max(1.0, 2.0 * spacing) if math.isfinite(spacing) else 1.0
     zmin = _min_raster(x, y, z, cell)
@@ -417,11 +425,18 @@ def regime_reason(measures: CloudMeasures, regime: str, *, sensor: str = "auto")
         cmp = ">" if m.sensor == "mls" else "<="
         kind = f"measured scan angle up to {_fmt(m.scan_angle_max)}° ({cmp} 60°)"
     else:
-        cmp = ">" if m.sensor == "mls" else "<="
+        crowded = m.concentration > MLS_CONCENTRATION
         kind = (
             f"no scan angle, {_fmt(100.0 * m.concentration)} % of the points in crowded "
-            f"cells ({cmp} {100.0 * MLS_CONCENTRATION:.0f} %, MLS_CONCENTRATION)"
+            f"cells ({'>' if crowded else '<='} {100.0 * MLS_CONCENTRATION:.0f} %, "
+            "MLS_CONCENTRATION)"
         )
+        if not crowded:
+            dense = m.density > MLS_DENSITY
+            kind += (
+                f"{' but' if dense else ','} density {'>' if dense else '<='} "
+                f"{MLS_DENSITY:g} pts/m² (MLS_DENSITY)"
+            )
     if regime == "mls":
         return f"mobile scan ({kind}); {dens}"
     cmp = "<" if regime == "als-sparse" else ">="
