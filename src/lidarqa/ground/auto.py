@@ -18,30 +18,31 @@ ISPRS samples that also score it), not measured on the cloud being filtered.
 The rules, in short:
 
 - **Sensor.** Ground-based scans (mobile or terrestrial) get Lin & Zhang's Table 1
-  (the library defaults, regime ``mls``). A recorded scan angle decides first (a
-  range beyond ±60° is ground-based). Without one, the geometry decides: a
-  ground-based scanner's density falls steeply with the range from its trajectory
-  or station, so most of its points crowd a few cells, while airborne strips
-  sample the ground almost evenly (an overlap doubles the count). The measured
-  figure is the *concentration*, the share of the points in cells of the density
-  grid (about 50 points per cell) that hold more than :data:`CONCENTRATION_FACTOR`
-  (4) times the median count of the occupied cells; above
-  :data:`MLS_CONCENTRATION` (a third) the scan is ground-based. Measured: the
-  eight Oakland mobile-scanning chunks 0.57–0.88 and PDAL's lone-star terrestrial
-  scan 0.67; the 15 ISPRS samples 0–0.17, the IGN tiles, BC forest tiles, Autzen
-  and lidR plots 0–0.004, the synthetic airborne scenes of :mod:`lidarqa.testing`
-  (walls sampled as densely as the ground included) 0–0.15. Effect: the Oakland
-  chunks (no scan angle, 6–43 points/m², so far filtered as dense airborne) are
-  filtered as mobile scans, mean total error 1.09 % to 0.99 % (now better than
-  CSF at PDAL's defaults on every chunk: chunk ah 4.05 % to 1.31 %, CSF 2.53 %;
-  six chunks lose 0.1–0.5 percentage points); every other family keeps its regime
-  and so its labels. Denser clouds than :data:`MLS_DENSITY` (100 points/m²)
-  without a scan angle stay ground-based whatever their concentration, as they
-  were: a part of a scan far from the scanner can be even (a quarter of PDAL's
-  lone-star scan measures 0.15 at 517 points/m²; the octree nodes of its EPT copy,
-  thinned to an even density level by level, 0–0.4); a drone flight that dense
-  without a scan angle is taken for ground-based too (no such file measured). A
-  `sensor` hint overrides the measurement.
+  (the library defaults, regime ``mls``). A recorded scan angle decides first (a range
+  beyond ±60° is ground-based). Without one, the geometry decides: a ground-based
+  scanner's density falls steeply with the range from its trajectory or station, so
+  most of its points crowd a few cells, while airborne strips sample the ground almost
+  evenly (an overlap doubles the count). The measured figure is the *concentration*,
+  the share of the points in cells of the density grid (about 50 points per cell) that
+  hold more than :data:`CONCENTRATION_FACTOR` (4) times the median count of the
+  occupied cells; above :data:`MLS_CONCENTRATION` (a third) the scan is ground-based.
+  Measured: the eight Oakland mobile-scanning chunks 0.57–0.88 and PDAL's lone-star
+  terrestrial scan 0.67; the 15 ISPRS samples 0–0.17, the IGN tiles, BC forest tiles,
+  Autzen and lidR plots 0–0.004, the synthetic airborne scenes of
+  :mod:`lidarqa.testing` (walls sampled as densely as the ground included) 0–0.15.
+  Effect: the Oakland chunks (no scan angle, 6–43 points/m², so far filtered as dense
+  airborne) are filtered as ground-based scans: thinned (below) but without the
+  terrain-first pass and the perched-surface test, which look for what an airborne
+  scanner misses; mean total error 1.09 % to 0.94 %, κ 97.66 to 97.97, chunk ah 4.05 %
+  to 2.52 % (CSF at PDAL's defaults 2.53 %). Lin & Zhang's Table 1 on every point
+  instead gave 0.99 % (ah 1.31 %, six chunks 0.1–0.5 points worse) at 2.5 times the
+  CPU. Every other family keeps its regime and so its labels. Denser clouds than
+  :data:`MLS_DENSITY` (100 points/m²) without a scan angle stay ground-based whatever
+  their concentration, as they were: a part of a scan far from the scanner can be even
+  (a quarter of PDAL's lone-star scan measures 0.15 at 517 points/m²; the octree nodes
+  of its EPT copy, thinned to an even density level by level, 0–0.4); a drone flight
+  that dense without a scan angle is taken for ground-based too (no such file
+  measured). A `sensor` hint overrides the measurement.
 - **Density regime** (airborne). Below :data:`DENSE_ALS` points/m² a segment of a
   few points cannot show whether it is vegetation (scatterness needs about ten
   neighbours within a metre), so the sparse set switches scatterness off and
@@ -50,13 +51,13 @@ The rules, in short:
   above the dense set keeps scatterness and the tight angles of Table 1: at
   0.2–0.3 m spacing a 16° iteration angle accepts a point 0.1 m above its
   neighbour regardless of what it is.
-- **Dense airborne clouds** (from 1.5 × :data:`FILTER_DENSITY` points/m²) are
+- **Dense clouds**, airborne or ground-based (from 1.5 × :data:`FILTER_DENSITY` points/m²), are
   filtered on their lowest point per cell of 1/sqrt(:data:`FILTER_DENSITY`) m; the
   other points join the ground by a plane test (segment-PTD's `filter_density`),
   and the TIN of the filter keeps a 2 m minimum edge (:data:`FILTER_MIN_EDGE`).
   At 20 points/m² this is 4 times less work, and the decision is taken where
   terrain shows: on the lower envelope.
-- **Terrain first** (the same dense clouds): the filter runs first at
+- **Terrain first** (the same dense clouds, airborne only): the filter runs first at
   :data:`TERRAIN_DENSITY` points/m² (1.4 m cells, large enough to hold a ground
   return under a closed canopy); its ground is the terrain model, and the ground of
   the run at :data:`FILTER_DENSITY` is kept only up to 0.3 m above it
@@ -384,17 +385,20 @@ def auto_parameters(
         for k, v in PRESETS["als"][method].items():
             params[k] = v
             sources[k] = "preset"  # a constant of the regime the measured density chose
-    elif regime == "als-dense" and method == "segment-ptd":
-        # airborne at any density: ground never drops steeply on opposite sides
-        params["perched_step"] = PERCHED_STEP
-        sources["perched_step"] = "preset"
-        if measures.density >= 1.5 * FILTER_DENSITY:
+    elif method == "segment-ptd":
+        dense = math.isfinite(measures.density) and measures.density >= 1.5 * FILTER_DENSITY
+        if dense:  # airborne or ground-based: the lowest point per cell is filtered
             params["filter_density"] = FILTER_DENSITY
             sources["filter_density"] = "preset"
             params["min_edge_length"] = FILTER_MIN_EDGE
             sources["min_edge_length"] = "preset"
-            params["terrain_density"] = TERRAIN_DENSITY
-            sources["terrain_density"] = "preset"
+        if regime == "als-dense":
+            # airborne at any density: ground never drops steeply on opposite sides
+            params["perched_step"] = PERCHED_STEP
+            sources["perched_step"] = "preset"
+            if dense:  # terrain first: a ground return under the canopy, seen from above
+                params["terrain_density"] = TERRAIN_DENSITY
+                sources["terrain_density"] = "preset"
     return params, sources, regime
 
 
