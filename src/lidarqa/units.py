@@ -167,6 +167,7 @@ KEY_UNITS: dict[str, str] = {
     "slope_median": "degree",
     "slope_p90": "degree",
     "multi_return_share": "fraction",
+    "concentration": "fraction",
     "curvature": "1/m",
     "size": "byte",
     # a verdict's value and target have the unit of the metric named beside them

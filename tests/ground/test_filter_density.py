@@ -68,7 +68,7 @@ def dense_scene():
     return make_scene(seed=3, size=(120.0, 120.0), density=20.0, origin=(600000.0, 6800000.0, 50.0))
 
 
-def test_auto_switches_it_on_for_dense_airborne_clouds_only(dense_scene):
+def test_auto_switches_it_on_for_dense_clouds_only(dense_scene):
     m = measure_cloud(dense_scene.points)
     p, src, regime = auto_parameters(m, "segment-ptd")
     assert regime == "als-dense"
@@ -80,7 +80,9 @@ def test_auto_switches_it_on_for_dense_airborne_clouds_only(dense_scene):
         pts = np.column_stack([rng.uniform(0, 100, (n, 2)), rng.normal(0, 0.02, n)])
         chosen = auto_parameters(measure_cloud(pts), "segment-ptd")[0]
         assert "filter_density" not in chosen and "min_edge_length" not in chosen
-    assert "filter_density" not in auto_parameters(m, "segment-ptd", sensor="mls")[0]
+    # a dense ground-based scan is thinned too, without the airborne terrain-first pass
+    mls = auto_parameters(m, "segment-ptd", sensor="mls")[0]
+    assert mls["filter_density"] == FILTER_DENSITY and "terrain_density" not in mls
     assert "filter_density" not in auto_parameters(m, "ptd")[0]
 
 

@@ -356,6 +356,7 @@ def ground(
     if m is not None:
         echo(
             f"  measured        {m.density:.2f} pts/m2 (spacing {m.spacing:.2f} m), "
+            f"{100 * m.concentration:.0f} % of points in crowded cells, "
             f"sensor {m.sensor}, multi-return share "
             + (f"{m.multi_return_share:.2f}" if m.has_returns else "n/a")
             + f", slope median/p90 {m.slope_median:.1f}/{m.slope_p90:.1f} deg, "
