@@ -240,6 +240,8 @@ class Source:
     @property
     def is_catalog(self) -> bool:
         """True when the user gave a catalog (several files, a folder, a glob, a .vpc)."""
+        if self.catalog is None:  # one cloud in memory
+            return False
         return is_catalog_input(self.paths) if self.paths else True
 
     @property
