@@ -384,6 +384,10 @@ def heights(
 
         raise NothingToMeasureError(
             f"none of the {len(mp):,} map point(s) could be fitted"
+            + (" (are there laser points with "
+               + " ".join(f"--{k} {','.join(map(str, v))}" for k, v in
+                          (("classes", classes), ("source-id", source_id)) if v) + "?)"
+               if classes or source_id else "")
             if n_fitted == 0
             else f"none of the {len(ref):,} reference point(s) could be compared "
             f"({report.n_outside:,} outside the TIN of the fitted map points); do the map and "
