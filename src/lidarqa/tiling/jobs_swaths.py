@@ -29,7 +29,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -202,19 +202,30 @@ class SwathCellsTask:
                 smooth = (planes.ok & (planes.rms <= self.max_roughness)
                           & (planes.b**2 + planes.c**2 <= tan**2))
             ext = {}
-            splits = self.splits
-            if splits is None:
+            planned = self.splits is None
+            if planned:  # the split the merge's range_plan picks; 1 only as its fall-back
                 _, need = range_plan(planes, cell_size=grid.cell_size,
                                      max_roughness=self.max_roughness,
                                      max_slope=self.max_slope, range_cell=self.range_cell)
-                splits = tuple(sorted({1, max(need, 1)}))
+                splits: tuple[int, ...] = (max(need, 1),)
+            else:
+                splits = cast("tuple[int, ...]", self.splits)
             for k in splits:
-                sub, hi, lo, n = K.residual_extremes(pts, grid, planes, smooth, split=k)
-                # cell index into this chunk's smooth cells -> the block-wide cell key
-                cell = keys[smooth][sub // (k * k)] if k > 1 else sub
-                ext[k] = (cell * (k * k) + sub % (k * k) if k > 1 else cell, hi, lo, n)
+                ext[k] = self._extremes(K, pts, grid, planes, smooth, keys, k)
+            if planned and 1 not in ext and not len(
+                    K.ranges_from_extremes(K.merge_extremes([ext[splits[0]]]), min_points=3)[1]):
+                ext[1] = self._extremes(K, pts, grid, planes, smooth, keys, 1)
             out[int(s)] = _StripCells(keys, sums, ext)
         return out if self.grid is not None else (grid, out)
+
+    @staticmethod
+    def _extremes(K: Any, pts: np.ndarray, grid: Grid, planes: Any, smooth: np.ndarray,
+                  keys: np.ndarray, k: int) -> tuple:
+        """Residual extremes of the range cells (split `k`), keyed block-wide."""
+        sub, hi, lo, n = K.residual_extremes(pts, grid, planes, smooth, split=k)
+        # cell index into this chunk's smooth cells -> the block-wide cell key
+        cell = keys[smooth][sub // (k * k)] if k > 1 else sub
+        return (cell * (k * k) + sub % (k * k) if k > 1 else cell, hi, lo, n)
 
 
 def catalog_swaths(
