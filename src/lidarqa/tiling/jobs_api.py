@@ -223,7 +223,8 @@ def catalog_heights(
     open_opts, chunk_opts, run_opts = _split(dict(common))
     catalog = open_sources(sources, classes=classes or None, source_id=source_id or None,
                            **open_opts)
-    mxy = np.asarray(map_xy, dtype=np.float64).reshape(len(map_xy), -1)[:, :2]
+    mxy = np.asarray(map_xy, dtype=np.float64)
+    mxy = mxy.reshape(-1, mxy.shape[-1] if mxy.ndim == 2 else 2)[:, :2]
     ref = np.asarray(reference_xyz, dtype=np.float64).reshape(-1, 3)
     if chunk_opts["buffer"] is None and (catalog.is_catalog or chunk_opts["chunk_size"]):
         chunk_opts["buffer"] = heights_buffer(mxy, options)
