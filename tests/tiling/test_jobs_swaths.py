@@ -14,12 +14,29 @@ from datapaths import SHARED, needs_shared
 import lidarqa
 from lidarqa.accuracy.swaths import assess_swaths
 from lidarqa.cli.main import cli
-from lidarqa.cli.swaths import load_strips
 from lidarqa.errors import InvalidPointsError, OptionError
 from lidarqa.io.crs import parse_crs
 from lidarqa.testing import write_tiles
 from lidarqa.testing.strips import make_strip_scene
 from lidarqa.tiling.jobs_swaths import catalog_swaths
+
+def load_strips(files, *, by_source_id, classes, all_returns):
+    """The in-memory oracle: every file read whole, strips by point_source_id or by file."""
+    from lidarqa.accuracy.swaths import select_surface
+    from lidarqa.io.crs import z_to_metres_factor
+
+    xyz, ids = [], []
+    for k, path in enumerate(files):
+        pc = lidarqa.read(path)
+        keep = select_surface(pc, classes=classes, all_returns=all_returns, where=str(path))
+        sid = (np.asarray(pc.point_source_id).astype(np.int64) if by_source_id
+               else np.full(len(pc), k + 1, dtype=np.int64))
+        p = pc.xyz[keep].copy()
+        p[:, 2] *= z_to_metres_factor(pc.crs)
+        xyz.append(p)
+        ids.append(sid[keep])
+    return np.vstack(xyz), np.concatenate(ids), None, None
+
 
 ORIGIN = np.array([600_000.0, 6_800_000.0, 0.0])
 OFFSETS = [[0.0, 0.0, 0.0], [0.06, -0.04, 0.03], [-0.03, 0.05, -0.02]]

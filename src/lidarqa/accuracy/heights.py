@@ -60,6 +60,7 @@ __all__ = [
     "compare_heights",
     "w_test",
     "assess_heights",
+    "summarise_heights",
     "densify_polygons",
     "read_map_points",
 ]
@@ -1006,7 +1007,6 @@ def assess_heights(
     """
     ref = as_points(reference_xyz, "reference_xyz")
     rho = check_range(correlation, "correlation", 0.0, 1.0)
-    k = critical_value(alpha)
     mp = map_point_heights(
         points,
         map_xy,
@@ -1048,8 +1048,50 @@ def assess_heights(
         weights=tin.weights,
         has_tin=tin.has_tin,
     )
-    comp = compare_heights(tin.height, tin.sigma, ref[:, 2], sigma_ref=sigma_ref)
-    wt = w_test(comp.dh, comp.sigma_dh, alpha=alpha, estimate_offset=estimate_offset)
+    return summarise_heights(
+        mp, ref, tin, radius=radius, max_radius=max_radius, min_points=min_points,
+        growth=growth, sigma_point=sigma_point, sigma_gps=sigma_gps, sigma_ins=sigma_ins,
+        sigma_strip=sigma_strip, sigma_ref=sigma_ref, curvature=curvature, s_mode=s_mode,
+        correlation=rho, covariance=covariance, alpha=alpha, estimate_offset=estimate_offset,
+        eq8_diagonal=eq8_diagonal, posterior=posterior, largest_segment=largest_segment,
+        labels=labels)
+
+
+def summarise_heights(
+    map_points: MapPointHeights, reference_xyz: Any, tin: TinInterpolation, **options: Any
+) -> HeightReport:
+    """The summary half of :func:`assess_heights`: Δh statistics, w-tests, flags, parameters.
+
+    One in-memory run and a catalog run (whose regions give the map points and
+    the TIN values at their reference points) both end here, so their figures
+    come from the same code.
+
+    Parameters
+    ----------
+    map_points : MapPointHeights
+        Every map point's fit.
+    reference_xyz : ndarray of shape (R, 3)
+        Reference points (m).
+    tin : TinInterpolation
+        The map point TIN at the reference points.
+    **options
+        The options of :func:`assess_heights` (defaults where not given).
+
+    Returns
+    -------
+    HeightReport
+    """
+    import inspect
+
+    p = {k: v.default for k, v in inspect.signature(assess_heights).parameters.items()
+         if v.default is not inspect.Parameter.empty}
+    unknown = sorted(set(options) - set(p))
+    if unknown:
+        raise OptionError(f"unknown option(s): {', '.join(unknown)}")
+    p.update(options)
+    ref = as_points(reference_xyz, "reference_xyz")
+    comp = compare_heights(tin.height, tin.sigma, ref[:, 2], sigma_ref=p["sigma_ref"])
+    wt = w_test(comp.dh, comp.sigma_dh, alpha=p["alpha"], estimate_offset=p["estimate_offset"])
     flags: list[str] = []
     if not tin.has_tin:
         flags.append("no_tin")
@@ -1058,38 +1100,19 @@ def assess_heights(
     elif not tin.inside.all():
         flags.append("reference_outside_tin")
     flags.extend(comp.flags)
-    if mp.failed.any():
+    if map_points.failed.any():
         flags.append("map_points_failed")
-    params = {
-        "radius": radius,
-        "max_radius": max_radius,
-        "min_points": min_points,
-        "growth": growth,
-        "sigma_point": sigma_point,
-        "sigma_gps": sigma_gps,
-        "sigma_ins": sigma_ins,
-        "sigma_strip": sigma_strip,
-        "sigma_ref": sigma_ref,
-        "curvature": curvature,
-        "s_mode": s_mode,
-        "correlation": rho,
-        "covariance": covariance is not None,
-        "alpha": alpha,
-        "critical": k,
-        "estimate_offset": bool(estimate_offset),
-        "eq8_diagonal": bool(eq8_diagonal),
-        "posterior": bool(posterior),
-        "largest_segment": bool(largest_segment or labels is not None),
-    }
-    return HeightReport(
-        map_points=mp,
-        reference_xyz=ref,
-        tin=tin,
-        comparison=comp,
-        w=wt,
-        parameters=params,
-        flags=tuple(flags),
-    )
+    params = {k: p[k] for k in ("radius", "max_radius", "min_points", "growth", "sigma_point",
+                                "sigma_gps", "sigma_ins", "sigma_strip", "sigma_ref",
+                                "curvature", "s_mode")}
+    params.update(
+        correlation=float(p["correlation"]), covariance=p["covariance"] is not None,
+        alpha=p["alpha"], critical=critical_value(p["alpha"]),
+        estimate_offset=bool(p["estimate_offset"]), eq8_diagonal=bool(p["eq8_diagonal"]),
+        posterior=bool(p["posterior"]),
+        largest_segment=bool(p["largest_segment"] or p["labels"] is not None))
+    return HeightReport(map_points=map_points, reference_xyz=ref, tin=tin, comparison=comp,
+                        w=wt, parameters=params, flags=tuple(flags))
 
 
 # ------------------------------------------------------------------ map points from files

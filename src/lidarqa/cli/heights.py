@@ -114,22 +114,17 @@ class _SigmaStrip(click.ParamType):
             self.fail(f"expected a number (m) or 'auto', got {value!r}", param, ctx)
 
 
-def _measured_e4(pc: Any) -> float:
-    """E4 from the overlaps of the cloud's strips (ground and buildings, last returns)."""
-    from ..accuracy.swaths import assess_swaths, last_return_mask, surface_class_mask
-    from ..errors import DegenerateGeometryError, EstimationError, InvalidPointsError
-    from ..io.crs import z_to_metres_factor
+def _measured_e4(source: Any, run_opts: dict[str, Any]) -> float:
+    """E4 from the overlaps of the source's strips (ground and buildings, last returns).
 
-    sid = pc.point_source_id
-    if sid is None:
-        raise InvalidPointsError(
-            "--sigma-strip auto needs the cloud's point_source_id (flight strips); it has none"
-        )
-    keep = last_return_mask(pc.fields, len(pc)) & surface_class_mask(pc.classification, len(pc))
-    xyz = pc.xyz[keep].copy()
-    xyz[:, 2] *= z_to_metres_factor(pc.crs)
+    The ``lidarqa swaths --by-source-id`` job on the same source (a file or a catalog).
+    """
+    from ..errors import DegenerateGeometryError, EstimationError, InvalidPointsError
+    from ..tiling.jobs_swaths import catalog_swaths
+
     try:
-        rep = assess_swaths(xyz, np.asarray(sid)[keep].astype(np.int64), return_grids=False)
+        rep = catalog_swaths(source.select(), by_source_id=True, return_grids=False,
+                             **run_opts).value
     except (InvalidPointsError, DegenerateGeometryError) as exc:
         raise type(exc)(f"--sigma-strip auto: {exc}") from exc
     if not np.isfinite(rep.e4):
@@ -328,94 +323,58 @@ def heights(
     holds it (the buffer must exceed --max-radius plus the map point spacing);
     the w-tests then run once over all reference points, as for one file.
     """
-    from ..accuracy.heights import assess_heights, read_map_points
+    from ..accuracy.heights import read_map_points
     from ..errors import OptionError
-    from ..io import read
     from ..io.crs import require_metric_xy, z_to_metres_factor
+    from ..tiling.jobs_api import catalog_heights
 
     if output is not None and Path(output).suffix.lower() not in OUT_SUFFIXES:
         raise OptionError(f"--output must end in {', '.join(OUT_SUFFIXES)}; got {output!r}")
     given = input_crs(crs)
     prepare_outputs(output, inputs=(cloud, map_path, reference))
     steps = Steps()
+    # one job for a file (one region: the in-memory run) and a catalog; heights in metres
     on_catalog = wants_catalog((cloud,), cat_opts)
-    sigma_strip_source = "given"
-    if on_catalog:
-        if largest_segment:
-            raise OptionError("--largest-segment is not available on a catalog")
-        if sigma_strip == "auto":
-            raise OptionError(
-                "--sigma-strip auto measures the strip offsets of one file; on a catalog give "
-                "the value (e.g. from `lidarqa swaths`)"
-            )
-        cat = open_catalog_source([cloud], cat_opts, crs=given, classes=classes,
-                                  source_id=source_id)
-        require_metric_xy(cat.native_crs, cloud, "the search radius and the plane fits need")
-        pc: Any = type("Header", (), {"crs": cat.native_crs})()
-    else:
-        with steps("Reading " + cloud):
-            pc = read(cloud, crs=given)
+    source = open_catalog_source([cloud], cat_opts, crs=given)
+    native = source.native_crs
+    require_metric_xy(native, cloud, "the search radius and the plane fits need")
+    engine = catalog_engine(cat_opts) if on_catalog else contextlib.nullcontext()
+    with engine as eng:
+        run_opts = job_options(cat_opts, eng) if on_catalog else {}
+        sigma_strip_source = "given"
         if sigma_strip == "auto":
             with steps("Measuring E4 from the strip overlaps"):
-                sigma_strip = _measured_e4(pc)
+                sigma_strip = _measured_e4(source, run_opts)
             sigma_strip_source = "measured (strip offsets)"
             echo(f"E4 (σ_strip) measured from the strip overlaps: {sigma_strip:.3f} m")
-        with steps("Selecting points"):
-            if classes or source_id:
-                pc = pc.select(classes=classes, source_id=source_id)
-                if len(pc) == 0:
-                    raise OptionError(
-                        f"{cloud} has no points with --classes {classes} --source-id {source_id}"
-                    )
-            require_metric_xy(pc.crs, cloud, "the search radius and the plane fits need")
-            xyz = pc.xyz.copy()
-            xyz[:, 2] *= z_to_metres_factor(pc.crs)
-    # options shared by the point-map and the road-level (polygon) paths
-    common: dict[str, Any] = dict(
-        radius=radius,
-        max_radius=max_radius,
-        min_points=min_points,
-        sigma_point=sigma_point,
-        sigma_gps=sigma_gps,
-        sigma_ins=sigma_ins,
-        sigma_strip=sigma_strip,
-        sigma_ref=sigma_ref,
-        curvature=curvature,
-        alpha=alpha,
-        estimate_offset=estimate_offset,
-    )
-    polygon_map = _is_polygon_map(map_path)
-    if polygon_map and on_catalog:
-        echo("note: on a catalog, polygons are tested as boundary points on one level "
-             "(road levels need one cloud: `lidarqa roads`)")
-    elif polygon_map:
-        return _heights_by_levels(
-            steps, pc, xyz, cloud, map_path, reference, output,
-            classes=classes, spacing=spacing, **common,
-        )  # fmt: skip
-    with steps("Reading map and reference points"):
-        mp = read_map_points(map_path, spacing=spacing, crs=given)
-        ref = _read_reference(reference, given)
-        _check_crs(pc.crs, mp.crs, ("cloud", "map"))
-        _check_crs(pc.crs, ref.crs, ("cloud", "reference"))
-        _check_crs(mp.crs, ref.crs, ("map", "reference"))
-        ref_xyz = ref.xyz.copy()
-        ref_xyz[:, 2] *= z_to_metres_factor(ref.crs if ref.crs is not None else pc.crs)
-    options: dict[str, Any] = dict(
-        common, correlation=correlation, eq8_diagonal=eq8_diagonal, posterior=posterior
-    )
-    catalog_run = None
-    if on_catalog:
-        from ..tiling.jobs_api import catalog_heights
-
-        with catalog_engine(cat_opts) as eng:
-            catalog_run = catalog_heights(cat, mp.xyz[:, :2], ref_xyz, options=options,
-                                          **job_options(cat_opts, eng))
-        report = catalog_run.value
-    else:
+        # options shared by the point-map and the road-level (polygon) paths
+        common: dict[str, Any] = dict(
+            radius=radius, max_radius=max_radius, min_points=min_points,
+            sigma_point=sigma_point, sigma_gps=sigma_gps, sigma_ins=sigma_ins,
+            sigma_strip=sigma_strip, sigma_ref=sigma_ref, curvature=curvature, alpha=alpha,
+            estimate_offset=estimate_offset,
+        )
+        if _is_polygon_map(map_path):
+            return _heights_by_levels(
+                steps, source.select(classes=classes, source_id=source_id), cloud, map_path,
+                reference, output, classes=classes, spacing=spacing, **common,
+            )  # fmt: skip
+        with steps("Reading map and reference points"):
+            mp = read_map_points(map_path, spacing=spacing, crs=given)
+            ref = _read_reference(reference, given)
+            _check_crs(native, mp.crs, ("cloud", "map"))
+            _check_crs(native, ref.crs, ("cloud", "reference"))
+            _check_crs(mp.crs, ref.crs, ("map", "reference"))
+            ref_xyz = ref.xyz.copy()
+            ref_xyz[:, 2] *= z_to_metres_factor(ref.crs if ref.crs is not None else native)
+        options: dict[str, Any] = dict(
+            common, correlation=correlation, eq8_diagonal=eq8_diagonal, posterior=posterior,
+            largest_segment=largest_segment,
+        )
         with steps(f"Fitting {len(mp):,} map points, testing {len(ref):,} reference points"):
-            report = assess_heights(xyz, mp.xyz[:, :2], ref_xyz, largest_segment=largest_segment,
-                                    **options)
+            run = catalog_heights(source, mp.xyz[:, :2], ref_xyz, classes=classes,
+                                  source_id=source_id, options=options, **run_opts)
+    report = run.value
     done = report.to_dict()
     n_fitted = done["map_points"]["n"] - done["map_points"]["n_failed"]
     if n_fitted == 0 or (len(ref) and done["comparison"]["n"] == 0):
@@ -425,6 +384,10 @@ def heights(
 
         raise NothingToMeasureError(
             f"none of the {len(mp):,} map point(s) could be fitted"
+            + (" (are there laser points with "
+               + " ".join(f"--{k} {','.join(map(str, v))}" for k, v in
+                          (("classes", classes), ("source-id", source_id)) if v) + "?)"
+               if classes or source_id else "")
             if n_fitted == 0
             else f"none of the {len(ref):,} reference point(s) could be compared "
             f"({report.n_outside:,} outside the TIN of the fitted map points); do the map and "
@@ -432,14 +395,13 @@ def heights(
         )
     if output is not None:
         from ..io.vector import write_points
-        stamp = reproducible_vectors() if on_catalog else contextlib.nullcontext()
-        with steps("Writing " + output), stamp:
+        with steps("Writing " + output), reproducible_vectors():
             rows = _output_rows(
                 report.map_points, report.map_points.xy, report.reference_xyz,
                 {"model_height": report.tin.height, "model_sigma": report.tin.sigma,
                  "dh": report.dh, "sigma_dh": report.sigma_dh, "w": report.w_values,
                  "outlier": report.outlier, "inside": report.inside},
-                _ids(mp.ids, ref.ids), pc.crs or mp.crs or ref.crs,
+                _ids(mp.ids, ref.ids), native or mp.crs or ref.crs,
                 (*_MAP_FIELDS, "radius", "distance", "failed", "reason"))
             write_points(rows, output, overwrite=settings().overwrite, layer="heights")
     res = report.to_dict()
@@ -468,9 +430,9 @@ def heights(
         crs=crs,
         sigma_strip_source=sigma_strip_source,
     )
-    if catalog_run is not None:
-        echo_run(catalog_run)
-        res["catalog"] = run_summary(catalog_run)
+    if on_catalog:
+        echo_run(run)
+        res["catalog"] = run_summary(run)
         params.update({k: v for k, v in cat_opts.items() if option_given(v)})
     finish(
         "heights",
@@ -478,8 +440,8 @@ def heights(
         parameters=params,
         results=res,
     )
-    if catalog_run is not None:
-        failed_exit(catalog_run)
+    if on_catalog:
+        failed_exit(run)
 
 
 def _is_polygon_map(path: str) -> bool:
@@ -496,8 +458,7 @@ def _is_polygon_map(path: str) -> bool:
 
 def _heights_by_levels(
     steps: Any,
-    pc: Any,
-    xyz: np.ndarray,
+    source: Any,
     cloud: str,
     map_path: str,
     reference: str,
@@ -514,6 +475,8 @@ def _heights_by_levels(
     from ..accuracy.roads import compare_road_heights, read_road_polygons, reconstruct_roads
     from ..io.crs import check_map_crs, z_to_metres_factor
 
+    with steps("Reading " + cloud):
+        pc = source.read()  # the whole area: roads are reconstructed in one piece (heights in m)
     with steps("Reading road polygons and reference points"):
         polys, ids, crs = read_road_polygons(map_path)
         ref = _read_reference(reference)
@@ -522,7 +485,7 @@ def _heights_by_levels(
         ref_xyz = ref.xyz.copy()
         ref_xyz[:, 2] *= z_to_metres_factor(ref.crs if ref.crs is not None else pc.crs)
     with steps(f"Reconstructing {len(polys):,} road polygons on their height levels"):
-        rec = reconstruct_roads(xyz, polys, ids=ids, spacing=spacing, **opts)
+        rec = reconstruct_roads(pc.xyz, polys, ids=ids, spacing=spacing, **opts)
     with steps(f"Testing {len(ref):,} reference points on their levels"):
         comp = compare_road_heights(
             rec, ref_xyz, sigma_ref=sigma_ref, alpha=alpha, estimate_offset=estimate_offset

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import os
@@ -26,61 +27,6 @@ from ._catalog import (
     wants_catalog,
 )
 from ._common import INT_LIST, Steps, common_options, echo, finish, settings
-
-
-def load_strips(
-    files: tuple[str, ...],
-    *,
-    by_source_id: bool,
-    classes: list[int] | None,
-    all_returns: bool,
-) -> tuple[np.ndarray, np.ndarray, Any, dict[int, str]]:
-    """Read FILES into points, strip ids, CRS and a strip -> label map.
-
-    One strip per file, or per ``point_source_id`` with `by_source_id`. Keeps
-    last/single returns unless `all_returns`, and `classes` (default: ground
-    and buildings, :func:`~lidarqa.accuracy.swaths.surface_class_mask`). Heights
-    are in metres.
-    """
-    from ..accuracy.swaths import select_surface
-    from ..errors import InvalidPointsError
-    from ..io import read
-    from ..io.crs import ensure_same_crs, z_to_metres_factor
-
-    xyz, ids, crs = [], [], None
-    labels: dict[Any, Any] = {}
-    for k, path in enumerate(files):
-        pc = read(path)
-        if k == 0:
-            crs = pc.crs
-        else:
-            ensure_same_crs(crs, pc.crs, what=(files[0], path))
-        keep = select_surface(pc, classes=classes, all_returns=all_returns, where=str(path))
-        if by_source_id:
-            sid = pc.point_source_id
-            if sid is None:
-                raise InvalidPointsError(
-                    f"{path} has no point_source_id field: cannot split it into flight strips "
-                    "(give one file per strip instead of --by-source-id)"
-                )
-            sid = np.asarray(sid).astype(np.int64)
-            for s in np.unique(sid[keep]):
-                labels.setdefault(int(s), f"point_source_id {int(s)}")
-        else:
-            sid = np.full(len(pc), k + 1, dtype=np.int64)
-            labels[k + 1] = Path(path).name
-        p = pc.xyz[keep].copy()
-        p[:, 2] *= z_to_metres_factor(pc.crs)
-        xyz.append(p)
-        ids.append(sid[keep])
-    all_ids = np.concatenate(ids)
-    if by_source_id and len(all_ids) and not all_ids.any():
-        # LAS always has the field; 0 everywhere means the strips were never recorded
-        raise InvalidPointsError(
-            "point_source_id is 0 for every point: the file(s) do not record flight strips "
-            "(give one file per strip instead of --by-source-id)"
-        )
-    return np.vstack(xyz), all_ids, crs, labels
 
 
 def _csv(rows: list[dict[str, Any]]) -> str:
@@ -197,7 +143,6 @@ def swaths(
     catalog option): the strips are then compared over the whole block, chunk by
     chunk, with the figures of one in-memory run.
     """
-    from ..accuracy.swaths import assess_swaths
     from ..errors import InvalidPointsError, OutputExistsError, WriteError
     from ..io._atomic import atomic_path, check_output
     from ..io.crs import ensure_same_crs, parse_crs
@@ -249,25 +194,20 @@ def swaths(
         rotations=rotations,
         reference_strip=reference_strip,
     )
-    catalog_run = None
-    if on_catalog:
-        from ..tiling.jobs_swaths import catalog_swaths
+    from ..tiling.jobs_swaths import catalog_swaths
 
-        # heights are converted by the chunk task (as load_strips does for files)
-        catalog = open_catalog_source(files, cat_opts, z_to_metres=False)
-        crs = catalog.crs
-        with catalog_engine(cat_opts) as eng:
-            catalog_run = catalog_swaths(catalog, by_source_id=by_source_id, classes=classes,
-                                         all_returns=all_returns, **job_options(cat_opts, eng),
-                                         **options)
-        rep, labels = catalog_run.value, catalog_run.extra["labels"]
-    else:
-        with steps("Reading " + ", ".join(Path(f).name for f in files)):
-            xyz, sid, crs, labels = load_strips(
-                files, by_source_id=by_source_id, classes=classes, all_returns=all_returns
-            )
-        with steps(f"Comparing strips ({len(xyz):,} points, {len(np.unique(sid))} strips)"):
-            rep = assess_swaths(xyz, sid, **options)
+    # one job for every input: one file (--by-source-id) or named strip files are one region
+    # (read once, as in memory); a folder, a glob, a .vpc or any catalog option the whole block,
+    # chunk by chunk. Heights are converted to metres by the task.
+    source = open_catalog_source(files, cat_opts, z_to_metres=False)
+    crs = source.crs
+    with catalog_engine(cat_opts) if on_catalog else contextlib.nullcontext() as eng:
+        with steps(f"Comparing strips of {', '.join(Path(f).name for f in files)}"):
+            run = catalog_swaths(source, by_source_id=by_source_id, classes=classes,
+                                 all_returns=all_returns, one_region=True if named_files else None,
+                                 **(job_options(cat_opts, eng) if on_catalog else {}), **options)
+    rep = run.value
+    labels = {k: v if by_source_id else Path(v).name for k, v in run.extra["labels"].items()}
     if given_crs is not None:
         if crs is not None:  # the rasters are horizontal: compare horizontal parts
             ensure_same_crs(_horizontal(crs), _horizontal(given_crs), what=(files[0], "--crs"))
@@ -350,9 +290,9 @@ def swaths(
         echo("note: " + f)
     echo(f"{'PASS' if rep.passed else 'FAIL'}; wrote {len(written)} file(s) to {out}")
     results = dict(rep.to_dict(), outputs=written)
-    if catalog_run is not None:
-        echo_run(catalog_run)
-        results["catalog"] = run_summary(catalog_run)
+    if on_catalog:
+        echo_run(run)
+        results["catalog"] = run_summary(run)
     finish(
         "swaths",
         inputs={"files": list(files), "strips": labels},
@@ -366,8 +306,8 @@ def swaths(
         ),
         results=results,
     )
-    if catalog_run is not None:
-        failed_exit(catalog_run)
+    if on_catalog:
+        failed_exit(run)
 
 
 def _horizontal(crs: Any) -> Any:

@@ -446,6 +446,8 @@ def run_chunks(
             engine.close()
     result = [outcomes[i] for i in range(len(chunks))]
     failed = [o for o in result if not o.ok]
+    if failed and len(result) == 1 and not skip_failed:  # one region (one file): its own error
+        raise ChunkFailedError(str(failed[0].error).split(": ", 1)[-1], result)
     if failed and not skip_failed:
         raise ChunkFailedError(
             f"{len(failed)} of {len(result)} chunk(s) failed: "

@@ -251,7 +251,7 @@ def merge_vertical(
 # ============================================================ heights
 
 
-_NO_CATALOG = ("covariance", "labels", "largest_segment")
+_NO_CATALOG = ("covariance", "labels")
 
 
 @dataclass(frozen=True, eq=False)
@@ -265,6 +265,9 @@ class HeightsPart:
     height: np.ndarray
     sigma: np.ndarray
     inside: np.ndarray
+    vertices: np.ndarray
+    weights: np.ndarray
+    has_tin: bool
 
 
 _MAP_FIELDS = ("height", "sigma", "sigma_plane", "sigma_block", "sigma_model", "n_points",
@@ -283,7 +286,9 @@ class HeightsTask:
         All reference points (m).
     options : dict
         Keyword options of :func:`lidarqa.accuracy.heights.assess_heights`
-        (not ``covariance``, ``labels`` or ``largest_segment``, which need the whole set).
+        (not ``covariance`` or ``labels``, which need the whole set;
+        ``largest_segment`` only on one region, see
+        :func:`~lidarqa.tiling.jobs_api.catalog_heights`).
     classes : tuple of int, optional
         Laser points used (e.g. ground 2 and buildings 6); None = all.
     bounds : (xmin, ymin, xmax, ymax), optional
@@ -310,9 +315,11 @@ class HeightsTask:
 
         chunk = chunk_data.chunk
         pts = _ground_xy(chunk_data, self.classes)
-        box = chunk.buffered
-        mi = np.flatnonzero(in_core(self.map_xy, box))
-        ri = np.flatnonzero(owned(self.reference_xyz, chunk))
+        # no laser point beyond the catalog: a side there is open, and a point beyond the area
+        # is owned by the chunk that owns its nearest point of the area
+        lo_x, lo_y, hi_x, hi_y = open_box(chunk.buffered, self.bounds)
+        mi = np.flatnonzero(in_core(self.map_xy, (lo_x, lo_y, hi_x, hi_y)))
+        ri = np.flatnonzero(owned(self.clamp(self.reference_xyz), chunk))
         opts: dict[str, Any] = dict(self.options)
         tin_opts: dict[str, Any] = {"correlation": opts.pop("correlation", 0.0)}
         for k in ("sigma_ref", "alpha", "estimate_offset"):
@@ -323,11 +330,9 @@ class HeightsTask:
         r_used = np.where(np.isfinite(mp.radius), mp.radius,
                           float(opts.get("max_radius", MAX_RADIUS)))
         xy = self.map_xy[mi]
-        # no laser point beyond the catalog: a side there is open
-        lo_x, lo_y, hi_x, hi_y = open_box(box, self.bounds)
         trusted = ((xy[:, 0] - r_used >= lo_x) & (xy[:, 0] + r_used <= hi_x)
                    & (xy[:, 1] - r_used >= lo_y) & (xy[:, 1] + r_used <= hi_y))
-        mine = owned(xy, chunk)
+        mine = owned(self.clamp(xy), chunk)
         if (mine & ~trusted).any():
             need = float(np.nanmax(r_used[mine & ~trusted]))
             raise TilingError(f"chunk {chunk.id}: map point fits reach {need:g} m, beyond the "
@@ -335,10 +340,23 @@ class HeightsTask:
         vert = np.flatnonzero(trusted & ~mp.failed)
         tin = interpolate_tin(np.column_stack([xy[vert], mp.height[vert]]), mp.sigma[vert],
                               self.reference_xyz[ri, :2], **tin_opts)
-        self._check_delaunay(chunk.id, xy[vert], tin, mi[trusted], self.reference_xyz[ri, :2])
+        if len(mi) < len(self.map_xy) or not trusted.all():  # else: the whole TIN is here
+            self._check_delaunay(chunk.id, xy[vert], tin, mi[trusted],
+                                 self.reference_xyz[ri, :2])
+        vertices = np.full(tin.vertices.shape, -1, dtype=np.int64)  # map point numbering
+        found = tin.vertices >= 0
+        vertices[found] = mi[vert][tin.vertices[found]]
         rows = {k: np.asarray(getattr(mp, k))[mine] for k in _MAP_FIELDS}
         return HeightsPart(chunk=chunk.id, map_index=mi[mine], map_rows=rows, ref_index=ri,
-                           height=tin.height, sigma=tin.sigma, inside=tin.inside)
+                           height=tin.height, sigma=tin.sigma, inside=tin.inside,
+                           vertices=vertices, weights=tin.weights, has_tin=tin.has_tin)
+
+    def clamp(self, xy: np.ndarray) -> np.ndarray:
+        """`xy` moved into the area's bounds (its owner is then a chunk of the grid)."""
+        if self.bounds is None or not len(xy):
+            return xy
+        b = self.bounds
+        return np.column_stack([np.clip(xy[:, 0], b[0], b[2]), np.clip(xy[:, 1], b[1], b[3])])
 
     def _check_delaunay(self, chunk_id: str, vxy: np.ndarray, tin: Any, used: np.ndarray,
                         ref_xy: np.ndarray) -> None:
@@ -411,16 +429,8 @@ def merge_heights(
     TIN. Δh statistics, w-tests and data snooping run once over all reference
     points in their input order, as in :func:`assess_heights`.
     """
-    from ..accuracy.heights import (
-        HeightReport,
-        MapPointHeights,
-        TinInterpolation,
-        compare_heights,
-        critical_value,
-        w_test,
-    )
+    from ..accuracy.heights import MapPointHeights, TinInterpolation, summarise_heights
 
-    opts: dict[str, Any] = dict(options or {})
     mxy = np.asarray(map_xy, dtype=np.float64)[:, :2]
     ref = np.asarray(reference_xyz, dtype=np.float64).reshape(-1, 3)
     m, r = len(mxy), len(ref)
@@ -433,6 +443,8 @@ def merge_heights(
     }
     height, sigma = np.full(r, np.nan), np.full(r, np.nan)
     inside = np.zeros(r, dtype=bool)
+    has_tin = False
+    vertices, weights = np.full((r, 3), -1, dtype=np.int64), np.full((r, 3), np.nan)
     for p in parts:
         if p is None:
             continue
@@ -440,26 +452,9 @@ def merge_heights(
             cols[k][p.map_index] = p.map_rows[k]
         height[p.ref_index], sigma[p.ref_index] = p.height, p.sigma
         inside[p.ref_index] = p.inside
+        vertices[p.ref_index], weights[p.ref_index] = p.vertices, p.weights
+        has_tin |= p.has_tin
     mp = MapPointHeights(xy=mxy, **cols)
-    tin = TinInterpolation(height=height, sigma=sigma, inside=inside,
-                           vertices=np.full((r, 3), -1, dtype=np.int64),
-                           weights=np.full((r, 3), np.nan), has_tin=bool(inside.any()))
-    sigma_ref = opts.get("sigma_ref")
-    comp = (compare_heights(height, sigma, ref[:, 2]) if sigma_ref is None else
-            compare_heights(height, sigma, ref[:, 2], sigma_ref=sigma_ref))
-    alpha = opts.get("alpha", 0.001)
-    wt = w_test(comp.dh, comp.sigma_dh, alpha=alpha,
-                estimate_offset=bool(opts.get("estimate_offset", False)))
-    flags: list[str] = []
-    if not tin.has_tin:
-        flags.append("no_tin")
-    if r == 0:
-        flags.append("no_reference_points")
-    elif not inside.all():
-        flags.append("reference_outside_tin")
-    flags.extend(comp.flags)
-    if mp.failed.any():
-        flags.append("map_points_failed")
-    params = {**opts, "alpha": alpha, "critical": critical_value(alpha)}
-    return HeightReport(map_points=mp, reference_xyz=ref, tin=tin, comparison=comp, w=wt,
-                        parameters=params, flags=tuple(flags))
+    tin = TinInterpolation(height=height, sigma=sigma, inside=inside, vertices=vertices,
+                           weights=weights, has_tin=has_tin)
+    return summarise_heights(mp, ref, tin, **(options or {}))

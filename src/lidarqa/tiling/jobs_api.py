@@ -37,7 +37,7 @@ import numpy as np
 
 from ..errors import OptionError
 from ..io.vector import PointSet
-from .apply import CatalogRun, chunk_status, open_sources, region_chunks  # noqa: F401
+from .apply import CatalogRun, chunk_status, open_sources, owned, region_chunks  # noqa: F401
 
 __all__ = [
     "CatalogRun",
@@ -210,6 +210,7 @@ def catalog_heights(
 
     The laser points are read through the source: its selection (``classes``,
     ``source_id``) and its heights in metres; `reference_xyz` must be in metres.
+    One file (without `chunk_size` or `buffer`) is one region: the in-memory run.
 
     Map points are fitted from the chunk that owns them; a chunk whose buffer
     is too narrow for the fits or the TIN around its reference points fails
@@ -222,16 +223,19 @@ def catalog_heights(
     open_opts, chunk_opts, run_opts = _split(dict(common))
     catalog = open_sources(sources, classes=classes or None, source_id=source_id or None,
                            **open_opts)
-    mxy = np.asarray(map_xy, dtype=np.float64).reshape(len(map_xy), -1)[:, :2]
+    mxy = np.asarray(map_xy, dtype=np.float64)
+    mxy = mxy.reshape(-1, mxy.shape[-1] if mxy.ndim == 2 else 2)[:, :2]
     ref = np.asarray(reference_xyz, dtype=np.float64).reshape(-1, 3)
-    from .jobs_vector import owned
-
     if chunk_opts["buffer"] is None and (catalog.is_catalog or chunk_opts["chunk_size"]):
         chunk_opts["buffer"] = heights_buffer(mxy, options)
-    chunks = tuple(c for c in region_chunks(catalog, **chunk_opts)
-                   if owned(mxy, c).any() or owned(ref, c).any())
     task = HeightsTask(mxy, ref, options=dict(options or {}), classes=None,
                        bounds=catalog.area_bounds)
+    chunks = region_chunks(catalog, **chunk_opts)
+    if (options or {}).get("largest_segment") and len(chunks) > 1:
+        raise OptionError("--largest-segment segments the whole cloud at once: it needs one "
+                          "file without --chunk-size or --buffer")
+    chunks = [c for c in chunks if owned(task.clamp(mxy), c).any()
+              or owned(task.clamp(ref), c).any()]
     outcomes, parts = _run(catalog, chunks, task, run_opts, "Heights")
     value = merge_heights(parts, mxy, ref, options=options)
     return CatalogRun(value, catalog, tuple(chunks), tuple(outcomes))

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -121,10 +121,17 @@ class OccupancyTask:
 class SwathCellsTask:
     """Chunk task: ``{strip: _StripCells}`` for the cells the chunk owns.
 
+    On one region (the whole area, e.g. one file) the task plans what the merge
+    would otherwise need from a first pass or from every chunk: with ``grid``
+    None it takes the cell size from its own points' occupancy (the whole
+    area's) and lays the grid over `clamp`; with ``splits`` None it prepares
+    only the split :func:`~lidarqa.accuracy.swaths.range_plan` chooses for each
+    strip (and 1, the fall-back). The part is then ``(grid, cells)``.
+
     Parameters
     ----------
-    grid : Grid
-        The block's cell grid.
+    grid : Grid or None
+        The block's cell grid; None: planned from the region (one region only).
     z0 : float
         Reference height of the sums (numerics only).
     clamp : (xmin, ymin, xmax, ymax)
@@ -135,11 +142,16 @@ class SwathCellsTask:
         Point selection (:func:`lidarqa.accuracy.swaths.select_surface`).
     min_points, max_roughness, max_slope
         As :func:`~lidarqa.accuracy.swaths.assess_swaths` (which cells are smooth).
-    splits : tuple of int
-        The splits of smooth cells into range cells to prepare.
+    splits : tuple of int or None
+        The splits of smooth cells into range cells to prepare; None: planned
+        per strip (one region only).
+    range_cell : float, optional
+        As :func:`~lidarqa.accuracy.swaths.assess_swaths` (used when planning splits).
+    cell_target : int
+        Points per cell of the planned cell size.
     """
 
-    grid: Grid
+    grid: Grid | None
     z0: float
     clamp: tuple[float, float, float, float]
     by_source_id: bool
@@ -149,18 +161,29 @@ class SwathCellsTask:
     min_points: int
     max_roughness: float
     max_slope: float
-    splits: tuple[int, ...]
+    splits: tuple[int, ...] | None
+    range_cell: float | None = None
+    cell_target: int = 16
 
-    def __call__(self, data: ChunkData) -> dict[int, _StripCells]:
-        """Per-strip plane fits of the chunk's core cells."""
+    def __call__(self, data: ChunkData) -> Any:
+        """Per-strip plane fits of the chunk's core cells (with the grid when planned here)."""
         from ..accuracy import _swaths_kernels as K
-        from ..accuracy.swaths import strip_planes
+        from ..accuracy.swaths import (
+            cell_size_from_occupancy,
+            range_plan,
+            strip_occupancy,
+            strip_planes,
+        )
 
         if len(data.cloud) == 0:
-            return {}
+            return {} if self.grid is not None else (None, {})
         xyz, sid = _strip_points(data, self.by_source_id, self.classes, self.all_returns,
                                  self.source_ids)
         grid = self.grid
+        if grid is None:
+            size = cell_size_from_occupancy(strip_occupancy(xyz, sid), target=self.cell_target)
+            b = self.clamp
+            grid = K.grid_for(np.array([[b[0], b[1]], [b[2], b[3]]]), size)
         out: dict[int, _StripCells] = {}
         for s in np.unique(sid).tolist():
             pts = xyz[sid == s]
@@ -179,13 +202,30 @@ class SwathCellsTask:
                 smooth = (planes.ok & (planes.rms <= self.max_roughness)
                           & (planes.b**2 + planes.c**2 <= tan**2))
             ext = {}
-            for k in self.splits:
-                sub, hi, lo, n = K.residual_extremes(pts, grid, planes, smooth, split=k)
-                # cell index into this chunk's smooth cells -> the block-wide cell key
-                cell = keys[smooth][sub // (k * k)] if k > 1 else sub
-                ext[k] = (cell * (k * k) + sub % (k * k) if k > 1 else cell, hi, lo, n)
+            planned = self.splits is None
+            if planned:  # the split the merge's range_plan picks; 1 only as its fall-back
+                _, need = range_plan(planes, cell_size=grid.cell_size,
+                                     max_roughness=self.max_roughness,
+                                     max_slope=self.max_slope, range_cell=self.range_cell)
+                splits: tuple[int, ...] = (max(need, 1),)
+            else:
+                splits = cast("tuple[int, ...]", self.splits)
+            for k in splits:
+                ext[k] = self._extremes(K, pts, grid, planes, smooth, keys, k)
+            if planned and 1 not in ext and not len(
+                    K.ranges_from_extremes(K.merge_extremes([ext[splits[0]]]), min_points=3)[1]):
+                ext[1] = self._extremes(K, pts, grid, planes, smooth, keys, 1)
             out[int(s)] = _StripCells(keys, sums, ext)
-        return out
+        return out if self.grid is not None else (grid, out)
+
+    @staticmethod
+    def _extremes(K: Any, pts: np.ndarray, grid: Grid, planes: Any, smooth: np.ndarray,
+                  keys: np.ndarray, k: int) -> tuple:
+        """Residual extremes of the range cells (split `k`), keyed block-wide."""
+        sub, hi, lo, n = K.residual_extremes(pts, grid, planes, smooth, split=k)
+        # cell index into this chunk's smooth cells -> the block-wide cell key
+        cell = keys[smooth][sub // (k * k)] if k > 1 else sub
+        return (cell * (k * k) + sub % (k * k) if k > 1 else cell, hi, lo, n)
 
 
 def catalog_swaths(
@@ -200,6 +240,7 @@ def catalog_swaths(
     min_points: int = 8,
     max_roughness: float = 0.05,
     max_slope: float = 10.0,
+    one_region: bool | None = None,
     **options: object,
 ) -> CatalogRun[SwathReport]:
     """:func:`~lidarqa.accuracy.swaths.assess_swaths` over a catalog of tiles.
@@ -217,6 +258,10 @@ def catalog_swaths(
     cell_size : float, optional
         Default: :func:`~lidarqa.accuracy.swaths.auto_cell_size` of all the
         compared points (a first, light pass over the chunks).
+    one_region : bool, optional
+        Read the whole area as one region (default: for one file without
+        ``chunk_size`` or ``buffer``, see :func:`~lidarqa.tiling.apply.region_chunks`):
+        the in-memory run, one read, the cell size and range cells planned in it.
     range_cell, min_points, max_roughness, max_slope, **options
         As :func:`~lidarqa.accuracy.swaths.assess_swaths` (quality_level,
         estimate_offsets, rotations, reference_strip, ...), plus the catalog
@@ -259,7 +304,11 @@ def catalog_swaths(
     b = catalog.bounds
     # reference height of the plane sums (numerics only): the middle of the catalog's z range
     z0 = float(np.round(0.5 * sum(catalog.zrange), 1))
-    if cell_size is None:
+    if one_region is None:
+        one_region = (not catalog.is_catalog and chunk_opts["chunk_size"] is None
+                      and chunk_opts["buffer"] is None)
+    target = max(CELL_TARGET_POINTS, 2 * min_points)
+    if cell_size is None and not one_region:
         # the densities behind the default cell size, over every point (first pass)
         occ_chunks = make_chunks(catalog, chunk_size=chunk_opts["chunk_size"], buffer=0.0,
                                  origin=chunk_opts["origin"])
@@ -273,25 +322,35 @@ def catalog_swaths(
                 occupancy[s] = (n0 + n, np.union1d(k0, keys))
         if not occupancy:
             raise InvalidPointsError("no point to compare in the catalog (check --classes)")
-        cell_size = cell_size_from_occupancy(occupancy,
-                                             target=max(CELL_TARGET_POINTS, 2 * min_points))
-    grid = K.grid_for(np.array([[b[0], b[1]], [b[2], b[3]]]), float(cell_size))
-    if chunk_opts["buffer"] is None:
-        chunk_opts["buffer"] = swaths_buffer(cell_size)
-    elif chunk_opts["buffer"] < cell_size:
-        raise OptionError(f"buffer must be at least the cell size ({cell_size:g} m), "
-                          f"got {chunk_opts['buffer']:g}")
-    chunks = make_chunks(catalog, **chunk_opts)
-    if range_cell is None:
+        cell_size = cell_size_from_occupancy(occupancy, target=target)
+    grid = (None if cell_size is None
+            else K.grid_for(np.array([[b[0], b[1]], [b[2], b[3]]]), float(cell_size)))
+    if one_region:
+        chunks = [catalog.whole_chunk()]
+    else:
+        if chunk_opts["buffer"] is None:
+            chunk_opts["buffer"] = swaths_buffer(cell_size)
+        elif chunk_opts["buffer"] < cell_size:
+            raise OptionError(f"buffer must be at least the cell size ({cell_size:g} m), "
+                              f"got {chunk_opts['buffer']:g}")
+        chunks = make_chunks(catalog, **chunk_opts)
+    if one_region:
+        splits = None
+    elif range_cell is None:
         splits = tuple(range(1, MAX_SPLIT + 1))
     else:
         splits = tuple(sorted({1, range_split(cell_size, range_cell)}))
     task = SwathCellsTask(grid=grid, z0=z0, clamp=(b[0], b[1], b[2], b[3]), **sel,
                           min_points=int(min_points),
                           max_roughness=float(max_roughness), max_slope=float(max_slope),
-                          splits=splits)
+                          splits=splits, range_cell=range_cell, cell_target=target)
     outcomes, parts = _run(catalog, chunks, task, run_opts, "Strips")
     _all_failed(outcomes)
+    if grid is None:  # planned by the one region
+        planned, cells0 = parts[0] if parts[0] is not None else (None, {})
+        if planned is None:
+            raise InvalidPointsError("no point to compare (check --classes)")
+        grid, parts, cell_size = planned, [cells0], planned.cell_size
     per_strip: dict[int, list[Any]] = {}
     for part in parts:
         for s, cells in (part or {}).items():
@@ -315,7 +374,8 @@ def catalog_swaths(
         o = np.argsort(keys, kind="stable")
         planes.append(strip_planes(keys[o], sums[o], z0, cell_size=float(cell_size),
                                    min_points=int(min_points)))
-        merged.append({k: K.merge_extremes([c.extremes[k] for c in cells]) for k in splits})
+        merged.append({k: K.merge_extremes([c.extremes[k] for c in cells])
+                       for k in cells[0].extremes})
         if by_source_id:
             labels[s] = f"point_source_id {s}"
 
@@ -332,7 +392,8 @@ def catalog_swaths(
                                range_cell=range_cell, **opts)
     return CatalogRun(value, catalog, tuple(chunks), tuple(outcomes),
                       {"labels": {int(k): v for k, v in labels.items() if k in set(ids.tolist())},
-                       "cell_size": float(cell_size), "buffer": float(chunk_opts["buffer"])})
+                       "cell_size": float(cell_size),
+                       "buffer": float(chunk_opts["buffer"] or 0.0)})
 
 
 

@@ -106,10 +106,13 @@ def _read_tile_box(
                 for k, v in piece.fields.items():
                     parts_fields.setdefault(k, []).append(v[sel])
             offset += n
-    if parts_xyz:
-        xyz = np.concatenate(parts_xyz)
-        idx = np.concatenate(parts_idx)
-        fields = {k: np.concatenate(v) for k, v in parts_fields.items()}
+    if parts_xyz:  # one piece (a tile within READ_STEP points) is used as read, not copied
+
+        def join(v: list[np.ndarray]) -> np.ndarray:
+            return v[0] if len(v) == 1 else np.concatenate(v)
+
+        xyz, idx = join(parts_xyz), join(parts_idx)
+        fields = {k: join(v) for k, v in parts_fields.items()}
     else:
         xyz = np.empty((0, 3))
         idx = np.empty(0, dtype=np.int64)

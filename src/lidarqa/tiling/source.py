@@ -212,8 +212,15 @@ class Source:
         if name.startswith("_") or name in ("catalog", "cloud"):
             raise AttributeError(name)
         cat = self.__dict__.get("catalog")
-        if cat is None:
-            raise AttributeError(name)
+        if cat is None:  # an in-memory file (not LAS/LAZ): its header view from the points
+            z = self._memory.xyz[:, 2]
+            memory = {"bad": (), "tiles": (), "source_ids": None,
+                      "bounds": lambda: self.area_bounds,
+                      "zrange": lambda: (float(z.min()), float(z.max())) if len(z) else (0.0, 0.0)}
+            if name not in memory:
+                raise AttributeError(name)
+            v = memory[name]
+            return v() if callable(v) else v
         return getattr(cat, name)
 
     @property
@@ -233,6 +240,8 @@ class Source:
     @property
     def is_catalog(self) -> bool:
         """True when the user gave a catalog (several files, a folder, a glob, a .vpc)."""
+        if self.catalog is None:  # one cloud in memory
+            return False
         return is_catalog_input(self.paths) if self.paths else True
 
     @property

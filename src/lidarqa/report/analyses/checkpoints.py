@@ -190,26 +190,27 @@ def run_checkpoints(ctx: RunContext, item: AnalysisItem) -> SectionResult:
     if opts["vertical"]:
         measured_label = selection_label(opts["measured"], None, opts["source_ids"])
         spec = ctx.config.inputs[opts["measured"]]
-        with ctx.step(f"Vertical check of {measured_label}"):
-            if is_catalog_input(str(spec.path)):  # chunk by chunk, only chunks with check points
-                from ...tiling.jobs_api import catalog_vertical_check
-                from ...tiling.source import open_source
+        # one job for a file (the report's cloud, one in-memory region) and a catalog (chunk
+        # by chunk, only the chunks holding check points are read)
+        from ...tiling.jobs_api import catalog_vertical_check
+        from ...tiling.source import Source, open_source
 
-                source = open_source(str(spec.path), z_to_metres=False)
-                params = dict(item.params)
-                classes = params.pop("classes", (2,))
-                run = catalog_vertical_check(
-                    source, check, classes=tuple(np.atleast_1d(classes).tolist()),
-                    source_id=opts["source_ids"], skip_failed=True, **params)
-                rep = run.value
-                paragraphs.append(
-                    f"{opts['measured']} is a catalog: each check point is compared in the "
-                    "chunk whose core holds it; only those chunks are read.")
-            else:
-                tested = ctx.select(opts["measured"], None, opts["source_ids"])
-                rep = mod.vertical_check(
-                    tested.xyz, check, classification=tested.classification, **item.params
-                )
+        on_catalog = is_catalog_input(str(spec.path))
+        source = (open_source(str(spec.path), z_to_metres=False) if on_catalog
+                  else Source(catalog=None, cloud=ctx.cloud(opts["measured"])))
+        params = dict(item.params)
+        classes = params.pop("classes", (2,))
+        no_classes = not on_catalog and source.cloud.classification is None  # all points: TIN
+        with ctx.step(f"Vertical check of {measured_label}"):
+            job = catalog_vertical_check(
+                source, check, classes=None if no_classes else tuple(np.atleast_1d(classes)),
+                source_id=opts["source_ids"], skip_failed=on_catalog, **params)
+        rep = job.value
+        if on_catalog:
+            run = job
+            paragraphs.append(
+                f"{opts['measured']} is a catalog: each check point is compared in the "
+                "chunk whose core holds it; only those chunks are read.")
         residuals = np.column_stack([np.zeros(len(rep.dz)), np.zeros(len(rep.dz)), rep.dz])
         ok = rep.flag == "ok"
         residuals[~ok] = np.nan

@@ -120,32 +120,46 @@ def _resolve(opts: dict, ctx: ResolveContext) -> None:
     order=60,
 )
 def run_heights(ctx: RunContext, item: AnalysisItem) -> SectionResult:
-    """Height quality (Oude Elberink & Vosselman): predicted map-point σ, w-tests."""
-    from ...tiling.source import is_catalog_input
+    """Height quality (Oude Elberink & Vosselman): predicted map-point σ, w-tests.
+
+    One job (:func:`~lidarqa.tiling.jobs_api.catalog_heights`) for a file and a
+    catalog: the report's cloud (selected, and without the points held apart as
+    reference) is one in-memory region; a catalog with map and reference inputs
+    is read chunk by chunk, each map and reference point owned by one chunk.
+    """
+    from ...tiling.jobs_api import catalog_heights
+    from ...tiling.source import Source, is_catalog_input, open_source
 
     mod = import_module("lidarqa.accuracy.heights", "heights")
     opts = item.options
-    notes: list[str] = []
-    paragraphs: list[str] = []
     label = selection_label(opts["cloud"], opts["classes"], opts["source_ids"])
     r, m = opts["reference"], opts["map"]
-    spec = ctx.config.inputs[opts["cloud"]]
-    if isinstance(r, str) and isinstance(m, str) and is_catalog_input(str(spec.path)):
-        return _heights_on_catalog(ctx, item, mod, label)
-    sel = ctx.select(opts["cloud"], opts["classes"], opts["source_ids"])
-    laser = sel.xyz
+    path = str(ctx.config.inputs[opts["cloud"]].path)
+    on_catalog = isinstance(r, str) and isinstance(m, str) and is_catalog_input(path)
+    laser = None
+    if on_catalog:
+        source: Any = open_source(path, z_to_metres=False, classes=opts["classes"],
+                                  source_id=opts["source_ids"])
+        label += (" (a catalog: each map point is fitted, and each reference point compared, "
+                  "in the chunk whose core holds it)")
+    else:
+        sel = ctx.select(opts["cloud"], opts["classes"], opts["source_ids"])
+        keep = np.arange(len(sel))
+        if not isinstance(r, str):  # reference points held apart from the laser points
+            rng = np.random.default_rng(r["seed"])
+            perm = rng.permutation(len(sel))
+            n_ref = int(round(r["fraction"] * len(sel)))
+            ref_idx, keep = perm[:n_ref], np.sort(perm[n_ref:])
+            if len(ref_idx) > r["max_points"]:
+                ref_idx = rng.choice(ref_idx, size=r["max_points"], replace=False)
+            ref_xyz = sel.xyz[np.sort(ref_idx)]
+        cloud = sel.subset(keep) if len(keep) < len(sel) else sel
+        laser = cloud.xyz
+        source = Source(catalog=None, cloud=cloud)
     if isinstance(r, str):
         ref_xyz = ctx.points(r).xyz
         ref_label = r
     else:
-        rng = np.random.default_rng(r["seed"])
-        perm = rng.permutation(len(laser))
-        n_ref = int(round(r["fraction"] * len(laser)))
-        ref_idx, laser_idx = perm[:n_ref], perm[n_ref:]
-        if len(ref_idx) > r["max_points"]:
-            ref_idx = rng.choice(ref_idx, size=r["max_points"], replace=False)
-        ref_xyz = laser[np.sort(ref_idx)]
-        laser = laser[np.sort(laser_idx)]
         ref_label = (
             f"{len(ref_xyz):,} points held apart from {label} (fraction {r['fraction']}, "
             f"seed {r['seed']}); the planes use the other {len(laser):,}"
@@ -158,35 +172,15 @@ def run_heights(ctx: RunContext, item: AnalysisItem) -> SectionResult:
         map_xy = grid_map_points(laser, m["grid"], min_points=m["min_points"])
         map_label = f"{len(map_xy)} map points on a {m['grid']:g} m grid where laser points exist"
     with ctx.step(f"Heights of {len(map_xy):,} map points, {len(ref_xyz):,} reference points"):
-        rep = mod.assess_heights(laser, map_xy, ref_xyz, **item.params)
-    return _heights_section(ctx, item, rep, laser, ref_xyz, notes, paragraphs,
-                            f"Laser points: {label}. Map points: {map_label}. "
-                            f"Reference: {ref_label}.")
-
-
-def _heights_on_catalog(ctx: RunContext, item: AnalysisItem, mod: Any, label: str) -> Any:
-    """The compute half on a catalog, chunk by chunk; the section is the file's.
-
-    Each map and reference point is owned by one chunk, so the figures are those of one
-    in-memory run.
-    """
-    from ...tiling.jobs_api import catalog_heights
-    from ...tiling.source import open_source
+        run = catalog_heights(source, map_xy, ref_xyz, options=dict(item.params),
+                              skip_failed=on_catalog)
+    out = _heights_section(ctx, item, run.value, laser, ref_xyz, [], [],
+                           f"Laser points: {label}. Map points: {map_label}. "
+                           f"Reference: {ref_label}.")
+    if not on_catalog:
+        return out
     from ..catalog_overview import with_overview
 
-    opts = item.options
-    source = open_source(str(ctx.config.inputs[opts["cloud"]].path), z_to_metres=False)
-    mp = mod.read_map_points(ctx.config.inputs[opts["map"]].path, spacing=opts["map_spacing"])
-    ref_xyz = ctx.points(opts["reference"]).xyz
-    with ctx.step(f"Heights of {len(mp):,} map points on the catalog {opts['cloud']}"):
-        run = catalog_heights(source, mp.xyz[:, :2], ref_xyz, classes=opts["classes"],
-                              source_id=opts["source_ids"], options=dict(item.params),
-                              skip_failed=True)
-    out = _heights_section(
-        ctx, item, run.value, None, ref_xyz, [], [],
-        f"Laser points: {label} (a catalog: each map point is fitted, and each reference point "
-        f"compared, in the chunk whose core holds it). Map points: {len(mp)} from "
-        f"{opts['map']}. Reference: {opts['reference']}.")
     return with_overview(out, run, f"{opts['cloud']}: chunks")
 
 

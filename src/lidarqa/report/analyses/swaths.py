@@ -109,40 +109,29 @@ LABELS = {
 )
 def run_swaths(ctx: RunContext, item: AnalysisItem) -> SectionResult:
     """Overlap differences, repeatability and offsets of the strips of one cloud."""
-    from ...accuracy.swaths import assess_swaths, last_return_mask, surface_class_mask
-    from ...errors import AnalysisError
-    from ...io.crs import z_to_metres_factor
+    from ...tiling.jobs_swaths import catalog_swaths
+    from ...tiling.source import Source
 
+    # one job for a file (one region, from the cloud the report already holds) and a catalog
+    # (chunk by chunk: every cell fitted by its owner)
     opts = item.options
-    if ctx.is_catalog(opts["cloud"]):  # chunk by chunk: every cell fitted by its owner
-        from ...tiling.jobs_swaths import catalog_swaths
-        from ..catalog_overview import with_overview
+    name = opts["cloud"]
+    on_catalog = ctx.is_catalog(name)
+    source = (str(ctx.config.inputs[name].path) if on_catalog
+              else Source(catalog=None, cloud=ctx.cloud(name)))
+    with ctx.step(f"Comparing the flight strips of {name}"):
+        run = catalog_swaths(source, by_source_id=True, classes=opts["classes"],
+                             source_ids=opts["source_ids"], all_returns=not opts["last_returns"],
+                             skip_failed=on_catalog, **item.params)
+    out = swaths_section(ctx, item, run.value, run.catalog.crs)
+    if not on_catalog:
+        return out
+    from ..catalog_overview import with_overview
 
-        name = opts["cloud"]
-        with ctx.step(f"Comparing the flight strips of the catalog {name}"):
-            run = catalog_swaths(str(ctx.config.inputs[name].path), by_source_id=True,
-                                 classes=opts["classes"], source_ids=opts["source_ids"],
-                                 all_returns=not opts["last_returns"], skip_failed=True,
-                                 **item.params)
-        out = swaths_section(ctx, item, run.value, run.catalog.crs)
-        out.paragraphs.append(f"{name} is a catalog: every grid cell is fitted in the chunk "
-                              "that owns it, with all its points; the figures are those of one "
-                              "run over the whole block.")
-        return with_overview(out, run, f"{name}: chunks")
-    cloud = ctx.select(opts["cloud"], opts["classes"], opts["source_ids"])
-    sid = cloud.point_source_id
-    if sid is None:
-        raise AnalysisError(f"cloud {opts['cloud']!r} has no point_source_id: no flight strips")
-    keep = last_return_mask(cloud.fields, len(cloud)) if opts["last_returns"] else None
-    if keep is None:
-        keep = np.ones(len(cloud), dtype=bool)
-    if opts["classes"] is None:
-        keep &= surface_class_mask(cloud.classification, len(cloud))
-    xyz = cloud.xyz[keep].copy()
-    xyz[:, 2] *= z_to_metres_factor(cloud.crs)
-    with ctx.step(f"Comparing flight strips ({len(xyz):,} points)"):
-        rep = assess_swaths(xyz, np.asarray(sid)[keep].astype(np.int64), **item.params)
-    return swaths_section(ctx, item, rep, cloud.crs)
+    out.paragraphs.append(f"{name} is a catalog: every grid cell is fitted in the chunk "
+                          "that owns it, with all its points; the figures are those of one "
+                          "run over the whole block.")
+    return with_overview(out, run, f"{name}: chunks")
 
 
 def swaths_section(ctx: RunContext, item: AnalysisItem, rep: Any, crs: Any) -> SectionResult:
