@@ -20,6 +20,7 @@ from lidarqa.testing import write_tiles
 from lidarqa.testing.strips import make_strip_scene
 from lidarqa.tiling.jobs_swaths import catalog_swaths
 
+
 def load_strips(files, *, by_source_id, classes, all_returns):
     """The in-memory oracle: every file read whole, strips by point_source_id or by file."""
     from lidarqa.accuracy.swaths import select_surface
