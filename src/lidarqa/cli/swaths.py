@@ -7,7 +7,7 @@ import csv
 import io
 import os
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import click
 import numpy as np
@@ -207,7 +207,8 @@ def swaths(
                                  all_returns=all_returns, one_region=True if named_files else None,
                                  **(job_options(cat_opts, eng) if on_catalog else {}), **options)
     rep = run.value
-    labels = {k: v if by_source_id else Path(v).name for k, v in run.extra["labels"].items()}
+    strip_labels = cast("dict[int, str]", run.extra["labels"])
+    labels = {k: v if by_source_id else Path(v).name for k, v in strip_labels.items()}
     if given_crs is not None:
         if crs is not None:  # the rasters are horizontal: compare horizontal parts
             ensure_same_crs(_horizontal(crs), _horizontal(given_crs), what=(files[0], "--crs"))

@@ -328,17 +328,19 @@ def catalog_swaths(
     if one_region:
         chunks = [catalog.whole_chunk()]
     else:
+        assert cell_size is not None  # given, or measured by the first pass above
         if chunk_opts["buffer"] is None:
             chunk_opts["buffer"] = swaths_buffer(cell_size)
         elif chunk_opts["buffer"] < cell_size:
             raise OptionError(f"buffer must be at least the cell size ({cell_size:g} m), "
                               f"got {chunk_opts['buffer']:g}")
-        chunks = make_chunks(catalog, **chunk_opts)
+        chunks = list(make_chunks(catalog, **chunk_opts))
     if one_region:
         splits = None
     elif range_cell is None:
         splits = tuple(range(1, MAX_SPLIT + 1))
     else:
+        assert cell_size is not None
         splits = tuple(sorted({1, range_split(cell_size, range_cell)}))
     task = SwathCellsTask(grid=grid, z0=z0, clamp=(b[0], b[1], b[2], b[3]), **sel,
                           min_points=int(min_points),
@@ -351,6 +353,7 @@ def catalog_swaths(
         if planned is None:
             raise InvalidPointsError("no point to compare (check --classes)")
         grid, parts, cell_size = planned, [cells0], planned.cell_size
+    assert cell_size is not None  # given, measured, or planned by the one region
     per_strip: dict[int, list[Any]] = {}
     for part in parts:
         for s, cells in (part or {}).items():

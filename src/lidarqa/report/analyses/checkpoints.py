@@ -196,11 +196,12 @@ def run_checkpoints(ctx: RunContext, item: AnalysisItem) -> SectionResult:
         from ...tiling.source import Source, open_source
 
         on_catalog = is_catalog_input(str(spec.path))
-        source = (open_source(str(spec.path), z_to_metres=False) if on_catalog
-                  else Source(catalog=None, cloud=ctx.cloud(opts["measured"])))
+        cloud = None if on_catalog else ctx.cloud(opts["measured"])
+        source = (open_source(str(spec.path), z_to_metres=False) if cloud is None
+                  else Source(catalog=None, cloud=cloud))
         params = dict(item.params)
         classes = params.pop("classes", (2,))
-        no_classes = not on_catalog and source.cloud.classification is None  # all points: TIN
+        no_classes = cloud is not None and cloud.classification is None  # all points: TIN
         with ctx.step(f"Vertical check of {measured_label}"):
             job = catalog_vertical_check(
                 source, check, classes=None if no_classes else tuple(np.atleast_1d(classes)),

@@ -136,7 +136,7 @@ def run_heights(ctx: RunContext, item: AnalysisItem) -> SectionResult:
     r, m = opts["reference"], opts["map"]
     path = str(ctx.config.inputs[opts["cloud"]].path)
     on_catalog = isinstance(r, str) and isinstance(m, str) and is_catalog_input(path)
-    laser = None
+    laser: Any = None  # the laser points of one in-memory region (None on a catalog)
     if on_catalog:
         source: Any = open_source(path, z_to_metres=False, classes=opts["classes"],
                                   source_id=opts["source_ids"])
