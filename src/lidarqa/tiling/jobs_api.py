@@ -30,14 +30,23 @@ Example
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
-from typing import Any
+from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..errors import OptionError
 from ..io.vector import PointSet
 from .apply import CatalogRun, chunk_status, open_sources, owned, region_chunks  # noqa: F401
+
+if TYPE_CHECKING:
+    from ._types import PathsInput
+    from .catalog import Catalog
+    from .source import Source
+
+    #: What a job reads: paths, a folder, a glob, a ``.vpc``, or an opened catalog or source.
+    Sources = PathsInput | Catalog | Source
 
 __all__ = [
     "CatalogRun",
@@ -80,15 +89,15 @@ def _split(kw: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any], dict[str
 
 
 def catalog_features(
-    sources: Any,
+    sources: Sources,
     *,
     kind: str,
     classes: Sequence[int] | None = None,
     source_id: Sequence[int] | None = None,
-    segment_options: dict[str, Any] | None = None,
-    options: dict[str, Any] | None = None,
+    segment_options: Mapping[str, object] | None = None,
+    options: Mapping[str, object] | None = None,
     tolerance: float = 0.05,
-    **common: Any,
+    **common: object,
 ) -> CatalogRun:
     """Planes, edges or corners of a whole catalog, each feature once.
 
@@ -136,15 +145,15 @@ def catalog_features(
 
 
 def catalog_vertical_check(
-    sources: Any,
-    check: Any,
+    sources: Sources,
+    check: PointSet | ArrayLike,
     *,
     classes: Sequence[int] | None = (2,),
     source_id: Sequence[int] | None = None,
     max_edge: float | None = None,
     search_radius: float | None = None,
     checkpoint_rmse_v: float = 0.0,
-    **common: Any,
+    **common: object,
 ) -> CatalogRun:
     """``checkpoints --vertical`` over a catalog: only chunks holding check points are read.
 
@@ -197,14 +206,14 @@ def catalog_vertical_check(
 
 
 def catalog_heights(
-    sources: Any,
-    map_xy: Any,
-    reference_xyz: Any,
+    sources: Sources,
+    map_xy: ArrayLike,
+    reference_xyz: ArrayLike,
     *,
     classes: Sequence[int] | None = None,
     source_id: Sequence[int] | None = None,
-    options: dict[str, Any] | None = None,
-    **common: Any,
+    options: Mapping[str, object] | None = None,
+    **common: object,
 ) -> CatalogRun:
     """Height quality (map point heights, TIN, w-tests) over a catalog.
 
@@ -237,11 +246,11 @@ def catalog_heights(
     chunks = [c for c in chunks if owned(task.clamp(mxy), c).any()
               or owned(task.clamp(ref), c).any()]
     outcomes, parts = _run(catalog, chunks, task, run_opts, "Heights")
-    value = merge_heights(parts, mxy, ref, options=options)
+    value = merge_heights(parts, mxy, ref, options=dict(options or {}))
     return CatalogRun(value, catalog, tuple(chunks), tuple(outcomes))
 
 
-def heights_buffer(map_xy: Any, options: dict[str, Any] | None = None) -> float:
+def heights_buffer(map_xy: ArrayLike, options: Mapping[str, object] | None = None) -> float:
     """Default buffer of a heights job (m): room for the map point TIN around a chunk.
 
     ``max(60, 3 x the largest nearest-neighbour distance between map points + 10)``:
@@ -263,15 +272,15 @@ def heights_buffer(map_xy: Any, options: dict[str, Any] | None = None) -> float:
 
 
 def catalog_repeatability(
-    sources: Any,
+    sources: Sources,
     *,
     classes: Sequence[int] | None = None,
     source_id: Sequence[int] | None = None,
-    segment_options: dict[str, Any] | None = None,
-    edge_options: dict[str, Any] | None = None,
-    match_options: dict[str, Any] | None = None,
+    segment_options: Mapping[str, object] | None = None,
+    edge_options: Mapping[str, object] | None = None,
+    match_options: Mapping[str, object] | None = None,
     tolerance: float = 0.05,
-    **common: Any,
+    **common: object,
 ) -> CatalogRun:
     """Line repeatability of every pair of flight strips (point_source_id) over the block.
 
@@ -312,7 +321,8 @@ def catalog_repeatability(
     chunks = region_chunks(catalog, task, **chunk_opts)
     outcomes, parts = _run(catalog, chunks, task, run_opts, "Strip edges")
     strips = merge_strip_edges(parts, tolerance=tolerance)
-    rows = strip_pairs(strips, **(match_options or {}))
+    match_kw: dict[str, Any] = dict(match_options or {})  # checked by strip_pairs
+    rows = strip_pairs(strips, **match_kw)
     where: dict[int, list[str]] = {}
     for p in parts:
         if p is not None:

@@ -23,7 +23,7 @@ edges for the matching is cheap even when the points are not.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from itertools import combinations
 from typing import TYPE_CHECKING, Any, cast
@@ -85,8 +85,8 @@ def strip_samples(source: Source, *, side: float = 100.0, min_points: int = 100,
 
 
 def strip_options(samples: dict[int, np.ndarray], *,
-                  segment_options: dict[str, object] | None = None,
-                  edge_options: dict[str, object] | None = None,
+                  segment_options: Mapping[str, object] | None = None,
+                  edge_options: Mapping[str, object] | None = None,
                   ) -> StripOptions:
     """Per strip: (segment options, edge options, point spacing m) fixed from its sample.
 

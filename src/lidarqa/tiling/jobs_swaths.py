@@ -165,7 +165,9 @@ class SwathCellsTask:
     range_cell: float | None = None
     cell_target: int = 16
 
-    def __call__(self, data: ChunkData) -> Any:
+    def __call__(
+        self, data: ChunkData
+    ) -> dict[int, _StripCells] | tuple[Grid | None, dict[int, _StripCells]]:
         """Per-strip plane fits of the chunk's core cells (with the grid when planned here)."""
         from ..accuracy import _swaths_kernels as K
         from ..accuracy.swaths import (

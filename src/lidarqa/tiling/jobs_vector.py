@@ -33,7 +33,7 @@ chunk*.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -240,8 +240,8 @@ def fixed_auto_options(
     points: np.ndarray,
     *,
     kind: str = "edges",
-    segment_options: dict[str, object] | None = None,
-    options: dict[str, object] | None = None,
+    segment_options: Mapping[str, object] | None = None,
+    options: Mapping[str, object] | None = None,
 ) -> tuple[dict[str, object], dict[str, object]]:
     """Fix the data-driven defaults once for a whole catalog.
 
@@ -278,7 +278,7 @@ def fixed_auto_options(
 def feature_buffer(
     points: np.ndarray,
     *,
-    segment_options: dict[str, object] | None = None,
+    segment_options: Mapping[str, object] | None = None,
     spacings: float = 4.0,
     cap: float | None = None,
 ) -> float:
@@ -353,8 +353,8 @@ def vector_features(
     *,
     kind: str,
     core: Where | None = None,
-    segment_options: dict[str, object] | None = None,
-    options: dict[str, object] | None = None,
+    segment_options: Mapping[str, object] | None = None,
+    options: Mapping[str, object] | None = None,
     crs: CRS | None = None,
     box: Sequence[float] | None = None,
 ) -> Segments | PointSet:
