@@ -83,6 +83,7 @@ def test_w_distribution_precise_reference(chain_precise_reference):
     assert no_block.to_dict()["w"]["std"] > 1.3
 
 
+@pytest.mark.slow  # ~6 s: a Monte Carlo calibration
 def test_sigma_plane_matches_monte_carlo():
     """Predicted σ_plane vs the spread of fitted heights over 300 noise draws.
 

@@ -89,6 +89,7 @@ def test_bad_band_is_an_option_error():
 
 
 @needs_shared
+@pytest.mark.slow  # ~6 s: edges of six real tiles
 def test_six_ign_tiles_same_survey_same_threshold(tmp_path):
     """Per 50 m tile thresholds within a factor 2; the block as a catalog: >= 10 pairs <= 0.5 m."""
     tiles = sorted((SHARED / "ign-lidarhd").glob("test_data_770*_6277*_LA93_IGN69.laz"))

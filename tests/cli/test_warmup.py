@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
 from click.testing import CliRunner
 
 from lidarqa._jitcache import KernelStats, kernel_stats, kernels_cached
@@ -12,6 +13,7 @@ from lidarqa.cli.main import cli
 from lidarqa.units import undefined_units
 
 
+@pytest.mark.slow  # ~5 s: compiles the demo's kernels
 def test_warmup_caches_the_demo_kernels_and_names_the_folder(tmp_path):
     from lidarqa.geometry import _kernels
     from lidarqa.ground import _tin

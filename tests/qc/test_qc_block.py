@@ -68,6 +68,7 @@ def test_relative_accuracy_without_strips_is_not_assessed(clean, tmp_path):
     assert b["relative_accuracy"]["message"].startswith("not assessed")
 
 
+@pytest.mark.slow  # ~6 s: the ground filter on a whole delivery
 def test_ground_consistency_maps_ground_the_delivery_left_unclassified(clean, tmp_path):
     """Class 2 wiped in the western 40 m of the block: the disagreement is there, its size
     is the number of wiped ground points, and it is information (the verdict holds)."""

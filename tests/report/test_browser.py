@@ -64,6 +64,7 @@ def demo_report(demo_run) -> Path:
 
 
 @pytest.mark.browser
+@pytest.mark.slow  # ~10 s: starts Chromium
 def test_report_opens_in_headless_chromium(demo_report: Path, tmp_path_factory) -> None:
     browser, driver_path = _need_browser()
     from selenium import webdriver

@@ -4,10 +4,13 @@ from __future__ import annotations
 
 import json
 
+import pytest
+
 from lidarqa.report.config import ANALYSIS_KINDS, load_config
 from lidarqa.report.run import demo_config_path
 
 
+@pytest.mark.slow  # ~7 s: the whole demo assessment
 def test_demo_writes_report_json_and_outputs(demo_run):
     r = demo_run["result"]
     out = demo_run["out"]

@@ -140,6 +140,7 @@ def test_failed_chunk_is_reported_and_resume_runs_only_the_missing(
         ground_catalog(paths, out, chunk_size=60.0, buffer=10.0, cell_size=20.0, workers=1)
 
 
+@pytest.mark.slow  # ~5 s: the ground filter on a folder through the CLI
 def test_cli_ground_on_a_folder(scene_tiles, tmp_path):
     from lidarqa.cli.main import cli
 

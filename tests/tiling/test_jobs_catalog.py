@@ -205,6 +205,7 @@ def test_cli_edges_on_a_folder_writes_each_edge_once(tiles, edges_run, tmp_path)
     assert again.read_bytes() == out.read_bytes()
 
 
+@pytest.mark.slow  # ~5 s: two catalog jobs through the CLI
 def test_cli_vertical_check_and_repeatability_on_a_catalog(tiles, tmp_path):
     import json
 
@@ -283,6 +284,7 @@ def test_vector_output_is_byte_identical_for_any_completion_order(tiles, tmp_pat
     assert outs[0] == outs[1] and len(outs[0]) > 100
 
 
+@pytest.mark.slow  # ~8 s: a whole assess run on a catalog
 def test_assess_with_a_catalog_input_shows_the_overview_and_chunk_status(tiles, tmp_path):
     import json
 

@@ -150,6 +150,7 @@ def test_catalog_refuses_one_strip_and_bad_options(tmp_path, strip_tiles):
         assess_swaths(scene.points, scene.strip, cell_size=1.0, range_cell=1e-300)
 
 
+@pytest.mark.slow  # ~5 s: a chunked swaths job through the CLI
 def test_cli_swaths_on_a_folder(tmp_path, strip_tiles):
     pytest.importorskip("rasterio")
     out, doc = tmp_path / "out", tmp_path / "swaths.json"

@@ -124,6 +124,7 @@ COMMANDS = {
 
 
 @pytest.mark.parametrize("name", sorted(COMMANDS))
+@pytest.mark.slow  # ~14 s over the commands: each job run, interrupted and resumed
 def test_every_catalog_command_resumes(name, scene_tiles, checks, tmp_path, monkeypatch):
     _, paths = scene_tiles
     folder = paths[0].parent
