@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from datapaths import SHARED, needs_shared
+from datapaths import SHARED, ign_block, needs_shared
 
 from lidarqa.cli.main import cli
 
@@ -42,29 +42,11 @@ def _ground(tmp: Path, src: Path, *extra: object) -> np.ndarray:
     return np.concatenate([np.asarray(laspy.read(f).classification) == 2 for f in files])
 
 
-def _merge(files: list[Path], path: Path) -> None:
-    import laspy
-
-    las = [laspy.read(f) for f in files]
-    merged = laspy.LasData(las[0].header)
-    merged.points = laspy.ScaleAwarePointRecord(
-        np.concatenate([x.points.array for x in las]), las[0].header.point_format,
-        las[0].header.scales, las[0].header.offsets)
-    merged.update_header()
-    merged.write(path)
-
-
 def test_ground_labels_of_the_ign_file_and_the_chunked_folder_agree(tmp_path):
-    files = sorted((SHARED / "ign-lidarhd").glob("test_data_770*.laz"))
-    assert len(files) == 6
-    folder = tmp_path / "tiles"
-    folder.mkdir()
-    for f in files:
-        (folder / f.name).symlink_to(f)
-    _merge(files, tmp_path / "merged.laz")
+    folder, merged, _ = ign_block(tmp_path)
     (tmp_path / "a").mkdir()
     (tmp_path / "b").mkdir()
-    a = _ground(tmp_path / "a", tmp_path / "merged.laz")
+    a = _ground(tmp_path / "a", merged)
     b = _ground(tmp_path / "b", folder, "--chunk-size", "100", "--workers", "1")
     assert len(a) == len(b) == 405937
     assert 0.2 < a.mean() < 0.6  # a real ground/non-ground split
