@@ -172,3 +172,36 @@ def test_switching_the_thinning_off_restores_the_tin_edge(dense_scene):
     mine = classify_ground(sub, filter_density=0.0, min_edge_length=3.0)
     assert mine.parameters["min_edge_length"] == 3.0
     assert mine.parameter_sources["min_edge_length"] == "given"
+
+
+def _road_with_echoes(seed: int = 5):
+    """A dense level road (40 pts/m²) with sparse multipath echoes 0.2-0.5 m below it."""
+    rng = np.random.default_rng(seed)
+    n = 40 * 30 * 30
+    xy = rng.uniform(0, 30, (n, 2))
+    z = 0.01 * xy[:, 0] + rng.normal(0, 0.01, n)
+    echo = rng.random(n) < 0.004  # about one cell in six holds an echo
+    z[echo] -= rng.uniform(0.2, 0.5, echo.sum())
+    return np.column_stack([xy + [500.0, 500.0], z + 10.0]), echo
+
+
+@pytest.mark.parametrize("seed", [5, 6])
+def test_join_below_keeps_the_road_above_a_multipath_echo(seed):
+    p, echo = _road_with_echoes(seed)
+    off = SegmentPTD(filter_density=4.0).run(p).ground_mask
+    on = SegmentPTD(filter_density=4.0, join_below=True).run(p).ground_mask
+    # without it, the road in a cell whose lowest point is an echo is lost
+    assert on[~echo].mean() >= 0.995, f"{100 * on[~echo].mean():.2f} % of the road kept"
+    assert on[~echo].mean() > off[~echo].mean()
+    # it takes no echo the plain join left out, and drops nothing the plain join took
+    np.testing.assert_array_equal(on[echo], off[echo])
+    assert not (off & ~on).any()
+
+
+def test_join_below_is_chosen_for_dense_ground_based_scans_only():
+    mls = measure_cloud(*_road_with_echoes()[:1])
+    for sensor, want in (("mls", True), ("als", False)):
+        params, sources, _ = auto_parameters(mls, "segment-ptd", sensor=sensor)
+        assert params.get("join_below", False) is want
+        if want:
+            assert sources["join_below"] == "preset"

@@ -57,6 +57,15 @@ The rules, in short:
   and the TIN of the filter keeps a 2 m minimum edge (:data:`FILTER_MIN_EDGE`).
   At 20 points/m² this is 4 times less work, and the decision is taken where
   terrain shows: on the lower envelope.
+- **Echoes below the ground** (the same dense clouds, ground-based only): segment-PTD's
+  `join_below` tests the points of a cell whose lowest point was rejected against
+  the plane of its ground neighbours when that lowest point lies below it, so the
+  road above a multipath echo joins. A preset value with a physical reason (from
+  the street a return below the ground is an echo; from the air the lowest return
+  is the ground), measured on the eight Oakland chunks (mean total error 0.94 % to
+  0.85 %, κ 97.97 to 98.14; chunk ah 2.52 % to 1.81 %). Airborne families keep
+  their labels (IGN, BC forest, ISPRS: 100 % identical); switched on for the BC
+  forest tiles it raised the DTM RMSE of bcts_2 from 0.19 to 0.25 m, so it is not.
 - **Terrain first** (the same dense clouds, airborne only): the filter runs first at
   :data:`TERRAIN_DENSITY` points/m² (1.4 m cells, large enough to hold a ground
   return under a closed canopy); its ground is the terrain model, and the ground of
@@ -392,6 +401,10 @@ def auto_parameters(
             sources["filter_density"] = "preset"
             params["min_edge_length"] = FILTER_MIN_EDGE
             sources["min_edge_length"] = "preset"
+        if dense and regime == "mls":
+            # seen from the street, a return below the ground is a multipath echo
+            params["join_below"] = True
+            sources["join_below"] = "preset"
         if regime == "als-dense":
             # airborne at any density: ground never drops steeply on opposite sides
             params["perched_step"] = PERCHED_STEP
@@ -472,7 +485,7 @@ def parameter_notes(
         if src != "preset":
             continue
         note = f"constant of the {regime} preset; regime: {why}"
-        if k in ("filter_density", "min_edge_length", "terrain_density"):
+        if k in ("filter_density", "min_edge_length", "terrain_density", "join_below"):
             note += (
                 f"; thinned filtering from a density of 1.5 × {FILTER_DENSITY:g} "
                 f"= {1.5 * FILTER_DENSITY:g} pts/m²"

@@ -218,14 +218,21 @@ class SegmentPTD(TINParameters):
         airborne clouds): the filter runs on the lowest candidate of each XY cell of
         1/sqrt(`filter_density`) m (cells on absolute coordinates, so tiles and chunks
         see the same cells), and every other candidate joins the ground when the
-        lowest point of its cell is ground and it lies within `join_distance` m
-        (vertically) of the least-squares plane through the lowest ground points of
-        its cell and the eight cells around it. Terrain is the lower envelope of the
-        cloud, so the lowest points carry the decision; the plane test then takes the
-        ground points the thinning set aside, and leaves low vegetation, cars and the
-        feet of walls that stand higher.
+        candidate joins the ground when the lowest point of its cell is ground and it
+        lies within `join_distance` m (vertically) of the least-squares plane through
+        the lowest ground points of its cell and the eight cells around it. Terrain is
+        the lower envelope of the cloud, so the lowest points carry the decision; the
+        plane test then takes the ground points the thinning set aside, and leaves low
+        vegetation, cars and the feet of walls that stand higher.
     join_distance : float, default 0.15
         See `filter_density` (m).
+    join_below : bool, default False
+        With `filter_density`: a cell whose lowest point is not ground but lies more
+        than `join_distance` m below the plane of its ground neighbours (at least
+        three of the nine cells) is tested against that plane too, so the surface
+        above a return from below the ground joins. For ground-based scans, where a
+        return below the ground is a multipath echo (a wet road, glass); from the
+        air the lowest return is the best ground evidence, and this stays off.
     terrain_density : float, default 0.0
         Terrain first (points/m²; 0 = off; only with `filter_density`): the filter
         first runs, thinned the same way, at this lower density, where a cell is
@@ -316,6 +323,7 @@ class SegmentPTD(TINParameters):
     perched_radius: float = 8.0
     filter_density: float = 0.0
     join_distance: float = 0.15
+    join_below: bool = False
     terrain_density: float = 0.0
     terrain_distance: float = 0.3
     terrain_grow_radius: float | None = None
@@ -488,8 +496,8 @@ class SegmentPTD(TINParameters):
         wp = np.ascontiguousarray(p[win])
         res = inner.run(wp, progress=stage(progress, *fine))
         wg = np.ascontiguousarray(res.ground_mask)
-        planes = _cell_planes(cells, wp, wg)
-        ok = _join(p, inv, wp, wg, planes, float(self.join_distance))
+        planes = _cell_planes(cells, wp, wg, float(self.join_distance), bool(self.join_below))
+        ok = _join(p, inv, wp, planes, float(self.join_distance))
         ok[win[wg]] = True  # a ground lowest point stays ground whatever its plane says
         ground = np.zeros(n, dtype=bool)
         ground[ci[ok]] = True
@@ -696,16 +704,19 @@ def _find_cell(cells, cx, cy):  # pragma: no cover - numba
 
 
 @njit(cache=True, parallel=True)
-def _cell_planes(cells, wp, wg):  # pragma: no cover - numba
-    """Per ground cell: (a, b, c) of z = a + b·dx + c·dy about its lowest point.
+def _cell_planes(cells, wp, wg, tol, below):  # pragma: no cover - numba
+    """Per cell: (a, b, c, has) of z = a + b·dx + c·dy about its lowest point.
 
     Least squares through the lowest ground points of the 3 × 3 cells around it; a
-    level plane through their mean when they do not span a plane.
+    level plane through their mean when they do not span a plane. With `below`, a
+    cell whose lowest point is not ground gets the plane of its ground neighbours
+    when at least three of them are ground and its lowest point lies more than `tol`
+    below that plane (`has` = 1); other cells get none (`has` = 0).
     """
     m = cells.shape[0]
-    out = np.zeros((m, 3))
+    out = np.zeros((m, 4))
     for i in prange(m):
-        if not wg[i]:
+        if not (wg[i] or below):
             continue
         nb = np.empty(9, np.int64)
         cnt = 0
@@ -715,6 +726,8 @@ def _cell_planes(cells, wp, wg):  # pragma: no cover - numba
                 if j >= 0 and wg[j]:
                     nb[cnt] = j
                     cnt += 1
+        if cnt == 0 or (not wg[i] and cnt < 3):
+            continue
         mx, my, mz, sxx, sxy, sxz, syy, syz, _ = centred_moments(wp, nb, cnt)
         mx -= wp[i, 0]  # the plane is written about the cell's lowest point
         my -= wp[i, 1]
@@ -723,20 +736,24 @@ def _cell_planes(cells, wp, wg):  # pragma: no cover - numba
         if cnt >= 3 and det > 1e-9 * (sxx * syy + 1e-300):
             b = (sxz * syy - syz * sxy) / det
             c = (syz * sxx - sxz * sxy) / det
-        out[i, 0] = mz - b * mx - c * my
+        a = mz - b * mx - c * my
+        if not wg[i] and a - wp[i, 2] <= tol:
+            continue  # a lowest point that is not below the ground is an object's
+        out[i, 0] = a
         out[i, 1] = b
         out[i, 2] = c
+        out[i, 3] = 1.0
     return out
 
 
 @njit(cache=True, parallel=True)
-def _join(p, inv, wp, wg, planes, tol):  # pragma: no cover - numba
-    """Points within `tol` (vertically) of their ground cell's plane."""
+def _join(p, inv, wp, planes, tol):  # pragma: no cover - numba
+    """Points within `tol` (vertically) of their cell's ground plane."""
     n = p.shape[0]
     ok = np.zeros(n, dtype=np.bool_)
     for k in prange(n):
         g = inv[k]
-        if wg[g]:
+        if planes[g, 3] > 0:
             h = p[k, 2] - (
                 planes[g, 0]
                 + planes[g, 1] * (p[k, 0] - wp[g, 0])
