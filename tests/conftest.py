@@ -2,15 +2,20 @@
 
 from __future__ import annotations
 
+import atexit
 import os
+import shutil
 import tempfile
 from pathlib import Path
 
 import pytest
 from datapaths import DATA, HAS_SHARED, SHARED
 
-# catalog jobs keep finished chunks for --resume in a work folder: never the user's cache
-os.environ.setdefault("LIDARQA_WORK_DIR", tempfile.mkdtemp(prefix="lidarqa-test-work-"))
+# catalog jobs keep finished chunks for --resume in a work folder: never the user's cache,
+# and removed when the test session ends (xdist workers inherit the controller's folder)
+if "LIDARQA_WORK_DIR" not in os.environ:
+    os.environ["LIDARQA_WORK_DIR"] = tempfile.mkdtemp(prefix="lidarqa-test-work-")
+    atexit.register(shutil.rmtree, os.environ["LIDARQA_WORK_DIR"], ignore_errors=True)
 
 
 @pytest.fixture(scope="session")
