@@ -16,12 +16,12 @@ from typing import Any
 
 import click
 
-from ._common import Steps, echo, settings
+from ._common import Steps, echo, finish, settings
 
 __all__ = ["bad_lines", "catalog_engine", "catalog_options", "catalog_options_given",
-           "echo_run", "failed_exit", "is_catalog", "job_options",
+           "echo_run", "failed_exit", "finish_run", "is_catalog", "job_options",
            "open_catalog_source", "option_given", "pop_catalog_options", "reproducible_vectors",
-           "run_summary", "sigterm_as_interrupt", "wants_catalog"]
+           "run_job", "run_summary", "sigterm_as_interrupt", "wants_catalog"]
 
 
 def is_catalog(paths: Sequence[str]) -> bool:
@@ -141,6 +141,34 @@ def job_options(cat_opts: dict[str, Any], engine: Any = None) -> dict[str, Any]:
             "progress": not settings().quiet, "skip_failed": True,
             "work_dir": default_work_dir(), "resume": bool(cat_opts.get("resume")),
             **({"engine": engine} if engine is not None else {})}
+
+
+def run_job(job: Callable[..., Any], source: Any, cat_opts: dict[str, Any], on_catalog: bool,
+            *args: Any, **kwargs: Any) -> Any:
+    """``job(source, *args, **kwargs)`` on the command's engine (one region: in this process).
+
+    On a catalog the job gets the command's catalog options (:func:`job_options`).
+    """
+    with catalog_engine(cat_opts) if on_catalog else contextlib.nullcontext() as eng:
+        return job(source, *args, **kwargs, **(job_options(cat_opts, eng) if on_catalog else {}))
+
+
+def finish_run(command: str, run: Any, on_catalog: bool, *, inputs: dict[str, Any],
+               parameters: dict[str, Any], results: dict[str, Any],
+               record: bool = False) -> None:
+    """Write the --json record of a job's `run` (None: no job); on a catalog its chunks too.
+
+    On a catalog (or with `record`) the chunk counts are echoed first, the record gets
+    the run's summary (``results["catalog"]``) and a failed chunk fails the command
+    after the record.
+    """
+    if run is not None and on_catalog:
+        echo_run(run)
+    if run is not None and (on_catalog or record):
+        results["catalog"] = run_summary(run)
+    finish(command, inputs=inputs, parameters=parameters, results=results)
+    if run is not None:
+        failed_exit(run)
 
 
 def run_summary(run: Any) -> dict[str, Any]:

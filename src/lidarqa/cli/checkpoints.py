@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import contextlib
 from pathlib import Path
 from typing import Any
 
@@ -11,14 +10,11 @@ import click
 from ..accuracy.transforms import TRANSFORMS
 from ..units import param_unit
 from ._catalog import (
-    catalog_engine,
     catalog_options,
-    echo_run,
-    failed_exit,
-    job_options,
+    finish_run,
     open_catalog_source,
     reproducible_vectors,
-    run_summary,
+    run_job,
     wants_catalog,
 )
 from ._common import (
@@ -27,7 +23,6 @@ from ._common import (
     common_options,
     crs_option,
     echo,
-    finish,
     fmt_number,
     input_crs,
     prepare_outputs,
@@ -279,10 +274,9 @@ def checkpoints(
                                   "cannot select ground points")
             notes.append("the cloud has no classification: all its points form the TIN")
             cls_arg = None
-        with catalog_engine(cat_opts) if on_catalog else contextlib.nullcontext() as eng:
-            run = catalog_vertical_check(source, chk, classes=cls_arg, source_id=source_id,
-                                         max_edge=max_edge, checkpoint_rmse_v=checkpoint_rmse_v,
-                                         **(job_options(cat_opts, eng) if on_catalog else {}))
+        run = run_job(catalog_vertical_check, source, cat_opts, on_catalog, chk, classes=cls_arg,
+                      source_id=source_id, max_edge=max_edge,
+                      checkpoint_rmse_v=checkpoint_rmse_v)
         report: Any = run.value
     else:
         from ..accuracy.checkpoints import assess_checkpoints
@@ -333,15 +327,14 @@ def checkpoints(
     results["warnings"] = notes + results["warnings"]
     results["units"] = "m"
     catalog_params = {}
-    if run is not None and on_catalog:
-        results["catalog"] = run_summary(run)
+    if on_catalog:
         catalog_params = {k: cat_opts.get(k) for k in ("chunk_size", "buffer", "workers",
                                                        "scheduler")}
     _summary(results, vertical)
-    if run is not None and on_catalog:
-        echo_run(run)
-    finish(
+    finish_run(
         "checkpoints",
+        run,
+        on_catalog,
         inputs={"measured": list(measured) if on_catalog else measured_path, "check": check,
                 "control_file": control_file},
         parameters={
@@ -361,8 +354,6 @@ def checkpoints(
         },
         results=results,
     )
-    if run is not None:
-        failed_exit(run)
 
 
 def _summary(r: dict, vertical: bool) -> None:

@@ -11,15 +11,12 @@ import click
 import numpy as np
 
 from ._catalog import (
-    catalog_engine,
     catalog_options,
-    echo_run,
-    failed_exit,
-    job_options,
+    finish_run,
     open_catalog_source,
     pop_catalog_options,
     reproducible_vectors,
-    run_summary,
+    run_job,
     wants_catalog,
 )
 from ._common import (
@@ -28,7 +25,6 @@ from ._common import (
     common_options,
     crs_option,
     echo,
-    finish,
     input_crs,
     prepare_outputs,
     settings,
@@ -84,11 +80,9 @@ def _run(kind: str, paths: tuple[str, ...], output: str, classes: Any, source_id
     source = open_catalog_source(paths, cat, crs=input_crs(opts.get("crs")), z_to_metres=False)
     # fitted in metres: x, y in feet or degrees mixed with z in metres would distort them
     require_metric_xy(source.crs, source.label, "planes, edges and corners need")
-    with catalog_engine(cat) as eng:
-        run = catalog_features(source, kind=kind, classes=classes, source_id=source_id,
-                               segment_options={k: opts[k] for k in _SEGMENT_KEYS if k in opts},
-                               options=options,
-                               **(job_options(cat, eng) if on_catalog else {}))
+    run = run_job(catalog_features, source, cat, on_catalog, kind=kind, classes=classes,
+                  source_id=source_id, options=options,
+                  segment_options={k: opts[k] for k in _SEGMENT_KEYS if k in opts})
     extra: dict[str, Any] = run.extra  # the job's details
     f, s = run.value, extra["summary"]
     if s["n_points"] < 3:
@@ -136,23 +130,21 @@ def _run(kind: str, paths: tuple[str, ...], output: str, classes: Any, source_id
         said = (f"{len(f)} corners from {s['n_planes']} planes; {sum(left.values())} triples "
                 "refused")
     per_chunk = Counter(a["chunk"].tolist()) if len(f) else Counter()
-    results.update({"output": output, "catalog": run_summary(run), "n_at_buffer_edge": n_edge,
+    results.update({"output": output, "n_at_buffer_edge": n_edge,
                     "per_chunk": dict(sorted(per_chunk.items()))})
     echo(said + (f" ({', '.join(f'{k}: {v}' for k, v in left.items())})" if left else "")
          + f" -> {output}")
-    if on_catalog:
-        echo_run(run)
     c = run.chunks[0] if run.chunks else None
-    finish(kind, inputs={"paths": list(paths), **({} if on_catalog else {"path": paths[0]}),
-                         "classes": classes, "source_id": source_id,
-                         "n_points_selected": s["n_points"], "crs": crs_name(source.crs)},
-           parameters={**s["parameters"], **extra["segment_options"], **extra["options"],
-                       "chunk_size": c.size if c else None,
-                       "buffer": (c.buffered[2] - c.core[2]) if c else None,
-                       "workers": cat.get("workers"), "scheduler": cat.get("scheduler"),
-                       "rule": "anchor-in-core (corner point, edge midpoint, plane centroid)"},
-           results=results)
-    failed_exit(run)
+    finish_run(kind, run, on_catalog, record=True,
+               inputs={"paths": list(paths), **({} if on_catalog else {"path": paths[0]}),
+                       "classes": classes, "source_id": source_id,
+                       "n_points_selected": s["n_points"], "crs": crs_name(source.crs)},
+               parameters={**s["parameters"], **extra["segment_options"], **extra["options"],
+                           "chunk_size": c.size if c else None,
+                           "buffer": (c.buffered[2] - c.core[2]) if c else None,
+                           "workers": cat.get("workers"), "scheduler": cat.get("scheduler"),
+                           "rule": "anchor-in-core (corner point, edge midpoint, plane centroid)"},
+               results=results)
 
 
 def _check_suffix(output: str) -> None:

@@ -23,13 +23,11 @@ from ..accuracy.heights import (
 from ._catalog import (
     catalog_engine,
     catalog_options,
-    echo_run,
-    failed_exit,
+    finish_run,
     job_options,
     open_catalog_source,
     option_given,
     reproducible_vectors,
-    run_summary,
     wants_catalog,
 )
 from ._common import (
@@ -431,17 +429,9 @@ def heights(
         sigma_strip_source=sigma_strip_source,
     )
     if on_catalog:
-        echo_run(run)
-        res["catalog"] = run_summary(run)
         params.update({k: v for k, v in cat_opts.items() if option_given(v)})
-    finish(
-        "heights",
-        inputs={"cloud": cloud, "map": map_path, "reference": reference, "output": output},
-        parameters=params,
-        results=res,
-    )
-    if on_catalog:
-        failed_exit(run)
+    finish_run("heights", run, on_catalog, parameters=params, results=res,
+               inputs={"cloud": cloud, "map": map_path, "reference": reference, "output": output})
 
 
 def _is_polygon_map(path: str) -> bool:

@@ -12,14 +12,12 @@ import click
 
 from ..units import format_decimal
 from ._catalog import (
-    catalog_engine,
     catalog_options,
     catalog_options_given,
-    echo_run,
-    failed_exit,
+    finish_run,
     job_options,
     open_catalog_source,
-    run_summary,
+    run_job,
     wants_catalog,
 )
 from ._common import (
@@ -458,27 +456,23 @@ def repeatability(
                          "shared_threshold": shared_threshold}
         prepare_outputs(inputs=tuple(files))
         source = open_catalog_source(files, cat_opts, crs=given, z_to_metres=False)
-        with catalog_engine(cat_opts) as eng:
-            run = catalog_repeatability(source, classes=classes, source_id=source_id,
-                                        match_options=match_options,
-                                        edge_options={"steps": step_edges, "outlines": outlines},
-                                        **job_options(cat_opts, eng))
+        run = run_job(catalog_repeatability, source, cat_opts, True, classes=classes,
+                      source_id=source_id, match_options=match_options,
+                      edge_options={"steps": step_edges, "outlines": outlines})
         extra: dict[str, Any] = run.extra  # the job's details
         if not run.value:
             raise OptionError(f"repeatability needs at least two strips with edges, got "
                               f"{len(extra['strips'])}")
         _print_rows(run.value, threshold, pool=True)
-        echo_run(run)
         strips = {str(k): len(v) for k, v in extra["strips"].items()}
         echo("  strips          " + ", ".join(f"{k} ({n} edges)" for k, n in strips.items()))
-        finish("repeatability", inputs={"files": list(files)},
+        finish_run("repeatability", run, True, inputs={"files": list(files)},
                parameters={"by_source_id": True, "source_id": source_id, "classes": classes,
                            **match_options, **extra["segment_options"],
                            **extra["edge_options"],
                            **{k: cat_opts.get(k) for k in ("chunk_size", "buffer", "workers",
                                                            "scheduler")}},
-               results={"pairs": run.value, "strips": strips, "catalog": run_summary(run)})
-        failed_exit(run)
+               results={"pairs": run.value, "strips": strips})
         return
     if catalog_options_given(cat_opts):
         raise OptionError("catalog options apply to repeatability --by-source-id only")
