@@ -56,27 +56,34 @@ def sigterm_as_interrupt() -> Iterator[None]:
 _OPTION_NAMES = ("chunk_size", "buffer", "workers", "scheduler", "skip_bad", "resume")
 
 
-def catalog_options(func: Callable[..., Any]) -> Callable[..., Any]:
-    """``--chunk-size --buffer --workers --scheduler --skip-bad --resume`` (as ``ground``)."""
-    opts = [
-        click.option("--chunk-size", type=float, default=None,
-                     help="Catalog: chunk side, m (default: from the point density, aligned "
-                          "with the tiles)."),
-        click.option("--buffer", type=float, default=None,
-                     help="Catalog: margin read around each chunk, m (default 60; wider than "
-                          "the largest building)."),
-        click.option("--workers", type=int, default=None,
-                     help="Catalog: local worker processes (default: one per core; 1 = serial, "
-                          "no Dask)."),
-        click.option("--scheduler", default=None,
-                     help="Catalog: Dask scheduler address (tcp://host:port) or 'serial'."),
-        click.option("--skip-bad", is_flag=True,
-                     help="Catalog: leave out bad tiles (listed) instead of failing."),
-        click.option("--resume", is_flag=True,
-                     help="Catalog: re-use the chunks finished by an interrupted or failed run "
-                          "(kept in $LIDARQA_WORK_DIR, default ~/.cache/lidarqa/chunks, until "
-                          "a run ends with no failed chunk)."),
-    ]
+def catalog_options(func: Callable[..., Any] | None = None, /,
+                    **help_texts: str) -> Callable[..., Any]:
+    """``--chunk-size --buffer --workers --scheduler --skip-bad --resume``.
+
+    ``@catalog_options`` or ``@catalog_options(buffer="...")``, with a command's own help
+    text for some of them.
+    """
+    if func is None:
+        return lambda f: catalog_options(f, **help_texts)
+    helps = {
+        "chunk_size": "Catalog: chunk side, m (default: from the point density, aligned with "
+                      "the tiles).",
+        "buffer": "Catalog: margin read around each chunk, m (default: the margin the job "
+                  "needs, see docs/catalogs.md).",
+        "workers": "Catalog: local worker processes (default: one per core; 1 = serial, no "
+                   "Dask).",
+        "scheduler": "Catalog: Dask scheduler address (tcp://host:port) or 'serial'.",
+        "skip_bad": "Catalog: leave out bad tiles (listed) instead of failing.",
+        "resume": "Catalog: re-use the chunks finished by an interrupted or failed run (kept "
+                  "in $LIDARQA_WORK_DIR, default ~/.cache/lidarqa/chunks, until a run ends "
+                  "with no failed chunk).",
+        **help_texts}
+    opts = [click.option("--chunk-size", type=float, default=None, help=helps["chunk_size"]),
+            click.option("--buffer", type=float, default=None, help=helps["buffer"]),
+            click.option("--workers", type=int, default=None, help=helps["workers"]),
+            click.option("--scheduler", default=None, help=helps["scheduler"]),
+            click.option("--skip-bad", is_flag=True, help=helps["skip_bad"]),
+            click.option("--resume", is_flag=True, help=helps["resume"])]
     for opt in reversed(opts):
         func = opt(func)
     return func

@@ -6,7 +6,7 @@ from typing import TYPE_CHECKING
 
 import click
 
-from ._catalog import is_catalog, open_catalog_source, sigterm_as_interrupt
+from ._catalog import catalog_options, is_catalog, open_catalog_source, sigterm_as_interrupt
 from ._common import (
     INT_LIST,
     Steps,
@@ -128,35 +128,11 @@ if TYPE_CHECKING:
     help="With --evaluate: reference classes left out, e.g. 1,7,9.",
 )
 @crs_option
-@click.option(
-    "--chunk-size",
-    type=float,
-    default=None,
-    help="Catalog: chunk side, m (default: from the point density, aligned with the tiles).",
-)
-@click.option(
-    "--buffer",
-    type=float,
-    default=None,
-    help="Catalog: margin read around each chunk, m "
-    "(default: the seed cell, see docs/catalogs.md).",
-)
-@click.option(
-    "--workers",
-    type=int,
-    default=None,
-    help="Catalog: local worker processes (default: one per core; 1 = serial, no Dask).",
-)
-@click.option(
-    "--scheduler",
-    default=None,
-    help="Catalog: Dask scheduler address (tcp://host:port) or 'serial'.",
-)
-@click.option(
-    "--resume", is_flag=True, help="Catalog: re-use the chunks finished by an interrupted run."
-)
-@click.option(
-    "--skip-bad", is_flag=True, help="Catalog: leave out bad tiles (listed) instead of failing."
+@catalog_options(
+    buffer="Catalog: margin read around each chunk, m (default: the seed cell, see "
+    "docs/catalogs.md).",
+    resume="Catalog: re-use the chunks finished by an interrupted run (kept in "
+    "OUTPUT/.lidarqa-work).",
 )
 @common_options
 def ground(
