@@ -14,8 +14,8 @@ from ..units import format_decimal
 from ._catalog import (
     catalog_options,
     catalog_options_given,
+    failed_exit,
     finish_run,
-    job_options,
     open_catalog_source,
     run_job,
     wants_catalog,
@@ -256,19 +256,11 @@ def _side_segments(side: str, path: str, label: str, classes: Any, source_id: An
             from ..accuracy._lines_io import extract_segments
 
             extract_segments(np.empty((0, 3)))  # raises the clear "not available" error
-
-        from ..tiling.apply import engine_for
-
-        with steps(f"Extracting the edges of {side} {label}"), engine_for(
-                workers=cat_opts.get("workers"), scheduler=cat_opts.get("scheduler")) as eng:
-            run = catalog_features(path, kind="edges", classes=classes, source_id=source_id,
-                                   crs=given, engine=eng, skip_bad=bool(cat_opts.get("skip_bad")),
-                                   **job_options(cat_opts))
-        if run.failed:
-            from ..errors import TilingError
-
-            raise TilingError(f"{side}: {len(run.failed)} chunk(s) failed: "
-                              + ", ".join(run.failed))
+        source = open_catalog_source([path], cat_opts, crs=given, z_to_metres=False)
+        with steps(f"Extracting the edges of {side} {label}"):
+            run = run_job(catalog_features, source, cat_opts, wants_catalog([path], cat_opts),
+                          kind="edges", classes=classes, source_id=source_id)
+        failed_exit(run)
         if len(run.value) == 0:
             raise NothingToMeasureError(f"{side} {label}: no edges found")
         return run.value
