@@ -135,12 +135,21 @@ def _measured_e4(source: Any, run_opts: dict[str, Any]) -> float:
 
 
 def laser_noise_options(func: Any) -> Any:
-    """Add ``--sigma-point``, ``--sigma-gps``, ``--sigma-ins``: the laser block's error budget.
+    """The options of the plane fits and the laser block, shared by ``heights`` and ``roads``.
 
-    E1–E3 of Oude Elberink & Vosselman, shared by ``heights`` and ``roads``.
+    ``--radius --max-radius --min-points`` and the error budget ``--sigma-point
+    --sigma-gps --sigma-ins`` (E1–E3 of Oude Elberink & Vosselman).
     """
     for opt in reversed(
         [
+            click.option("--radius", type=float, default=RADIUS, show_default=True,
+                         help="First search radius for laser points around a map point (m)."),
+            click.option("--max-radius", type=float, default=MAX_RADIUS, show_default=True,
+                         help="The radius grows (x2 per step) up to this until --min-points "
+                              "are found (m)."),
+            click.option("--min-points", type=int, default=MIN_POINTS, show_default=True,
+                         help="Laser points needed for a plane fit; map points with fewer are "
+                              "flagged."),
             click.option(
                 "--sigma-point",
                 type=float,
@@ -173,27 +182,6 @@ def _fmt(v: float, scale: float = 1.0, unit: str = "m") -> str:
 @click.argument("cloud", type=click.Path())
 @click.argument("map_path", metavar="MAP", type=click.Path())
 @click.argument("reference", type=click.Path())
-@click.option(
-    "--radius",
-    type=float,
-    default=RADIUS,
-    show_default=True,
-    help="First search radius for laser points around a map point (m).",
-)
-@click.option(
-    "--max-radius",
-    type=float,
-    default=MAX_RADIUS,
-    show_default=True,
-    help="The radius grows (x2 per step) up to this until --min-points are found (m).",
-)
-@click.option(
-    "--min-points",
-    type=int,
-    default=MIN_POINTS,
-    show_default=True,
-    help="Laser points needed for a plane fit; map points with fewer are flagged.",
-)
 @laser_noise_options
 @click.option(
     "--sigma-strip",
