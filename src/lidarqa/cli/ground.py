@@ -6,7 +6,7 @@ from typing import TYPE_CHECKING
 
 import click
 
-from ._catalog import catalog_options, is_catalog, open_catalog_source, sigterm_as_interrupt
+from ._catalog import catalog_options, open_catalog_source, sigterm_as_interrupt, wants_catalog
 from ._common import (
     INT_LIST,
     Steps,
@@ -157,12 +157,7 @@ def ground(
     evaluate,
     ignore_classes,
     crs,
-    chunk_size,
-    buffer,
-    workers,
-    scheduler,
-    resume,
-    skip_bad,
+    **cat_opts,
 ) -> None:
     """Classify ground points of PATHS and write them (class 2) to OUTPUT.
 
@@ -182,14 +177,6 @@ def ground(
     from ..io import read, write
 
     given_crs = input_crs(crs)
-    catalog_opts = {
-        "--chunk-size": chunk_size,
-        "--buffer": buffer,
-        "--workers": workers,
-        "--scheduler": scheduler,
-        "--resume": resume or None,
-        "--skip-bad": skip_bad or None,
-    }
     params = {
         k: v
         for k, v in {
@@ -218,7 +205,7 @@ def ground(
             + " only apply to --method segment-ptd"
         )
     params.update(given)
-    if is_catalog(paths) or any(v is not None for v in catalog_opts.values()):
+    if wants_catalog(paths, cat_opts):
         from ..tiling.ground import ground_catalog
 
         s = settings()
@@ -226,7 +213,7 @@ def ground(
             from ..io import check_output
 
             check_output(s.json_path, overwrite=s.overwrite)
-        catalog = open_catalog_source(paths, {"skip_bad": skip_bad}, crs=given_crs,
+        catalog = open_catalog_source(paths, cat_opts, crs=given_crs,
                                       z_to_metres=False).catalog
         with sigterm_as_interrupt():
             cres = ground_catalog(
@@ -239,12 +226,7 @@ def ground(
                 exclude_classes=exclude_classes or (),
                 evaluate=evaluate,
                 ignore_classes=ignore_classes,
-                chunk_size=chunk_size,
-                buffer=buffer,
-                workers=workers,
-                scheduler=scheduler,
-                resume=resume,
-                skip_bad=skip_bad,
+                **cat_opts,
                 overwrite=s.overwrite,
                 progress=not s.quiet,
                 **params,
@@ -279,8 +261,8 @@ def ground(
                 "ignore_classes": list(ignore_classes or []),
                 "chunk_size": cres.chunk_size,
                 "buffer": cres.buffer,
-                "workers": workers,
-                "scheduler": scheduler,
+                "workers": cat_opts["workers"],
+                "scheduler": cat_opts["scheduler"],
                 **cres.parameters.get("filter", {}),
                 **({"auto": cres.parameters["auto"]} if "auto" in cres.parameters else {}),
             },
