@@ -91,6 +91,24 @@ def _unit_factors(crs: Any, what: str) -> tuple[float, float, str | None, str | 
     return h_factor, z_to_metres_factor(crs), h_name, v_name
 
 
+def _units(measured: Any, check: Any, notes: list[str]) -> tuple[Any, float, float]:
+    """The CRS both inputs are in (MEASURED's, else CHECK's) and its factors to metres.
+
+    A conversion is noted in `notes`; differing CRSs are refused.
+    """
+    from ..io.crs import ensure_same_crs
+
+    ensure_same_crs(measured, check, what=("MEASURED", "CHECK"))
+    crs = measured if measured is not None else check
+    fh, fv, hname, vname = _unit_factors(crs, "MEASURED" if measured is not None else "CHECK")
+    if fv != 1.0 or fh != 1.0:
+        notes.append(f"coordinates converted to metres (horizontal unit: {hname or 'metre'}, "
+                     f"vertical unit: {vname or 'metre'})")
+        if measured is None or check is None:
+            notes.append("one input has no CRS and is taken to share the other's CRS and units")
+    return crs, fh, fv
+
+
 def _scaled(xyz: Any, fh: float, fv: float) -> Any:
     out = xyz.astype(float, copy=True)
     out[:, :2] *= fh
@@ -215,7 +233,7 @@ def checkpoints(
     it, reading only those chunks; the figures equal one whole-area run.
     """
     from ..errors import OptionError
-    from ..io.crs import crs_name, ensure_same_crs
+    from ..io.crs import crs_name
     from ..io.vector import VECTOR_SUFFIXES, PointSet, read_points, write_points
 
     if output is not None and Path(output).suffix.lower() not in VECTOR_SUFFIXES:
@@ -254,18 +272,7 @@ def checkpoints(
         source = open_catalog_source(measured, cat_opts, crs=given)
         if source.native_crs is None and chk.crs is not None:  # the check points' CRS for both
             source = open_catalog_source(measured, cat_opts, crs=chk.crs)
-        native = source.native_crs
-        ensure_same_crs(native, chk.crs, what=("MEASURED", "CHECK"))
-        crs_used = native if native is not None else chk.crs
-        fh, fv, hname, vname = _unit_factors(crs_used,
-                                             "MEASURED" if native is not None else "CHECK")
-        if fv != 1.0 or fh != 1.0:
-            notes.append(
-                f"coordinates converted to metres (horizontal unit: {hname or 'metre'}, "
-                f"vertical unit: {vname or 'metre'})"
-            )
-            if chk.crs is None or native is None:
-                notes.append("one input has no CRS and is taken to share the other's CRS and units")
+        crs_used, _, _ = _units(source.native_crs, chk.crs, notes)
         fh, fv = source.xy_factor, source.z_factor
         cls_arg: tuple[int, ...] | None = tuple(classes) if classes else (2,)
         if source.cloud is not None and source.cloud.classification is None:  # a point file
@@ -290,18 +297,7 @@ def checkpoints(
             )
         with steps("Reading measured points"):
             mea = read_points(measured_path, crs=given)
-        ensure_same_crs(mea.crs, chk.crs, what=("MEASURED", "CHECK"))
-        crs_used = mea.crs if mea.crs is not None else chk.crs
-        fh, fv, hname, vname = _unit_factors(
-            crs_used, "MEASURED" if mea.crs is not None else "CHECK"
-        )
-        if fv != 1.0 or fh != 1.0:
-            notes.append(
-                f"coordinates converted to metres (horizontal unit: {hname or 'metre'}, "
-                f"vertical unit: {vname or 'metre'})"
-            )
-            if mea.crs is None or chk.crs is None:
-                notes.append("one input has no CRS and is taken to share the other's CRS and units")
+        crs_used, fh, fv = _units(mea.crs, chk.crs, notes)
         with steps("Matching and estimating"):
             report = assess_checkpoints(
                 PointSet(mea.ids, _scaled(mea.xyz, fh, fv)),
