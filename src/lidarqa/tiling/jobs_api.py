@@ -38,7 +38,8 @@ from numpy.typing import ArrayLike
 
 from ..errors import OptionError
 from ..io.vector import PointSet
-from .apply import CatalogRun, chunk_status, open_sources, owned, region_chunks  # noqa: F401
+from .apply import CatalogRun, chunk_status, open_sources, region_chunks  # noqa: F401
+from .jobs_vector import owned
 
 if TYPE_CHECKING:
     from ._types import PathsInput

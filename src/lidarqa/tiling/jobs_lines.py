@@ -23,10 +23,10 @@ edges for the matching is cheap even when the points are not.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Hashable, Mapping, Sequence
 from dataclasses import dataclass, field
 from itertools import combinations
-from typing import TYPE_CHECKING, Any, cast
+from typing import TYPE_CHECKING, Any, TypeVar, cast
 
 import numpy as np
 
@@ -39,6 +39,9 @@ if TYPE_CHECKING:
     from ._types import Tiles
     from .engine import ChunkData
     from .source import Source
+
+#: A pass's key in :func:`strip_pairs` (a strip id, or any name).
+K = TypeVar("K", bound=Hashable)
 
 #: Per strip: (segment options, edge options, point spacing m), see :func:`strip_options`.
 StripOptions = dict[int, tuple[dict[str, object], dict[str, object], float]]
@@ -199,8 +202,8 @@ def merge_strip_edges(
     }
 
 
-def strip_pairs(strips: Mapping[Any, Segments | Exception], *, shared_threshold: bool = False,
-                pairs: Sequence[tuple[Any, Any]] | None = None,
+def strip_pairs(strips: Mapping[K, Segments | Exception], *, shared_threshold: bool = False,
+                pairs: Sequence[tuple[K, K]] | None = None,
                 **match_options: object) -> list[dict[str, object]]:
     """Match every pair of strips both ways: rows like ``lidarqa repeatability``.
 
@@ -241,7 +244,7 @@ def strip_pairs(strips: Mapping[Any, Segments | Exception], *, shared_threshold:
     pairs = list(combinations(strips, 2)) if pairs is None else list(pairs)
     bad = {k: v for k, v in strips.items() if isinstance(v, Exception)}
     good = [(a, b) for a, b in pairs if a not in bad and b not in bad]
-    segs = cast("Mapping[Any, Segments]", strips)  # the passes of `good`
+    segs = cast("Mapping[K, Segments]", strips)  # the passes of `good`
     if shared_threshold:
         if opts.get("threshold") is not None:
             raise OptionError("--shared-threshold computes the threshold; do not also give "

@@ -35,7 +35,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -69,6 +69,11 @@ __all__ = [
 ]
 
 KINDS = ("planes", "edges", "corners")
+
+#: One chunk's part: (chunk id, features) or, from :class:`VectorTask`, (chunk id, features,
+#: what the chunk owns of its segmentation, see :func:`vector_features`).
+VectorPart = tuple[str, "Segments | PointSet"] | tuple[str, "Segments | PointSet",
+                                                       dict[str, object]]
 
 
 def in_core(xy: ArrayLike, core: Sequence[float]) -> np.ndarray:
@@ -177,7 +182,7 @@ def dedupe_segments(segments: Segments, *, tolerance: float = 0.05) -> Segments:
 
 
 def merge_vector_parts(
-    parts: Sequence[tuple[Any, ...] | None],
+    parts: Sequence[VectorPart | None],
     *,
     tolerance: float = 0.05,
     crs: CRS | None = None,
@@ -361,7 +366,7 @@ def vector_features(
     options: Mapping[str, object] | None = None,
     crs: CRS | None = None,
     box: Sequence[float] | None = None,
-    summary: dict[str, Any] | None = None,
+    summary: dict[str, object] | None = None,
 ) -> Segments | PointSet:
     """Planes, edges or corners of (buffered) points, keeping those anchored in `core`.
 
@@ -458,22 +463,24 @@ def _summary(pts: np.ndarray, seg: Any, left: list[dict[str, Any]],
             "parameters": dict(seg.parameters)}
 
 
-def merge_summaries(parts: Sequence[tuple[Any, ...] | None]) -> dict[str, Any]:
+def merge_summaries(parts: Sequence[VectorPart | None]) -> dict[str, object]:
     """The whole area's summary: the sum of the parts' summaries (:func:`vector_features`)."""
     from collections import Counter
 
-    out: dict[str, Any] = {"n_points": 0, "n_segmented_points": 0, "n_planes": 0,
-                           "n_adjacent_pairs": 0, "parameters": {}}
-    left: Counter = Counter()
+    counts: Counter[str] = Counter(dict.fromkeys(_COUNTS, 0))
+    left: Counter[str] = Counter()
+    params: object = {}
     for p in parts:
         if p is None or len(p) < 3:
             continue
-        for k in ("n_points", "n_segmented_points", "n_planes", "n_adjacent_pairs"):
-            out[k] += p[2].get(k, 0)
-        left.update(p[2].get("left_out", {}))
-        out["parameters"] = out["parameters"] or p[2].get("parameters", {})  # the first chunk's
-    out["left_out"] = dict(left.most_common())
-    return out
+        part = cast("dict[str, Any]", p[-1])
+        counts.update({k: int(part.get(k, 0)) for k in _COUNTS})
+        left.update(part.get("left_out", {}))
+        params = params or part.get("parameters", {})  # the first chunk's
+    return {**counts, "left_out": dict(left.most_common()), "parameters": params}
+
+
+_COUNTS = ("n_points", "n_segmented_points", "n_planes", "n_adjacent_pairs")
 
 
 def _at_box_edge(pts: np.ndarray, seg: Any, feats: Any, kind: str, box: Sequence[float],
@@ -547,7 +554,8 @@ class VectorTask:
         if self.kind not in KINDS:
             raise OptionError(f"kind must be one of {', '.join(KINDS)}, got {self.kind!r}")
 
-    def __call__(self, chunk_data: ChunkData) -> tuple[str, Segments | PointSet, dict[str, Any]]:
+    def __call__(self, chunk_data: ChunkData) -> tuple[str, Segments | PointSet,
+                                                        dict[str, object]]:
         """Features of one chunk (its buffer read too) anchored in its core, by chunk id.
 
         The third item is what the chunk owns of its segmentation (see
@@ -565,7 +573,7 @@ class VectorTask:
             if f != 1.0:
                 xyz = xyz.copy()
                 xyz[:, 2] *= f
-        summary: dict[str, Any] = {}
+        summary: dict[str, object] = {}
         feats = vector_features(xyz, kind=self.kind, core=chunk_data.chunk,
                                 segment_options=self.segment_options, options=self.options,
                                 crs=cloud.crs, box=open_box(chunk_data.chunk.buffered,
