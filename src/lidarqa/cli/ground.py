@@ -205,6 +205,10 @@ def ground(
             + " only apply to --method segment-ptd"
         )
     params.update(given)
+    # the filter's options, the same for one file and a catalog
+    job = {"method": method, "preset": preset, "sensor": sensor,
+           "last_returns_only": not all_returns, "exclude_classes": list(exclude_classes or []),
+           "ignore_classes": list(ignore_classes or []), "evaluate": evaluate}
     if wants_catalog(paths, cat_opts):
         from ..tiling.ground import ground_catalog
 
@@ -216,21 +220,8 @@ def ground(
         catalog = open_catalog_source(paths, cat_opts, crs=given_crs,
                                       z_to_metres=False).catalog
         with sigterm_as_interrupt():
-            cres = ground_catalog(
-                catalog,
-                output,
-                method=method,
-                preset=preset,
-                sensor=sensor,
-                last_returns_only=not all_returns,
-                exclude_classes=exclude_classes or (),
-                evaluate=evaluate,
-                ignore_classes=ignore_classes,
-                **cat_opts,
-                overwrite=s.overwrite,
-                progress=not s.quiet,
-                **params,
-            )
+            cres = ground_catalog(catalog, output, **job, **cat_opts, overwrite=s.overwrite,
+                                  progress=not s.quiet, **params)
         res: dict = cres.to_dict()
         for msg in cres.warnings:
             click.echo(f"Warning: {msg}", err=True)
@@ -253,12 +244,7 @@ def ground(
             "ground",
             inputs={"paths": list(paths), "output": output},
             parameters={
-                "method": method,
-                "preset": preset,
-                "sensor": sensor,
-                "last_returns_only": not all_returns,
-                "exclude_classes": list(exclude_classes or []),
-                "ignore_classes": list(ignore_classes or []),
+                **{k: v for k, v in job.items() if k != "evaluate"},
                 "chunk_size": cres.chunk_size,
                 "buffer": cres.buffer,
                 "workers": cat_opts["workers"],
@@ -287,18 +273,7 @@ def ground(
         warnings.catch_warnings(record=True) as caught,
     ):
         warnings.simplefilter("always", DataQualityWarning)
-        result = classify_ground(
-            cloud,
-            method=method,
-            last_returns_only=not all_returns,
-            exclude_classes=exclude_classes or (),
-            evaluate=evaluate,
-            ignore_classes=ignore_classes,
-            preset=preset,
-            progress=progress,
-            sensor=sensor,
-            **params,
-        )
+        result = classify_ground(cloud, **job, progress=progress, **params)
     for w in caught:
         click.echo(f"Warning: {w.message}", err=True)
     cls = cloud.fields.get("classification")
@@ -338,17 +313,12 @@ def ground(
         "ground",
         inputs={"path": path, "output": output},
         parameters={
-            "method": method,
-            "preset": preset,
-            "sensor": sensor,
+            **{k: v for k, v in job.items() if k != "evaluate"},
             "regime": result.regime,
             "measured": res["measured"],
             "parameter_sources": result.parameter_sources,
             "parameter_notes": result.parameter_notes,
             "regime_reason": result.regime_reason,
-            "last_returns_only": not all_returns,
-            "exclude_classes": list(exclude_classes or []),
-            "ignore_classes": list(ignore_classes or []),
             "crs": crs,
             **result.parameters,
         },
