@@ -197,7 +197,9 @@ STAT_KEYS = frozenset("min max median mean std p95 rms max_abs".split())
 #: class code (while a list ``"classes": [2, 6]`` holds codes), ``timings_s`` seconds per step.
 GROUP_UNITS: dict[str, str] = {
     **dict.fromkeys(
-        "classes point_source_ids flags confusion sigma_classes failed_by_check".split(), _N
+        "classes point_source_ids flags confusion sigma_classes failed_by_check per_chunk skipped "
+        "refused".split(),
+        _N,
     ),
     **dict.fromkeys("producers_accuracy users_accuracy".split(), _F),
     "timings_s": "second",

@@ -22,10 +22,7 @@ from datapaths import ign_block, needs_shared
 pytestmark = [needs_shared, pytest.mark.slow]
 
 ANALYSES = (
-    pytest.param("info", marks=pytest.mark.xfail(
-        reason="info's density_per_m2: 27.75 on the file, 27.83 on the folder (two definitions "
-               "of the area); issue #26, left to the info command's one-source rewrite")),
-    "checkpoints", "heights", "lines", "edges", "swaths", "ground",
+    "info", "checkpoints", "heights", "lines", "edges", "swaths", "ground",
 )
 # ground labels: >= 99.9 % equal (issue #26), so counts of points may differ by 0.1 %
 _SHARE = {"ground": 1e-3}

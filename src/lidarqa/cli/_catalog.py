@@ -19,9 +19,9 @@ import click
 from ._common import Steps, echo, finish, settings
 
 __all__ = ["bad_lines", "catalog_engine", "catalog_options", "catalog_options_given",
-           "echo_run", "failed_exit", "info_on_catalog", "is_catalog", "job_options",
+           "echo_run", "failed_exit", "finish_run", "is_catalog", "job_options",
            "open_catalog_source", "option_given", "pop_catalog_options", "reproducible_vectors",
-           "run_summary", "sigterm_as_interrupt", "wants_catalog"]
+           "run_job", "run_summary", "sigterm_as_interrupt", "wants_catalog"]
 
 
 def is_catalog(paths: Sequence[str]) -> bool:
@@ -56,27 +56,34 @@ def sigterm_as_interrupt() -> Iterator[None]:
 _OPTION_NAMES = ("chunk_size", "buffer", "workers", "scheduler", "skip_bad", "resume")
 
 
-def catalog_options(func: Callable[..., Any]) -> Callable[..., Any]:
-    """``--chunk-size --buffer --workers --scheduler --skip-bad --resume`` (as ``ground``)."""
-    opts = [
-        click.option("--chunk-size", type=float, default=None,
-                     help="Catalog: chunk side, m (default: from the point density, aligned "
-                          "with the tiles)."),
-        click.option("--buffer", type=float, default=None,
-                     help="Catalog: margin read around each chunk, m (default 60; wider than "
-                          "the largest building)."),
-        click.option("--workers", type=int, default=None,
-                     help="Catalog: local worker processes (default: one per core; 1 = serial, "
-                          "no Dask)."),
-        click.option("--scheduler", default=None,
-                     help="Catalog: Dask scheduler address (tcp://host:port) or 'serial'."),
-        click.option("--skip-bad", is_flag=True,
-                     help="Catalog: leave out bad tiles (listed) instead of failing."),
-        click.option("--resume", is_flag=True,
-                     help="Catalog: re-use the chunks finished by an interrupted or failed run "
-                          "(kept in $LIDARQA_WORK_DIR, default ~/.cache/lidarqa/chunks, until "
-                          "a run ends with no failed chunk)."),
-    ]
+def catalog_options(func: Callable[..., Any] | None = None, /,
+                    **help_texts: str) -> Callable[..., Any]:
+    """``--chunk-size --buffer --workers --scheduler --skip-bad --resume``.
+
+    ``@catalog_options`` or ``@catalog_options(buffer="...")``, with a command's own help
+    text for some of them.
+    """
+    if func is None:
+        return lambda f: catalog_options(f, **help_texts)
+    helps = {
+        "chunk_size": "Catalog: chunk side, m (default: from the point density, aligned with "
+                      "the tiles).",
+        "buffer": "Catalog: margin read around each chunk, m (default: the margin the job "
+                  "needs, see docs/catalogs.md).",
+        "workers": "Catalog: local worker processes (default: one per core; 1 = serial, no "
+                   "Dask).",
+        "scheduler": "Catalog: Dask scheduler address (tcp://host:port) or 'serial'.",
+        "skip_bad": "Catalog: leave out bad tiles (listed) instead of failing.",
+        "resume": "Catalog: re-use the chunks finished by an interrupted or failed run (kept "
+                  "in $LIDARQA_WORK_DIR, default ~/.cache/lidarqa/chunks, until a run ends "
+                  "with no failed chunk).",
+        **help_texts}
+    opts = [click.option("--chunk-size", type=float, default=None, help=helps["chunk_size"]),
+            click.option("--buffer", type=float, default=None, help=helps["buffer"]),
+            click.option("--workers", type=int, default=None, help=helps["workers"]),
+            click.option("--scheduler", default=None, help=helps["scheduler"]),
+            click.option("--skip-bad", is_flag=True, help=helps["skip_bad"]),
+            click.option("--resume", is_flag=True, help=helps["resume"])]
     for opt in reversed(opts):
         func = opt(func)
     return func
@@ -143,6 +150,34 @@ def job_options(cat_opts: dict[str, Any], engine: Any = None) -> dict[str, Any]:
             **({"engine": engine} if engine is not None else {})}
 
 
+def run_job(job: Callable[..., Any], source: Any, cat_opts: dict[str, Any], on_catalog: bool,
+            *args: Any, **kwargs: Any) -> Any:
+    """``job(source, *args, **kwargs)`` on the command's engine (one region: in this process).
+
+    On a catalog the job gets the command's catalog options (:func:`job_options`).
+    """
+    with catalog_engine(cat_opts) if on_catalog else contextlib.nullcontext() as eng:
+        return job(source, *args, **kwargs, **(job_options(cat_opts, eng) if on_catalog else {}))
+
+
+def finish_run(command: str, run: Any, on_catalog: bool, *, inputs: dict[str, Any],
+               parameters: dict[str, Any], results: dict[str, Any],
+               record: bool = False) -> None:
+    """Write the --json record of a job's `run` (None: no job); on a catalog its chunks too.
+
+    On a catalog (or with `record`) the chunk counts are echoed first, the record gets
+    the run's summary (``results["catalog"]``) and a failed chunk fails the command
+    after the record.
+    """
+    if run is not None and on_catalog:
+        echo_run(run)
+    if run is not None and (on_catalog or record):
+        results["catalog"] = run_summary(run)
+    finish(command, inputs=inputs, parameters=parameters, results=results)
+    if run is not None:
+        failed_exit(run)
+
+
 def run_summary(run: Any) -> dict[str, Any]:
     d = run.to_dict()
     d["chunks"] = run.chunk_status()
@@ -195,83 +230,3 @@ def bad_lines(bad: Sequence[tuple[str, str]]) -> None:
         click.echo(f"Skipped {len(bad)} bad input(s):", err=True)
         for p, r in bad:
             click.echo(f"  {p}: {r}", err=True)
-
-
-def _strip_counts(catalog: Any) -> tuple[dict[int, int], dict[str, list[int]]]:
-    """Points per point source id over the catalog, and the ids of each tile (streamed)."""
-    import numpy as np
-
-    from ..io.las import LasReader
-
-    total: dict[int, int] = {}
-    per_tile: dict[str, list[int]] = {}
-    for t in catalog.tiles:
-        ids: set[int] = set()
-        with LasReader(t.path) as r:
-            for piece in r.chunks(1_000_000):
-                psid = piece.fields.get("point_source_id")
-                if psid is None:
-                    continue
-                u, c = np.unique(np.asarray(psid), return_counts=True)
-                for k, n in zip(u.tolist(), c.tolist(), strict=True):
-                    total[int(k)] = total.get(int(k), 0) + int(n)
-                ids.update(int(k) for k in u.tolist())
-        per_tile[t.path] = sorted(ids)
-    return dict(sorted(total.items())), per_tile
-
-
-def info_on_catalog(paths: Sequence[str], *, skip_bad: bool = False, strips: bool = False,
-                    crs: Any = None) -> None:
-    from ..tiling import make_chunks
-
-    # --crs for tiles that declare none; a tile whose own CRS contradicts it is an error
-    catalog = open_catalog_source(paths, {"skip_bad": skip_bad}, crs=crs, z_to_metres=False).catalog
-    d = catalog.to_dict()
-    chunks = make_chunks(catalog)
-    d["default_chunks"] = {
-        "n_chunks": len(chunks),
-        "chunk_size": chunks[0].size if chunks else None,
-        "buffer": float(chunks[0].buffered[2] - chunks[0].core[2]) if chunks else None,
-    }
-    if strips:
-        with Steps()(f"Reading the point source ids of {len(catalog.tiles)} tile(s)"):
-            d["strips"], d["strips_per_tile"] = _strip_counts(catalog)
-    b = d["bounds"]
-    echo(", ".join(paths))
-    echo(f"  tiles           {d['n_tiles']:,}" + (f" ({d['n_copc']} COPC)" if d["n_copc"] else ""))
-    echo(f"  points          {d['n_points']:,}")
-    echo(f"  x               {b[0]:.3f} .. {b[2]:.3f}")
-    echo(f"  y               {b[1]:.3f} .. {b[3]:.3f}")
-    echo(f"  z               {d['zrange'][0]:.3f} .. {d['zrange'][1]:.3f}")
-    echo(
-        f"  CRS             {d['crs_name'] or 'none'}"
-        + (f" (EPSG:{d['crs_epsg']})" if d["crs_epsg"] else "")
-    )
-    echo(f"  density         {d['density_per_m2']:.1f} pts/m² (points / tile area)")
-    echo(f"  tile size       {d['tile_size']:g} m (median)")
-    echo("  point formats   " + ", ".join(str(f) for f in d["point_formats"]))
-    if strips:
-        echo(
-            "  strips          "
-            + (", ".join(f"{k}: {v:,}" for k, v in d["strips"].items()) or "none")
-            + " (point source ids: points)"
-        )
-    elif d["source_ids"]:
-        echo(
-            "  strips          " + ", ".join(str(i) for i in d["source_ids"]) + " (file source ids)"
-        )
-    else:
-        echo("  strips          not recorded in the headers (--strips reads them)")
-    echo(f"  gaps            {len(d['gaps'])} missing tile cell(s)")
-    echo(f"  overlaps        {len(d['overlaps'])} duplicate overlap(s)")
-    for o in d["overlaps"][:10]:
-        echo(f"    {o['tiles'][0]} / {o['tiles'][1]}: {100 * o['fraction']:.0f} %")
-    dc = d["default_chunks"]
-    if dc["n_chunks"]:
-        echo(
-            f"  chunks          {dc['n_chunks']} of {dc['chunk_size']:g} m (default), "
-            f"buffer {dc['buffer']:g} m"
-        )
-    if d["bad"]:
-        echo(f"  bad inputs      {len(d['bad'])}")
-    finish("info", inputs={"paths": list(paths)}, parameters={"catalog": True}, results=d)

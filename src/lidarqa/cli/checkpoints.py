@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import contextlib
 from pathlib import Path
 from typing import Any
 
@@ -11,14 +10,11 @@ import click
 from ..accuracy.transforms import TRANSFORMS
 from ..units import param_unit
 from ._catalog import (
-    catalog_engine,
     catalog_options,
-    echo_run,
-    failed_exit,
-    job_options,
+    finish_run,
     open_catalog_source,
     reproducible_vectors,
-    run_summary,
+    run_job,
     wants_catalog,
 )
 from ._common import (
@@ -27,7 +23,6 @@ from ._common import (
     common_options,
     crs_option,
     echo,
-    finish,
     fmt_number,
     input_crs,
     prepare_outputs,
@@ -94,6 +89,24 @@ def _unit_factors(crs: Any, what: str) -> tuple[float, float, str | None, str | 
             break
     v_name, _ = vertical_unit(crs)
     return h_factor, z_to_metres_factor(crs), h_name, v_name
+
+
+def _units(measured: Any, check: Any, notes: list[str]) -> tuple[Any, float, float]:
+    """The CRS both inputs are in (MEASURED's, else CHECK's) and its factors to metres.
+
+    A conversion is noted in `notes`; differing CRSs are refused.
+    """
+    from ..io.crs import ensure_same_crs
+
+    ensure_same_crs(measured, check, what=("MEASURED", "CHECK"))
+    crs = measured if measured is not None else check
+    fh, fv, hname, vname = _unit_factors(crs, "MEASURED" if measured is not None else "CHECK")
+    if fv != 1.0 or fh != 1.0:
+        notes.append(f"coordinates converted to metres (horizontal unit: {hname or 'metre'}, "
+                     f"vertical unit: {vname or 'metre'})")
+        if measured is None or check is None:
+            notes.append("one input has no CRS and is taken to share the other's CRS and units")
+    return crs, fh, fv
 
 
 def _scaled(xyz: Any, fh: float, fv: float) -> Any:
@@ -220,7 +233,7 @@ def checkpoints(
     it, reading only those chunks; the figures equal one whole-area run.
     """
     from ..errors import OptionError
-    from ..io.crs import crs_name, ensure_same_crs
+    from ..io.crs import crs_name
     from ..io.vector import VECTOR_SUFFIXES, PointSet, read_points, write_points
 
     if output is not None and Path(output).suffix.lower() not in VECTOR_SUFFIXES:
@@ -259,18 +272,7 @@ def checkpoints(
         source = open_catalog_source(measured, cat_opts, crs=given)
         if source.native_crs is None and chk.crs is not None:  # the check points' CRS for both
             source = open_catalog_source(measured, cat_opts, crs=chk.crs)
-        native = source.native_crs
-        ensure_same_crs(native, chk.crs, what=("MEASURED", "CHECK"))
-        crs_used = native if native is not None else chk.crs
-        fh, fv, hname, vname = _unit_factors(crs_used,
-                                             "MEASURED" if native is not None else "CHECK")
-        if fv != 1.0 or fh != 1.0:
-            notes.append(
-                f"coordinates converted to metres (horizontal unit: {hname or 'metre'}, "
-                f"vertical unit: {vname or 'metre'})"
-            )
-            if chk.crs is None or native is None:
-                notes.append("one input has no CRS and is taken to share the other's CRS and units")
+        crs_used, _, _ = _units(source.native_crs, chk.crs, notes)
         fh, fv = source.xy_factor, source.z_factor
         cls_arg: tuple[int, ...] | None = tuple(classes) if classes else (2,)
         if source.cloud is not None and source.cloud.classification is None:  # a point file
@@ -279,10 +281,9 @@ def checkpoints(
                                   "cannot select ground points")
             notes.append("the cloud has no classification: all its points form the TIN")
             cls_arg = None
-        with catalog_engine(cat_opts) if on_catalog else contextlib.nullcontext() as eng:
-            run = catalog_vertical_check(source, chk, classes=cls_arg, source_id=source_id,
-                                         max_edge=max_edge, checkpoint_rmse_v=checkpoint_rmse_v,
-                                         **(job_options(cat_opts, eng) if on_catalog else {}))
+        run = run_job(catalog_vertical_check, source, cat_opts, on_catalog, chk, classes=cls_arg,
+                      source_id=source_id, max_edge=max_edge,
+                      checkpoint_rmse_v=checkpoint_rmse_v)
         report: Any = run.value
     else:
         from ..accuracy.checkpoints import assess_checkpoints
@@ -296,18 +297,7 @@ def checkpoints(
             )
         with steps("Reading measured points"):
             mea = read_points(measured_path, crs=given)
-        ensure_same_crs(mea.crs, chk.crs, what=("MEASURED", "CHECK"))
-        crs_used = mea.crs if mea.crs is not None else chk.crs
-        fh, fv, hname, vname = _unit_factors(
-            crs_used, "MEASURED" if mea.crs is not None else "CHECK"
-        )
-        if fv != 1.0 or fh != 1.0:
-            notes.append(
-                f"coordinates converted to metres (horizontal unit: {hname or 'metre'}, "
-                f"vertical unit: {vname or 'metre'})"
-            )
-            if mea.crs is None or chk.crs is None:
-                notes.append("one input has no CRS and is taken to share the other's CRS and units")
+        crs_used, fh, fv = _units(mea.crs, chk.crs, notes)
         with steps("Matching and estimating"):
             report = assess_checkpoints(
                 PointSet(mea.ids, _scaled(mea.xyz, fh, fv)),
@@ -333,15 +323,14 @@ def checkpoints(
     results["warnings"] = notes + results["warnings"]
     results["units"] = "m"
     catalog_params = {}
-    if run is not None and on_catalog:
-        results["catalog"] = run_summary(run)
+    if on_catalog:
         catalog_params = {k: cat_opts.get(k) for k in ("chunk_size", "buffer", "workers",
                                                        "scheduler")}
     _summary(results, vertical)
-    if run is not None and on_catalog:
-        echo_run(run)
-    finish(
+    finish_run(
         "checkpoints",
+        run,
+        on_catalog,
         inputs={"measured": list(measured) if on_catalog else measured_path, "check": check,
                 "control_file": control_file},
         parameters={
@@ -361,8 +350,6 @@ def checkpoints(
         },
         results=results,
     )
-    if run is not None:
-        failed_exit(run)
 
 
 def _summary(r: dict, vertical: bool) -> None:

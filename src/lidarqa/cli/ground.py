@@ -6,7 +6,7 @@ from typing import TYPE_CHECKING
 
 import click
 
-from ._catalog import is_catalog, open_catalog_source, sigterm_as_interrupt
+from ._catalog import catalog_options, open_catalog_source, sigterm_as_interrupt, wants_catalog
 from ._common import (
     INT_LIST,
     Steps,
@@ -128,35 +128,11 @@ if TYPE_CHECKING:
     help="With --evaluate: reference classes left out, e.g. 1,7,9.",
 )
 @crs_option
-@click.option(
-    "--chunk-size",
-    type=float,
-    default=None,
-    help="Catalog: chunk side, m (default: from the point density, aligned with the tiles).",
-)
-@click.option(
-    "--buffer",
-    type=float,
-    default=None,
-    help="Catalog: margin read around each chunk, m "
-    "(default: the seed cell, see docs/catalogs.md).",
-)
-@click.option(
-    "--workers",
-    type=int,
-    default=None,
-    help="Catalog: local worker processes (default: one per core; 1 = serial, no Dask).",
-)
-@click.option(
-    "--scheduler",
-    default=None,
-    help="Catalog: Dask scheduler address (tcp://host:port) or 'serial'.",
-)
-@click.option(
-    "--resume", is_flag=True, help="Catalog: re-use the chunks finished by an interrupted run."
-)
-@click.option(
-    "--skip-bad", is_flag=True, help="Catalog: leave out bad tiles (listed) instead of failing."
+@catalog_options(
+    buffer="Catalog: margin read around each chunk, m (default: the seed cell, see "
+    "docs/catalogs.md).",
+    resume="Catalog: re-use the chunks finished by an interrupted run (kept in "
+    "OUTPUT/.lidarqa-work).",
 )
 @common_options
 def ground(
@@ -181,12 +157,7 @@ def ground(
     evaluate,
     ignore_classes,
     crs,
-    chunk_size,
-    buffer,
-    workers,
-    scheduler,
-    resume,
-    skip_bad,
+    **cat_opts,
 ) -> None:
     """Classify ground points of PATHS and write them (class 2) to OUTPUT.
 
@@ -206,14 +177,6 @@ def ground(
     from ..io import read, write
 
     given_crs = input_crs(crs)
-    catalog_opts = {
-        "--chunk-size": chunk_size,
-        "--buffer": buffer,
-        "--workers": workers,
-        "--scheduler": scheduler,
-        "--resume": resume or None,
-        "--skip-bad": skip_bad or None,
-    }
     params = {
         k: v
         for k, v in {
@@ -242,7 +205,11 @@ def ground(
             + " only apply to --method segment-ptd"
         )
     params.update(given)
-    if is_catalog(paths) or any(v is not None for v in catalog_opts.values()):
+    # the filter's options, the same for one file and a catalog
+    job = {"method": method, "preset": preset, "sensor": sensor,
+           "last_returns_only": not all_returns, "exclude_classes": list(exclude_classes or []),
+           "ignore_classes": list(ignore_classes or []), "evaluate": evaluate}
+    if wants_catalog(paths, cat_opts):
         from ..tiling.ground import ground_catalog
 
         s = settings()
@@ -250,29 +217,11 @@ def ground(
             from ..io import check_output
 
             check_output(s.json_path, overwrite=s.overwrite)
-        catalog = open_catalog_source(paths, {"skip_bad": skip_bad}, crs=given_crs,
+        catalog = open_catalog_source(paths, cat_opts, crs=given_crs,
                                       z_to_metres=False).catalog
         with sigterm_as_interrupt():
-            cres = ground_catalog(
-                catalog,
-                output,
-                method=method,
-                preset=preset,
-                sensor=sensor,
-                last_returns_only=not all_returns,
-                exclude_classes=exclude_classes or (),
-                evaluate=evaluate,
-                ignore_classes=ignore_classes,
-                chunk_size=chunk_size,
-                buffer=buffer,
-                workers=workers,
-                scheduler=scheduler,
-                resume=resume,
-                skip_bad=skip_bad,
-                overwrite=s.overwrite,
-                progress=not s.quiet,
-                **params,
-            )
+            cres = ground_catalog(catalog, output, **job, **cat_opts, overwrite=s.overwrite,
+                                  progress=not s.quiet, **params)
         res: dict = cres.to_dict()
         for msg in cres.warnings:
             click.echo(f"Warning: {msg}", err=True)
@@ -295,16 +244,11 @@ def ground(
             "ground",
             inputs={"paths": list(paths), "output": output},
             parameters={
-                "method": method,
-                "preset": preset,
-                "sensor": sensor,
-                "last_returns_only": not all_returns,
-                "exclude_classes": list(exclude_classes or []),
-                "ignore_classes": list(ignore_classes or []),
+                **{k: v for k, v in job.items() if k != "evaluate"},
                 "chunk_size": cres.chunk_size,
                 "buffer": cres.buffer,
-                "workers": workers,
-                "scheduler": scheduler,
+                "workers": cat_opts["workers"],
+                "scheduler": cat_opts["scheduler"],
                 **cres.parameters.get("filter", {}),
                 **({"auto": cres.parameters["auto"]} if "auto" in cres.parameters else {}),
             },
@@ -329,18 +273,7 @@ def ground(
         warnings.catch_warnings(record=True) as caught,
     ):
         warnings.simplefilter("always", DataQualityWarning)
-        result = classify_ground(
-            cloud,
-            method=method,
-            last_returns_only=not all_returns,
-            exclude_classes=exclude_classes or (),
-            evaluate=evaluate,
-            ignore_classes=ignore_classes,
-            preset=preset,
-            progress=progress,
-            sensor=sensor,
-            **params,
-        )
+        result = classify_ground(cloud, **job, progress=progress, **params)
     for w in caught:
         click.echo(f"Warning: {w.message}", err=True)
     cls = cloud.fields.get("classification")
@@ -380,17 +313,12 @@ def ground(
         "ground",
         inputs={"path": path, "output": output},
         parameters={
-            "method": method,
-            "preset": preset,
-            "sensor": sensor,
+            **{k: v for k, v in job.items() if k != "evaluate"},
             "regime": result.regime,
             "measured": res["measured"],
             "parameter_sources": result.parameter_sources,
             "parameter_notes": result.parameter_notes,
             "regime_reason": result.regime_reason,
-            "last_returns_only": not all_returns,
-            "exclude_classes": list(exclude_classes or []),
-            "ignore_classes": list(ignore_classes or []),
             "crs": crs,
             **result.parameters,
         },

@@ -23,13 +23,11 @@ from ..accuracy.heights import (
 from ._catalog import (
     catalog_engine,
     catalog_options,
-    echo_run,
-    failed_exit,
+    finish_run,
     job_options,
     open_catalog_source,
     option_given,
     reproducible_vectors,
-    run_summary,
     wants_catalog,
 )
 from ._common import (
@@ -137,12 +135,21 @@ def _measured_e4(source: Any, run_opts: dict[str, Any]) -> float:
 
 
 def laser_noise_options(func: Any) -> Any:
-    """Add ``--sigma-point``, ``--sigma-gps``, ``--sigma-ins``: the laser block's error budget.
+    """The options of the plane fits and the laser block, shared by ``heights`` and ``roads``.
 
-    E1–E3 of Oude Elberink & Vosselman, shared by ``heights`` and ``roads``.
+    ``--radius --max-radius --min-points`` and the error budget ``--sigma-point
+    --sigma-gps --sigma-ins`` (E1–E3 of Oude Elberink & Vosselman).
     """
     for opt in reversed(
         [
+            click.option("--radius", type=float, default=RADIUS, show_default=True,
+                         help="First search radius for laser points around a map point (m)."),
+            click.option("--max-radius", type=float, default=MAX_RADIUS, show_default=True,
+                         help="The radius grows (x2 per step) up to this until --min-points "
+                              "are found (m)."),
+            click.option("--min-points", type=int, default=MIN_POINTS, show_default=True,
+                         help="Laser points needed for a plane fit; map points with fewer are "
+                              "flagged."),
             click.option(
                 "--sigma-point",
                 type=float,
@@ -175,27 +182,6 @@ def _fmt(v: float, scale: float = 1.0, unit: str = "m") -> str:
 @click.argument("cloud", type=click.Path())
 @click.argument("map_path", metavar="MAP", type=click.Path())
 @click.argument("reference", type=click.Path())
-@click.option(
-    "--radius",
-    type=float,
-    default=RADIUS,
-    show_default=True,
-    help="First search radius for laser points around a map point (m).",
-)
-@click.option(
-    "--max-radius",
-    type=float,
-    default=MAX_RADIUS,
-    show_default=True,
-    help="The radius grows (x2 per step) up to this until --min-points are found (m).",
-)
-@click.option(
-    "--min-points",
-    type=int,
-    default=MIN_POINTS,
-    show_default=True,
-    help="Laser points needed for a plane fit; map points with fewer are flagged.",
-)
 @laser_noise_options
 @click.option(
     "--sigma-strip",
@@ -431,17 +417,9 @@ def heights(
         sigma_strip_source=sigma_strip_source,
     )
     if on_catalog:
-        echo_run(run)
-        res["catalog"] = run_summary(run)
         params.update({k: v for k, v in cat_opts.items() if option_given(v)})
-    finish(
-        "heights",
-        inputs={"cloud": cloud, "map": map_path, "reference": reference, "output": output},
-        parameters=params,
-        results=res,
-    )
-    if on_catalog:
-        failed_exit(run)
+    finish_run("heights", run, on_catalog, parameters=params, results=res,
+               inputs={"cloud": cloud, "map": map_path, "reference": reference, "output": output})
 
 
 def _is_polygon_map(path: str) -> bool:

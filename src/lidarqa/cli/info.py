@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import click
 
 from ._common import (
@@ -24,56 +26,96 @@ from ._common import (
 @click.option(
     "--strips",
     is_flag=True,
-    help="Catalog: also count the points of each strip (point source id); reads every point.",
+    help="Read the input as a catalog (also for one file): its tiles, and the strips (point "
+    "source ids) of each tile.",
 )
 @crs_option
 @common_options
 def info(paths: tuple[str, ...], skip_bad: bool, strips: bool, crs: str | None) -> None:
     """Describe a point cloud: points, bounds, CRS, classes, strips, density, returns.
 
-    With a catalog (a folder, glob pattern, .vpc or several files): a summary from the
-    file headers (tiles, points, bounds, CRS, strips, gaps, overlaps, default chunks).
+    With a catalog (a folder, glob pattern, .vpc or several files): the same, read tile
+    by tile as one cloud, with the catalog's tiles, gaps, overlaps and default chunks.
     """
-    from ..io.info import describe
-    from ._catalog import info_on_catalog, is_catalog
+    from ..io.info import describe, describe_files
+    from ._catalog import is_catalog, open_catalog_source
 
     given = input_crs(crs)
+    prepare_outputs(inputs=tuple(paths))
+    cat = None
     if is_catalog(paths) or skip_bad or strips:
-        info_on_catalog(paths, skip_bad=skip_bad, strips=strips, crs=given)
-        return
-    path = paths[0]
-    prepare_outputs(inputs=(path,))
-    with Steps()("Reading " + path):
-        result = describe(path, crs=given)
-    d = result.to_dict()
-    b = d["bounds"]
-    echo(f"{path}")
+        # --crs for tiles that declare none; a tile whose own CRS contradicts it is an error
+        source = open_catalog_source(paths, {"skip_bad": skip_bad}, crs=given, z_to_metres=False)
+        cat = source.catalog
+    if cat is None:
+        with Steps()("Reading " + paths[0]):
+            d = describe(paths[0], crs=given).to_dict()
+    else:
+        per_tile: dict[str, list[int]] = {}
+        with Steps()(f"Reading the points of {len(cat.tiles)} tile(s)"):
+            d = describe_files([t.path for t in cat.tiles], crs=source.native_crs,
+                               ids_per_file=per_tile).to_dict()
+        d = {**d, **_catalog_results(cat), "strips_per_tile": per_tile,
+             "strips": {int(k): v for k, v in d["point_source_ids"].items()},
+             # points per occupied area, as for one file (no longer points / tile area)
+             "density_per_m2": d["density_per_m2"]}
+    _echo_info(paths, d, given)
+    finish("info", inputs={"paths": list(paths)} if cat is not None else {"path": paths[0]},
+           parameters={"catalog": True} if cat is not None else {"crs": crs}, results=d)
+
+
+def _catalog_results(cat: Any) -> dict[str, Any]:
+    """The catalog's own keys: tiles, header bounds, gaps, overlaps and default chunks."""
+    from ..tiling import make_chunks
+
+    d = cat.to_dict()
+    chunks = make_chunks(cat)
+    d["default_chunks"] = {
+        "n_chunks": len(chunks),
+        "chunk_size": chunks[0].size if chunks else None,
+        "buffer": float(chunks[0].buffered[2] - chunks[0].core[2]) if chunks else None,
+    }
+    return d
+
+
+def _echo_info(paths: tuple[str, ...], d: dict[str, Any], given: Any) -> None:
+    """The human summary of one file or a catalog (``d``: the results)."""
+    catalog = "n_tiles" in d
+    echo(", ".join(paths))
+    if catalog:
+        echo(f"  tiles           {d['n_tiles']:,}"
+             + (f" ({d['n_copc']} COPC)" if d["n_copc"] else ""))
     echo(f"  points          {d['n_points']:,}")
+    if catalog and d["n_points"]:
+        b, zr = d["bounds"], d["zrange"]
+        b = {"min_x": b[0], "min_y": b[1], "max_x": b[2], "max_y": b[3], "min_z": zr[0],
+             "max_z": zr[1]}
+    else:
+        b = d["bounds"]
     if d["n_points"]:
-        echo(f"  x               {b['min_x']:.3f} .. {b['max_x']:.3f}")
-        echo(f"  y               {b['min_y']:.3f} .. {b['max_y']:.3f}")
-        echo(f"  z               {b['min_z']:.3f} .. {b['max_z']:.3f}")
+        for a in "xyz":
+            echo(f"  {a}               {b['min_' + a]:.3f} .. {b['max_' + a]:.3f}")
     echo(
         f"  CRS             {d['crs_name'] or 'none'}"
         + (f" (EPSG:{d['crs_epsg']})" if d["crs_epsg"] else "")
-        + (" (from --crs)" if given is not None and d["crs_name"] else "")
+        + (" (from --crs)" if given is not None and d["crs_name"] and not catalog else "")
     )
     if not d["crs_name"]:
         echo(
-            "                  (the file declares no CRS: pass --crs, e.g. --crs EPSG:2154, "
+            "                  (the input declares no CRS: pass --crs, e.g. --crs EPSG:2154, "
             "to every command that reads it, so that its outputs carry one)"
         )
     if d["vertical_unit"]:
         echo(f"  vertical unit   {d['vertical_unit']}")
     if d["density_per_m2"]:
-        echo(f"  density         {d['density_per_m2']:.3g} pts/m²")
+        echo(f"  density         {d['density_per_m2']:.3g} pts/m² (points / occupied area)")
+    if catalog:
+        echo(f"  tile size       {d['tile_size']:g} m (median)")
+        echo("  point formats   " + ", ".join(str(f) for f in d["point_formats"]))
     if d["classes"]:
         echo("  classes         " + ", ".join(f"{k}: {v:,}" for k, v in d["classes"].items()))
-    if d["point_source_ids"]:
-        echo(
-            "  strips          "
-            + ", ".join(f"{k}: {v:,}" for k, v in d["point_source_ids"].items())
-        )
+    echo("  strips          " + (", ".join(f"{k}: {v:,}" for k, v in d["point_source_ids"].items())
+                                 or "none") + " (point source ids: points)")
     r = d["returns"]
     echo(
         "  returns         "
@@ -87,7 +129,20 @@ def info(paths: tuple[str, ...], skip_bad: bool, strips: bool, crs: str | None) 
             )
         )
     )
-    finish("info", inputs={"path": path}, parameters={"crs": crs}, results=d)
+    if not catalog:
+        return
+    echo(f"  gaps            {len(d['gaps'])} missing tile cell(s)")
+    echo(f"  overlaps        {len(d['overlaps'])} duplicate overlap(s)")
+    for o in d["overlaps"][:10]:
+        echo(f"    {o['tiles'][0]} / {o['tiles'][1]}: {100 * o['fraction']:.0f} %")
+    dc = d["default_chunks"]
+    if dc["n_chunks"]:
+        echo(
+            f"  chunks          {dc['n_chunks']} of {dc['chunk_size']:g} m (default), "
+            f"buffer {dc['buffer']:g} m"
+        )
+    if d["bad"]:
+        echo(f"  bad inputs      {len(d['bad'])}")
 
 
 def _station(value: str | None) -> tuple[float, float, float]:

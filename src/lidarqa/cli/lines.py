@@ -12,14 +12,12 @@ import click
 
 from ..units import format_decimal
 from ._catalog import (
-    catalog_engine,
     catalog_options,
     catalog_options_given,
-    echo_run,
     failed_exit,
-    job_options,
+    finish_run,
     open_catalog_source,
-    run_summary,
+    run_job,
     wants_catalog,
 )
 from ._common import (
@@ -258,19 +256,11 @@ def _side_segments(side: str, path: str, label: str, classes: Any, source_id: An
             from ..accuracy._lines_io import extract_segments
 
             extract_segments(np.empty((0, 3)))  # raises the clear "not available" error
-
-        from ..tiling.apply import engine_for
-
-        with steps(f"Extracting the edges of {side} {label}"), engine_for(
-                workers=cat_opts.get("workers"), scheduler=cat_opts.get("scheduler")) as eng:
-            run = catalog_features(path, kind="edges", classes=classes, source_id=source_id,
-                                   crs=given, engine=eng, skip_bad=bool(cat_opts.get("skip_bad")),
-                                   **job_options(cat_opts))
-        if run.failed:
-            from ..errors import TilingError
-
-            raise TilingError(f"{side}: {len(run.failed)} chunk(s) failed: "
-                              + ", ".join(run.failed))
+        source = open_catalog_source([path], cat_opts, crs=given, z_to_metres=False)
+        with steps(f"Extracting the edges of {side} {label}"):
+            run = run_job(catalog_features, source, cat_opts, wants_catalog([path], cat_opts),
+                          kind="edges", classes=classes, source_id=source_id)
+        failed_exit(run)
         if len(run.value) == 0:
             raise NothingToMeasureError(f"{side} {label}: no edges found")
         return run.value
@@ -432,8 +422,8 @@ def repeatability(
     "strips": {strip: n_edges}, "catalog": {...}}``.
     """
     from ..accuracy._lines_io import is_segment_file, load_passes, pool_passes
-    from ..accuracy.lines import match_segments, match_strips
-    from ..errors import CRSMismatchError, LidarQAError, OptionError
+    from ..errors import OptionError
+    from ..tiling.jobs_lines import strip_pairs
 
     given = input_crs(crs)
     if source_id is not None and not by_source_id:
@@ -458,27 +448,23 @@ def repeatability(
                          "shared_threshold": shared_threshold}
         prepare_outputs(inputs=tuple(files))
         source = open_catalog_source(files, cat_opts, crs=given, z_to_metres=False)
-        with catalog_engine(cat_opts) as eng:
-            run = catalog_repeatability(source, classes=classes, source_id=source_id,
-                                        match_options=match_options,
-                                        edge_options={"steps": step_edges, "outlines": outlines},
-                                        **job_options(cat_opts, eng))
+        run = run_job(catalog_repeatability, source, cat_opts, True, classes=classes,
+                      source_id=source_id, match_options=match_options,
+                      edge_options={"steps": step_edges, "outlines": outlines})
         extra: dict[str, Any] = run.extra  # the job's details
         if not run.value:
             raise OptionError(f"repeatability needs at least two strips with edges, got "
                               f"{len(extra['strips'])}")
         _print_rows(run.value, threshold, pool=True)
-        echo_run(run)
         strips = {str(k): len(v) for k, v in extra["strips"].items()}
         echo("  strips          " + ", ".join(f"{k} ({n} edges)" for k, n in strips.items()))
-        finish("repeatability", inputs={"files": list(files)},
+        finish_run("repeatability", run, True, inputs={"files": list(files)},
                parameters={"by_source_id": True, "source_id": source_id, "classes": classes,
                            **match_options, **extra["segment_options"],
                            **extra["edge_options"],
                            **{k: cat_opts.get(k) for k in ("chunk_size", "buffer", "workers",
                                                            "scheduler")}},
-               results={"pairs": run.value, "strips": strips, "catalog": run_summary(run)})
-        failed_exit(run)
+               results={"pairs": run.value, "strips": strips})
         return
     if catalog_options_given(cat_opts):
         raise OptionError("catalog options apply to repeatability --by-source-id only")
@@ -496,71 +482,28 @@ def repeatability(
         )
     if pool:
         passes = pool_passes(passes)
-    groups: dict[str, list] = {}
-    for group, name, seg in passes:
-        groups.setdefault(group, []).append((name, seg))
-    todo = [(g, a, b) for g, members in groups.items() for a, b in combinations(members, 2)]
+    # pairs within a group (one file, or every pass), in the order the passes came
+    todo = [(i, j) for i, j in combinations(range(len(passes)), 2)
+            if passes[i][0] == passes[j][0]]
     if not todo:
         raise OptionError(
             f"repeatability needs at least two passes, got {len(passes)}"
             + ("" if by_source_id else " (use --by-source-id for the strips of one file)")
         )
-    if shared_threshold and threshold is not None:
-        raise OptionError("--shared-threshold computes the threshold; do not also give --threshold")
-    if shared_threshold:
-        import numpy as np
-
-        knees = []
-        for _, (_, a), (_, b) in steps.track(todo, "Finding each pair's threshold"):
-            if isinstance(a, Exception) or isinstance(b, Exception):
-                continue
-            try:
-                r0 = match_segments(a, b, weight=weight, sensitivity=sensitivity, rotate=rotate)
-            except LidarQAError:
-                continue
-            knees += [
-                t
-                for t, ok in (
-                    (r0.threshold_tm, r0.threshold_found_tm),
-                    (r0.threshold_mt, r0.threshold_found_mt),
-                )
-                if ok
-            ]
-        if not knees:
-            raise OptionError("--shared-threshold: no pair has an automatic threshold (no knee)")
-        threshold = float(np.median(knees))
-        echo(f"shared threshold δ = {threshold:.3f} m: median of {len(knees)} pair thresholds")
+    with steps(f"Matching {len(todo)} pass pair(s)"):
+        matched = strip_pairs(dict(enumerate(p[2] for p in passes)), pairs=todo,
+                              shared_threshold=shared_threshold,
+                              auto=auto if by_source_id else "knee", weight=weight,
+                              sensitivity=sensitivity, threshold=threshold, rotate=rotate,
+                              denominator=denominator)
     rows: list[dict] = []
-    for group, (na, a), (nb, b) in steps.track(todo, "Matching pass pairs"):
-        row: dict[str, Any] = (
-            {"file": group, "test": na, "model": nb} if group else {"test": na, "model": nb}
-        )
-        if isinstance(a, Exception) or isinstance(b, Exception):
-            bad = a if isinstance(a, Exception) else b
-            row["error"] = str(bad)
-            rows.append(row)
-            continue
-        try:
-            row.update(
-                match_strips(
-                    a,
-                    b,
-                    auto=auto if by_source_id else "knee",
-                    weight=weight,
-                    sensitivity=sensitivity,
-                    threshold=threshold,
-                    rotate=rotate,
-                    denominator=denominator,
-                )
-            )
-        except CRSMismatchError:
-            raise
-        except LidarQAError as exc:
-            row.update(p=len(a), q=len(b), error=str(exc))
-            rows.append(row)
-            continue
-        rows.append(row)
-
+    for (i, j), row in zip(todo, matched, strict=True):
+        group = passes[i][0]
+        rows.append({**({"file": group} if group else {}), **row,
+                     "test": passes[i][1], "model": passes[j][1]})
+    if shared_threshold:  # the median knee every pair was matched with
+        threshold = next((r["threshold_tm"] for r in rows if "error" not in r), None)
+        echo(f"shared threshold δ = {threshold:.3f} m: median of the pair thresholds")
     _print_rows(rows, threshold, pool=pool)
     if rows and all("error" in r for r in rows):
         # Nothing to measure is an error (exit 1), never a table of n/a with exit 0.

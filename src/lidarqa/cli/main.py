@@ -138,12 +138,22 @@ def _option_name(param: click.Parameter | None) -> str:
     return max(opts, key=len)
 
 
-class _BoundedInt(click.types.IntParamType):
-    """An integer option that also fits a 64-bit integer (numeric kernels take int64)."""
+class _Wrapped:
+    """A click type that checks the value of the type it wraps (name and metavar are its)."""
 
     def __init__(self, inner: click.ParamType) -> None:
         self.inner = inner
         self.name = inner.name
+
+    def get_metavar(self, *args: Any, **kwargs: Any) -> str | None:
+        return self.inner.get_metavar(*args, **kwargs)
+
+    def __repr__(self) -> str:
+        return repr(self.inner)
+
+
+class _BoundedInt(_Wrapped, click.types.IntParamType):
+    """An integer option that also fits a 64-bit integer (numeric kernels take int64)."""
 
     def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> Any:
         from ..errors import OptionError
@@ -153,19 +163,9 @@ class _BoundedInt(click.types.IntParamType):
             raise OptionError(f"{_option_name(param)} {value!s:.40} is too large")
         return v
 
-    def get_metavar(self, *args: Any, **kwargs: Any) -> str | None:
-        return self.inner.get_metavar(*args, **kwargs)
 
-    def __repr__(self) -> str:
-        return repr(self.inner)
-
-
-class _BoundedFloat(click.types.FloatParamType):
+class _BoundedFloat(_Wrapped, click.types.FloatParamType):
     """A number option that must be finite and within +-1e15 (no NaN, inf or 1e308)."""
-
-    def __init__(self, inner: click.ParamType) -> None:
-        self.inner = inner
-        self.name = inner.name
 
     def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> Any:
         import math
@@ -183,12 +183,6 @@ class _BoundedFloat(click.types.FloatParamType):
                     f"{_option_name(param)} {value!s:.40} is out of range (at most {_MAX_FLOAT:g})"
                 )
         return v
-
-    def get_metavar(self, *args: Any, **kwargs: Any) -> str | None:
-        return self.inner.get_metavar(*args, **kwargs)
-
-    def __repr__(self) -> str:
-        return repr(self.inner)
 
 
 def _bound_options(cmd: click.Command) -> click.Command:

@@ -9,9 +9,6 @@ import numpy as np
 
 from ..accuracy.heights import (
     CURVATURE,
-    MAX_RADIUS,
-    MIN_POINTS,
-    RADIUS,
     SIGMA_STRIP,
 )
 from ._common import (
@@ -95,27 +92,6 @@ def _fmt_cm(v: float) -> str:
     default=20.0,
     show_default=True,
     help="Smooth segments smaller than this (m²) are dropped (cars, signs).",
-)
-@click.option(
-    "--radius",
-    type=float,
-    default=RADIUS,
-    show_default=True,
-    help="First search radius of the plane fits (m).",
-)
-@click.option(
-    "--max-radius",
-    type=float,
-    default=MAX_RADIUS,
-    show_default=True,
-    help="Largest search radius (m).",
-)
-@click.option(
-    "--min-points",
-    type=int,
-    default=MIN_POINTS,
-    show_default=True,
-    help="Laser points needed for a plane fit.",
 )
 @laser_noise_options
 @click.option(

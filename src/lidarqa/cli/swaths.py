@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import contextlib
 import csv
 import io
 import os
@@ -14,19 +13,16 @@ import numpy as np
 
 from ..accuracy.swaths import DEFAULT_QUALITY_LEVEL, QUALITY_LEVELS
 from ._catalog import (
-    catalog_engine,
     catalog_options,
     catalog_options_given,
-    echo_run,
-    failed_exit,
-    job_options,
+    finish_run,
     open_catalog_source,
     option_given,
     pop_catalog_options,
-    run_summary,
+    run_job,
     wants_catalog,
 )
-from ._common import INT_LIST, Steps, common_options, echo, finish, settings
+from ._common import INT_LIST, Steps, common_options, echo, settings
 
 
 def _csv(rows: list[dict[str, Any]]) -> str:
@@ -201,11 +197,10 @@ def swaths(
     # chunk by chunk. Heights are converted to metres by the task.
     source = open_catalog_source(files, cat_opts, z_to_metres=False)
     crs = source.crs
-    with catalog_engine(cat_opts) if on_catalog else contextlib.nullcontext() as eng:
-        with steps(f"Comparing strips of {', '.join(Path(f).name for f in files)}"):
-            run = catalog_swaths(source, by_source_id=by_source_id, classes=classes,
-                                 all_returns=all_returns, one_region=True if named_files else None,
-                                 **(job_options(cat_opts, eng) if on_catalog else {}), **options)
+    with steps(f"Comparing strips of {', '.join(Path(f).name for f in files)}"):
+        run = run_job(catalog_swaths, source, cat_opts, on_catalog, by_source_id=by_source_id,
+                      classes=classes, all_returns=all_returns,
+                      one_region=True if named_files else None, **options)
     rep = run.value
     strip_labels = cast("dict[int, str]", run.extra["labels"])
     labels = {k: v if by_source_id else Path(v).name for k, v in strip_labels.items()}
@@ -291,11 +286,10 @@ def swaths(
         echo("note: " + f)
     echo(f"{'PASS' if rep.passed else 'FAIL'}; wrote {len(written)} file(s) to {out}")
     results = dict(rep.to_dict(), outputs=written)
-    if on_catalog:
-        echo_run(run)
-        results["catalog"] = run_summary(run)
-    finish(
+    finish_run(
         "swaths",
+        run,
+        on_catalog,
         inputs={"files": list(files), "strips": labels},
         parameters=dict(
             rep.parameters,
@@ -307,8 +301,6 @@ def swaths(
         ),
         results=results,
     )
-    if on_catalog:
-        failed_exit(run)
 
 
 def _horizontal(crs: Any) -> Any:

@@ -255,6 +255,7 @@ def extract_corners(
     max_dist: float = 1.0,
     normal_uncertainty: bool = True,
     crs: Any = None,
+    left_out: list[dict[str, Any]] | None = None,
     **segment_options: Any,
 ) -> PointSet:
     """Corners of a cloud: intersections of three mutually adjacent planes.
@@ -276,6 +277,9 @@ def extract_corners(
         Propagate the normal covariances too (see :func:`corner_from_planes`).
     crs : pyproj.CRS, optional
         Stored on the result.
+    left_out : list, optional
+        Extended with the refused triples, as ``{"planes", "reason"}`` (see
+        :func:`corners_from_segmentation`).
 
     Returns
     -------
@@ -291,7 +295,9 @@ def extract_corners(
         segmentation = segment_planes(pts, **segment_options)
     elif len(segmentation.labels) != len(pts):
         raise OptionError("segmentation was computed for a different number of points")
-    corners, _ = corners_from_segmentation(segmentation, pts, min_det=min_det, min_angle=min_angle,
-                                           max_dist=max_dist, normal_uncertainty=normal_uncertainty,
-                                           crs=crs)
+    corners, refused = corners_from_segmentation(segmentation, pts, min_det=min_det,
+                                                 min_angle=min_angle, max_dist=max_dist,
+                                                 normal_uncertainty=normal_uncertainty, crs=crs)
+    if left_out is not None:
+        left_out.extend(refused)
     return corners

@@ -394,6 +394,7 @@ def extract_edges(
     min_support: int = 5,
     min_length: float = 0.5,
     crs: Any = None,
+    left_out: list[dict[str, Any]] | None = None,
     outlines: bool = False,
     steps: bool = False,
     point_spacing: float | None = None,
@@ -423,6 +424,9 @@ def extract_edges(
         Shorter edges (m) are dropped.
     crs : pyproj.CRS, optional
         Stored on the result.
+    left_out : list, optional
+        Extended with the adjacent pairs that gave no intersection edge, as
+        ``{"plane_a", "plane_b", "reason"}`` (see :func:`edges_from_segmentation`).
     outlines : bool, default False
         Also return the outline sides of roof planes (:func:`outline_segments`),
         which stand in for roof-wall and step edges that airborne scans leave
@@ -465,9 +469,12 @@ def extract_edges(
         raise OptionError("segmentation was computed for a different number of points")
     if near_dist is None:
         near_dist = auto_near_dist(segmentation)
-    edges, _ = edges_from_segmentation(pts, segmentation, near_dist=near_dist, min_angle=min_angle,
-                                       q_lo=q_lo, q_hi=q_hi, min_support=int(min_support),
-                                       min_length=min_length, crs=crs)
+    edges, skipped = edges_from_segmentation(pts, segmentation, near_dist=near_dist,
+                                             min_angle=min_angle, q_lo=q_lo, q_hi=q_hi,
+                                             min_support=int(min_support),
+                                             min_length=min_length, crs=crs)
+    if left_out is not None:
+        left_out.extend(skipped)
     if outlines:
         edges = _with_extra(edges, outline_segments(pts, segmentation), near_dist, "outline")
     if steps:

@@ -26,7 +26,7 @@ import os
 import signal
 import tempfile
 import threading
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 from ..errors import OutputExistsError, ReadError, WriteError
@@ -38,6 +38,7 @@ __all__ = [
     "check_output",
     "check_distinct",
     "check_output_dir",
+    "check_output_folder",
     "file_mode",
     "install_signal_handlers",
     "output_session",
@@ -295,6 +296,30 @@ def check_output_dir(folder: Path, *, what: str = "output") -> None:
         raise WriteError(f"{what} folder {folder} is a file, not a folder")
     if not os.access(folder, os.W_OK | os.X_OK):
         raise WriteError(f"{what} folder {folder} is not writable (permission denied)")
+
+
+def check_output_folder(out: str | os.PathLike, names: Iterable[str], *,
+                        overwrite: bool = False) -> Path:
+    """Refuse an output folder that holds a previous run's `names` (unless `overwrite`).
+
+    The folder may not exist yet (it is created later): its nearest existing ancestor
+    must be a writable folder. :class:`WriteError` for an empty name or a file in the
+    way, :class:`OutputExistsError` for an earlier run's output.
+    """
+    if str(out).strip() == "":
+        raise WriteError("the output folder name is empty")
+    d = Path(out)
+    if d.exists() and not d.is_dir():
+        raise WriteError(f"output {d} exists and is not a folder")
+    anc = d
+    while not anc.exists() and anc != anc.parent:
+        anc = anc.parent
+    check_output_dir(anc if anc.exists() else Path("."))
+    for name in () if overwrite else names:
+        if (d / name).exists():
+            raise OutputExistsError(f"output {d / name} exists; pass --overwrite "
+                                    "(overwrite=True) to replace it")
+    return d
 
 
 # Cloud Optimized Point Cloud: laspy (the LAS library) reads it but cannot write it.

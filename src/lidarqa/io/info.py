@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 from collections import Counter
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -12,7 +13,7 @@ import numpy as np
 
 from .crs import crs_epsg, crs_name, vertical_unit
 
-__all__ = ["CloudInfo", "describe", "describe_cloud"]
+__all__ = ["CloudInfo", "describe", "describe_cloud", "describe_files"]
 
 
 @dataclass(frozen=True)
@@ -38,14 +39,24 @@ class CloudInfo:
         return asdict(self)
 
 
-def _density_cell(mins: np.ndarray, maxs: np.ndarray, n: int) -> float:
-    """Cell size for the occupied-area estimate: twice the mean point spacing, >= 1 m."""
+def _density_cell(mins: Sequence[float] | np.ndarray, maxs: Sequence[float] | np.ndarray,
+                  n: int) -> float:
+    """Cell size for the occupied-area estimate: twice the mean point spacing, >= 1 m.
+
+    Rounded to two significant digits and laid on a grid anchored at 0, 0, so one
+    file and the folder of its tiles (the same bounds and count) count the same cells.
+    """
     area = float(max(maxs[0] - mins[0], 1e-9) * max(maxs[1] - mins[1], 1e-9))
     spacing = np.sqrt(area / max(n, 1))
-    return float(np.clip(2.0 * spacing, 1.0, 50.0))
+    return float(f"{np.clip(2.0 * spacing, 1.0, 50.0):.2g}")
 
 
 class _Accumulator:
+    """The per-region half of ``describe``: counts, extent and occupied cells.
+
+    Pieces are added in any order and summarised once by :func:`_finish`.
+    """
+
     def __init__(self, cell: float = 1.0) -> None:
         self.cell = cell
         self.n = 0
@@ -57,32 +68,32 @@ class _Accumulator:
         self.rn_present = False
         self.rn_zero = 0
         self.rn_invalid = 0
-        self.origin: np.ndarray | None = None
 
-    def add(self, cloud: Any) -> None:
+    def add(self, cloud: Any) -> np.ndarray | None:
+        """Add a piece of points; return its distinct point source ids (None without)."""
         xyz = cloud.xyz
         n = len(xyz)
         if n == 0:
-            return
+            return None
         self.n += n
         self.mins = np.minimum(self.mins, xyz.min(axis=0))
         self.maxs = np.maximum(self.maxs, xyz.max(axis=0))
+        ids = None
         for name, counter in (("classification", self.classes), ("point_source_id", self.psids)):
             values = cloud.fields.get(name)
             if values is not None:
                 u, c = np.unique(values, return_counts=True)
                 counter.update(dict(zip(u.tolist(), c.tolist(), strict=True)))
-        if self.origin is None:
-            self.origin = np.floor(xyz[0, :2])
-        ij = np.floor((xyz[:, :2] - self.origin) / self.cell).astype(np.int64)
-        keys = np.unique(ij, axis=0)
-        self.cells.update(map(tuple, keys.tolist()))
+                ids = u if name == "point_source_id" else ids
+        ij = np.floor(xyz[:, :2] / self.cell).astype(np.int64)
+        self.cells.update(map(tuple, np.unique(ij, axis=0).tolist()))
         rn = cloud.fields.get("return_number")
         nr = cloud.fields.get("number_of_returns")
         if rn is not None and nr is not None:
             self.rn_present = True
             self.rn_zero += int(np.count_nonzero(rn == 0))
             self.rn_invalid += int(np.count_nonzero((rn > nr) | (nr == 0)))
+        return ids
 
 
 def _finish(acc: _Accumulator, crs: Any, dims: list[str], header: dict) -> CloudInfo:
@@ -128,13 +139,64 @@ def describe_cloud(cloud: Any) -> CloudInfo:
     cells of twice the mean point spacing (at least 1 m), which is robust to
     irregular footprints, unlike points / bounding box.
     """
-    acc = _Accumulator(
-        _density_cell(cloud.xyz.min(axis=0), cloud.xyz.max(axis=0), len(cloud))
-        if len(cloud)
-        else 1.0
-    )
+    xyz = cloud.xyz
+    acc = _Accumulator(_density_cell(xyz.min(axis=0), xyz.max(axis=0), len(xyz))
+                       if len(xyz) else 1.0)
     acc.add(cloud)
     return _finish(acc, cloud.crs, ["X", "Y", "Z", *cloud.fields], {})
+
+
+def describe_files(
+    paths: Sequence[str | os.PathLike],
+    *,
+    crs: Any = None,
+    chunk_size: int = 2_000_000,
+    ids_per_file: dict[str, list[int]] | None = None,
+) -> CloudInfo:
+    """Describe LAS/LAZ files as one cloud, streaming each in chunks (constant memory).
+
+    One file and a catalog of tiles are the same job: every file is one region added
+    to one summary, with the occupied-area cells fixed by the files' header bounds and
+    point count, so a merged file and the folder of its tiles give the same numbers.
+
+    Parameters
+    ----------
+    paths : sequence of path-like
+        LAS/LAZ/COPC files.
+    crs : pyproj.CRS, optional
+        The CRS of the result (default: the first file's).
+    chunk_size : int, default 2 000 000
+        Points read at a time.
+    ids_per_file : dict, optional
+        Filled with the sorted point source ids of each file, by path.
+
+    Returns
+    -------
+    CloudInfo
+        ``header`` is the first file's header summary for one file, else empty.
+    """
+    from . import las_header_summary
+    from .las import LasReader
+
+    heads = []
+    for path in paths:  # the header pass: the cells of the whole area
+        with LasReader(path) as r:
+            heads.append((r.n_points, r.bounds, r.dimension_names, r.crs))
+    lo = np.min([h[1][:3] for h in heads], axis=0) if heads else np.zeros(3)
+    hi = np.max([h[1][3:] for h in heads], axis=0) if heads else np.zeros(3)
+    acc = _Accumulator(_density_cell(lo, hi, sum(h[0] for h in heads)))
+    header: dict[str, Any] = {}
+    for path in paths:
+        ids: set[int] = set()
+        with LasReader(path) as r:
+            for chunk in r.chunks(chunk_size):
+                u = acc.add(chunk)
+                ids.update(u.tolist() if u is not None else ())
+            header = las_header_summary(r) if len(paths) == 1 else {}  # as read (after points)
+        if ids_per_file is not None:
+            ids_per_file[str(path)] = sorted(int(i) for i in ids)
+    first = heads[0] if heads else (0, (), [], None)
+    return _finish(acc, crs if crs is not None else first[3], list(first[2]), header)
 
 
 def describe(
@@ -146,18 +208,15 @@ def describe(
     A point list that is not a cloud (CSV with text ids, GeoPackage, GeoJSON)
     is described by its points.
     """
-    from . import las_header_summary, read
+    from . import read
     from .crs import resolve_crs
-    from .las import LasReader
 
     if Path(path).suffix.lower() in {".las", ".laz"}:
+        from .las import LasReader
+
         with LasReader(path) as reader:
-            b = reader.bounds
-            acc = _Accumulator(_density_cell(np.array(b[:3]), np.array(b[3:]), reader.n_points))
-            for chunk in reader.chunks(chunk_size):
-                acc.add(chunk)
             own = resolve_crs(reader.crs, crs, path)
-            return _finish(acc, own, reader.dimension_names, las_header_summary(reader))
+        return describe_files([path], crs=own, chunk_size=chunk_size)
     from ..errors import ReadError
     from .vector import VECTOR_SUFFIXES, read_points
 

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import OutputExistsError, WriteError
+from ..errors import WriteError
 
 __all__ = ["OUTPUT_NAMES", "check_outputs", "write_outputs", "block_map_png"]
 
@@ -21,22 +21,9 @@ _COLOURS = {"pass": "#3a9a4a", "warn": "#e0a526", "fail": "#c8352b"}
 
 def check_outputs(out: str | os.PathLike, *, overwrite: bool = False) -> Path:
     """Refuse an output folder that holds a previous run's files (unless `overwrite`)."""
-    from ..io._atomic import check_output_dir
+    from ..io._atomic import check_output_folder
 
-    if str(out).strip() == "":
-        raise WriteError("the output folder name is empty")
-    d = Path(out)
-    if d.exists() and not d.is_dir():
-        raise WriteError(f"output {d} exists and is not a folder")
-    anc = d
-    while not anc.exists() and anc != anc.parent:
-        anc = anc.parent
-    check_output_dir(anc if anc.exists() else Path("."))
-    if not overwrite:
-        for name in OUTPUT_NAMES.values():
-            if (d / name).exists():
-                raise OutputExistsError(f"output {d / name} exists; add --overwrite to replace it")
-    return d
+    return check_output_folder(out, OUTPUT_NAMES.values(), overwrite=overwrite)
 
 
 def write_outputs(result: Any, out: str | os.PathLike, *, overwrite: bool = False,

@@ -243,32 +243,23 @@ class RunContext:
         return cloud.select(classes=classes, source_id=source_id)
 
     def edges(self, cloud: str, classes: Any, source_id: Any, options: dict[str, Any]) -> Any:
-        """Edges extracted from a cloud selection (cached on selection + options)."""
-        key = (cloud, _norm_ids(classes), _norm_ids(source_id), _freeze(options))
-        spec = self.config.inputs.get(cloud)
-        if key not in self._edges and spec is not None and spec.kind == "clouds":
-            # one job for a file (one region) and a catalog (chunk by chunk, each edge once):
-            # the same data-driven defaults (the central sample window), the same edges
-            catalog = self.is_catalog(cloud)
-            if catalog or str(spec.path).lower().endswith((".las", ".laz")):
-                label = selection_label(cloud, classes, source_id)
-                how = "catalog" if catalog else "one region"
-                with self.step(f"Extracting edges ({label}, {how})"):
-                    self._edges[key] = _catalog_edges(spec.path, classes, source_id, options)
-        if key not in self._edges:
-            extract_edges = library_attr("lidarqa.geometry.edges", "extract_edges", "edges")
-            sub = self.select(cloud, classes, source_id)
-            label = selection_label(cloud, classes, source_id)
-            with self.step(f"Extracting edges ({label}, {len(sub):,} points)"):
-                if len(sub) < 3:
-                    from ..io.vector import Segments
+        """Edges extracted from a cloud selection (cached on selection + options).
 
-                    seg = Segments(np.empty(0, dtype=np.int64), np.empty((0, 3)), np.empty((0, 3)))
-                else:
-                    seg = extract_edges(sub.xyz, **options)
-            if getattr(seg, "crs", None) is None:
-                seg.crs = sub.crs
-            self._edges[key] = seg
+        One job for a file (one region) and a catalog (chunk by chunk, each edge once):
+        the same data-driven defaults (the central sample window), the same edges. A cloud
+        that is not LAS/LAZ is the cloud read in memory, as one region.
+        """
+        key = (cloud, _norm_ids(classes), _norm_ids(source_id), _freeze(options))
+        if key not in self._edges:
+            src: Any = str(self.config.inputs[cloud].path)
+            if not (self.is_catalog(cloud) or src.lower().endswith((".las", ".laz"))):
+                from ..tiling.source import Source
+
+                src = Source(catalog=None, cloud=self.cloud(cloud))
+            label = selection_label(cloud, classes, source_id)
+            how = "catalog" if self.is_catalog(cloud) else "one region"
+            with self.step(f"Extracting edges ({label}, {how})"):
+                self._edges[key] = _catalog_edges(src, classes, source_id, options)
         return self._edges[key]
 
     # -- outputs
@@ -281,8 +272,8 @@ class RunContext:
         return p
 
 
-def _catalog_edges(path: Any, classes: Any, source_id: Any, options: dict[str, Any]) -> Any:
-    """The edges of a catalog selection, each edge once (chunk by chunk)."""
+def _catalog_edges(source: Any, classes: Any, source_id: Any, options: dict[str, Any]) -> Any:
+    """The edges of a selection of a source (a path or a Source), each edge once."""
     import inspect
 
     from ..errors import AnalysisError
@@ -292,10 +283,10 @@ def _catalog_edges(path: Any, classes: Any, source_id: Any, options: dict[str, A
     params = dict(options)
     keys = set(inspect.signature(segment_planes).parameters) - {"points", "progress"}
     seg_opts: dict[str, Any] = {k: params.pop(k) for k in sorted(keys) if k in params}
-    run = catalog_features(str(path), kind="edges", classes=classes, source_id=source_id,
+    run = catalog_features(source, kind="edges", classes=classes, source_id=source_id,
                            segment_options=seg_opts, options=params)
     if run.failed:
-        raise AnalysisError(f"edges of the catalog {path}: chunk(s) {', '.join(run.failed)} "
+        raise AnalysisError(f"edges of the catalog {source}: chunk(s) {', '.join(run.failed)} "
                             "failed")
     return run.value
 

@@ -169,7 +169,12 @@ def catalog_section(run: Any, *, title: str = "Catalog") -> dict[str, Any]:
 
 
 def with_overview(res: Any, run: Any, title: str) -> Any:
-    """`res` (a SectionResult) with the catalog overview map and chunk table of `run` added."""
+    """`res` (a SectionResult) with the catalog overview map and chunk table of `run` added.
+
+    `run` None (not a catalog): `res` as it is.
+    """
+    if run is None:
+        return res
     sec = catalog_section(run, title=title)
     res.figures = [*res.figures, *sec["figures"]]
     res.tables = [*res.tables, *sec["tables"]]

@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from .._version import __version__
-from ..errors import LidarQAError, OutputExistsError, WriteError
+from ..errors import LidarQAError
 from . import _registry
 from .config import AnalysisItem, AssessmentConfig, load_config
 from .html import Report, Section, SummaryRow, fmt, render_html
@@ -82,26 +82,10 @@ def check_out_dir(out_dir: str | os.PathLike, *, overwrite: bool = False) -> Pat
     ``outputs/`` exist and `overwrite` is false, and :class:`WriteError` when
     the path is a file.
     """
-    if str(out_dir).strip() == "":
-        raise WriteError("the output folder name is empty")
-    out = Path(out_dir)
-    if out.exists() and not out.is_dir():
-        raise WriteError(f"output {out} exists and is not a folder")
-    # the nearest existing ancestor must be a writable folder (the rest is created)
-    from ..io._atomic import check_output_dir
+    from ..io._atomic import check_output_folder
 
-    anc = out
-    while not anc.exists() and anc != anc.parent:
-        anc = anc.parent
-    check_output_dir(anc if anc.exists() else Path("."))
-    if not overwrite:
-        for name in (REPORT_HTML, REPORT_JSON, OUTPUTS_DIR):
-            if (out / name).exists():
-                raise OutputExistsError(
-                    f"output {out / name} exists; pass --overwrite "
-                    "(overwrite=True) to replace the report"
-                )
-    return out
+    return check_output_folder(out_dir, (REPORT_HTML, REPORT_JSON, OUTPUTS_DIR),
+                               overwrite=overwrite)
 
 
 class _Progress:

@@ -19,7 +19,7 @@ Chunking, retries, progress, Dask (``workers``, ``scheduler`` or an
 :class:`~lidarqa.tiling.Engine`) and resuming (``work_dir`` + ``resume``, see
 :class:`ChunkStore`) are handled here for every job. Ownership of
 per-point or per-feature results on chunk borders is the chunk's own rule
-(:meth:`Chunk.core_mask`, used through :func:`owned`).
+(:meth:`Chunk.core_mask`, used through :func:`~lidarqa.tiling.jobs_vector.owned`).
 """
 
 from __future__ import annotations
@@ -50,7 +50,7 @@ V = TypeVar("V")
 V_co = TypeVar("V_co", covariant=True)
 
 __all__ = ["CatalogRun", "ChunkStore", "apply", "chunk_status", "default_work_dir", "engine_for",
-           "open_sources", "owned", "region_chunks"]
+           "open_sources", "region_chunks"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -217,20 +217,6 @@ def open_sources(sources: PathsInput | Catalog | Source, *, skip_bad: bool = Fal
         return sources.select(classes=classes, source_id=source_id)
     return open_source(sources, skip_bad=skip_bad, crs=crs, classes=classes,
                        source_id=source_id, z_to_metres=z_to_metres)
-
-
-
-
-def owned(xy: np.ndarray, chunk: Chunk) -> np.ndarray:
-    """Mask of the points `xy` (N, 2+) whose owner is `chunk` (its half-open core rule).
-
-    Every point of the plane is owned by exactly one chunk of a grid, whatever
-    floating point rounding does at cell borders: per-point results, reference
-    points and feature anchors are kept by their owner only.
-    """
-    from .jobs_vector import owned as _owned
-
-    return _owned(xy, chunk)
 
 
 @contextlib.contextmanager

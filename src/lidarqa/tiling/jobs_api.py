@@ -38,7 +38,8 @@ from numpy.typing import ArrayLike
 
 from ..errors import OptionError
 from ..io.vector import PointSet
-from .apply import CatalogRun, chunk_status, open_sources, owned, region_chunks  # noqa: F401
+from .apply import CatalogRun, chunk_status, open_sources, region_chunks  # noqa: F401
+from .jobs_vector import owned
 
 if TYPE_CHECKING:
     from ._types import PathsInput
@@ -120,8 +121,21 @@ def catalog_features(
         ``retries``, ``skip_failed``, ``order_seed`` (shuffled submission, for
         tests), ``skip_bad``, ``crs``, ``work_dir`` and ``resume`` (see
         :func:`~lidarqa.tiling.apply.apply`).
+
+    Returns
+    -------
+    CatalogRun
+        ``value`` the features; ``extra`` the fixed ``segment_options`` and
+        ``options`` and the ``summary`` of the chunks' segmentations
+        (:func:`~lidarqa.tiling.jobs_vector.merge_summaries`).
     """
-    from .jobs_vector import VectorTask, feature_buffer, fixed_auto_options, merge_vector_parts
+    from .jobs_vector import (
+        VectorTask,
+        feature_buffer,
+        fixed_auto_options,
+        merge_summaries,
+        merge_vector_parts,
+    )
 
     open_opts, chunk_opts, run_opts = _split(dict(common))
     catalog = open_sources(sources, classes=classes or None, source_id=source_id or None,
@@ -138,7 +152,8 @@ def catalog_features(
     outcomes, parts = _run(catalog, chunks, task, run_opts, f"{kind.capitalize()}")
     value = merge_vector_parts(parts, tolerance=tolerance, crs=catalog.crs)
     return CatalogRun(value, catalog, tuple(chunks), tuple(outcomes),
-                      {"segment_options": seg_opts, "options": opts})
+                      {"segment_options": seg_opts, "options": opts,
+                       "summary": merge_summaries(parts)})
 
 
 # ------------------------------------------------------------------ check points, heights

@@ -23,10 +23,10 @@ edges for the matching is cheap even when the points are not.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Hashable, Mapping, Sequence
 from dataclasses import dataclass, field
 from itertools import combinations
-from typing import TYPE_CHECKING, Any, cast
+from typing import TYPE_CHECKING, Any, TypeVar, cast
 
 import numpy as np
 
@@ -39,6 +39,9 @@ if TYPE_CHECKING:
     from ._types import Tiles
     from .engine import ChunkData
     from .source import Source
+
+#: A pass's key in :func:`strip_pairs` (a strip id, or any name).
+K = TypeVar("K", bound=Hashable)
 
 #: Per strip: (segment options, edge options, point spacing m), see :func:`strip_options`.
 StripOptions = dict[int, tuple[dict[str, object], dict[str, object], float]]
@@ -199,14 +202,16 @@ def merge_strip_edges(
     }
 
 
-def strip_pairs(strips: dict[int, Segments], *, shared_threshold: bool = False,
+def strip_pairs(strips: Mapping[K, Segments | Exception], *, shared_threshold: bool = False,
+                pairs: Sequence[tuple[K, K]] | None = None,
                 **match_options: object) -> list[dict[str, object]]:
     """Match every pair of strips both ways: rows like ``lidarqa repeatability``.
 
     Parameters
     ----------
     strips : dict of strip id to Segments
-        From :func:`merge_strip_edges`.
+        From :func:`merge_strip_edges` (or any passes by name). A pass that is an
+        exception (its edges could not be found) gives its pairs an ``error``.
     shared_threshold : bool, default False
         One threshold for every pair: the median of the pairs' automatic
         thresholds (knees) in both directions (``--shared-threshold``).
@@ -217,12 +222,15 @@ def strip_pairs(strips: dict[int, Segments], *, shared_threshold: bool = False,
         strips' point spacing (:func:`~lidarqa.accuracy.lines.sampling_threshold_range`),
         ``"knee"`` keeps the plain knee.
 
+    pairs : sequence of (test, model) keys, optional
+        The pairs to match (default every pair, in the order of `strips`).
+
     Returns
     -------
     list of dict
         ``test``, ``model`` (strip ids as text) and the ``LineMatch.to_dict()``
-        figures, or ``error`` when a pair cannot be matched. Pairs in
-        increasing strip order.
+        figures, or ``error`` when a pair cannot be matched. Pairs in the order
+        of `pairs`.
 
     Raises
     ------
@@ -233,7 +241,10 @@ def strip_pairs(strips: dict[int, Segments], *, shared_threshold: bool = False,
     from ..errors import OptionError
 
     opts: dict[str, Any] = dict(match_options)  # checked by match_segments
-    pairs = list(combinations(sorted(strips), 2))
+    pairs = list(combinations(strips, 2)) if pairs is None else list(pairs)
+    bad = {k: v for k, v in strips.items() if isinstance(v, Exception)}
+    good = [(a, b) for a, b in pairs if a not in bad and b not in bad]
+    segs = cast("Mapping[K, Segments]", strips)  # the passes of `good`
     if shared_threshold:
         if opts.get("threshold") is not None:
             raise OptionError("--shared-threshold computes the threshold; do not also give "
@@ -241,9 +252,9 @@ def strip_pairs(strips: dict[int, Segments], *, shared_threshold: bool = False,
         knee_opts = {k: opts[k] for k in ("weight", "sensitivity", "rotate")
                      if k in opts}
         knees = []
-        for a, b in pairs:
+        for a, b in good:
             try:
-                r0 = match_segments(strips[a], strips[b], **knee_opts)
+                r0 = match_segments(segs[a], segs[b], **knee_opts)
             except LidarQAError:
                 continue
             knees += [t for t, ok in ((r0.threshold_tm, r0.threshold_found_tm),
@@ -254,11 +265,15 @@ def strip_pairs(strips: dict[int, Segments], *, shared_threshold: bool = False,
     rows: list[dict[str, object]] = []
     for a, b in pairs:
         row: dict[str, object] = {"test": str(a), "model": str(b)}
-        try:
-            row.update(match_strips(strips[a], strips[b], **opts))
-        except CRSMismatchError:
-            raise
-        except LidarQAError as exc:
-            row.update(p=len(strips[a]), q=len(strips[b]), error=str(exc))
+        if a in bad or b in bad:
+            row["error"] = str(bad.get(a, bad.get(b)))
+        else:
+            try:
+                row.update(match_strips(segs[a], segs[b], **opts))
+            except CRSMismatchError:
+                raise
+            except LidarQAError as exc:
+                row.update(p=len(segs[a]), q=len(segs[b]), error=str(exc))
         rows.append(row)
     return rows
+

@@ -28,14 +28,14 @@ canonical order. The merged output is sorted by anchor (x, then y, then z) and
 numbered 0..n-1, so it does not depend on the number of workers or on which
 chunk finished first. The ``chunk`` column names the chunk that kept each
 feature; ``plane_a``/``plane_b``/``plane_c`` are plane numbers *within that
-chunk*.
+chunk* (a plane's number is its ``plane`` column).
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -62,12 +62,18 @@ __all__ = [
     "fixed_auto_options",
     "in_core",
     "keep_anchored",
+    "merge_summaries",
     "merge_vector_parts",
     "owned",
     "vector_features",
 ]
 
 KINDS = ("planes", "edges", "corners")
+
+#: One chunk's part: (chunk id, features) or, from :class:`VectorTask`, (chunk id, features,
+#: what the chunk owns of its segmentation, see :func:`vector_features`).
+VectorPart = tuple[str, "Segments | PointSet"] | tuple[str, "Segments | PointSet",
+                                                       dict[str, object]]
 
 
 def in_core(xy: ArrayLike, core: Sequence[float]) -> np.ndarray:
@@ -176,7 +182,7 @@ def dedupe_segments(segments: Segments, *, tolerance: float = 0.05) -> Segments:
 
 
 def merge_vector_parts(
-    parts: Sequence[tuple[str, Segments | PointSet] | None],
+    parts: Sequence[VectorPart | None],
     *,
     tolerance: float = 0.05,
     crs: CRS | None = None,
@@ -185,7 +191,8 @@ def merge_vector_parts(
 
     Parameters
     ----------
-    parts : sequence of (chunk_id, Segments or PointSet), or None for a failed chunk
+    parts : sequence of (chunk_id, Segments or PointSet, ...), or None for a failed chunk
+        (more items, such as a :class:`VectorTask` part's summary, are ignored)
     tolerance : float, default 0.05
         Features closer than this (m) are duplicates (see the module docstring).
     crs : pyproj.CRS, optional
@@ -200,11 +207,12 @@ def merge_vector_parts(
     if not items:
         raise InvalidPointsError("no chunk produced features (every chunk failed)")
     is_seg = isinstance(items[0][1], Segments)
-    names = sorted(set().union(*(set(f.attributes) for _, f in items)))
+    # columns in the order the features give them (the single-region command's order)
+    names = list(dict.fromkeys(k for p in items for k in p[1].attributes))
     cols: dict[str, list[np.ndarray]] = {k: [] for k in names}
     chunk_col: list[np.ndarray] = []
     geo: list[list[np.ndarray]] = [[], []]
-    for cid, f in items:
+    for cid, f, *_ in items:
         if isinstance(f, Segments) != is_seg:
             raise InvalidPointsError("cannot merge segments with points")
         n = len(f)
@@ -345,7 +353,8 @@ def _planes_pointset(seg: Any, crs: Any) -> PointSet:
     return PointSet(ids=np.arange(n, dtype=np.int64), xyz=seg.centroid.copy(), crs=crs, attributes={
         "nx": seg.normal[:, 0], "ny": seg.normal[:, 1], "nz": seg.normal[:, 2], "rho": seg.rho,
         "n_points": seg.n_points, "n_inliers": seg.n_inliers, "rmse": seg.rmse,
-        "sigma_rho": seg.sigma_rho, "sigma_normal_deg": np.degrees(sn), "n_adjacent": deg})
+        "sigma_rho": seg.sigma_rho, "sigma_normal_deg": np.degrees(sn), "n_adjacent": deg,
+        "plane": np.arange(n, dtype=np.int64)})  # the plane_a/b/c of the chunk's edges, corners
 
 
 def vector_features(
@@ -357,6 +366,7 @@ def vector_features(
     options: Mapping[str, object] | None = None,
     crs: CRS | None = None,
     box: Sequence[float] | None = None,
+    summary: dict[str, object] | None = None,
 ) -> Segments | PointSet:
     """Planes, edges or corners of (buffered) points, keeping those anchored in `core`.
 
@@ -378,6 +388,12 @@ def vector_features(
         beyond the catalog set to ±inf). Adds the column ``at_buffer_edge``: 1 when
         one of the feature's planes reaches that box's edge, so the plane (a roof
         wider than the buffer) may be cut and the feature differ from a whole-area run.
+    summary : dict, optional
+        Filled with what `core` owns, so that chunk summaries add up to the whole
+        area's: ``n_points``, ``n_segmented_points``, ``n_planes`` (by centroid),
+        ``n_adjacent_pairs`` and ``left_out`` (reason -> count of the plane pairs or
+        triples that gave no edge or corner, by their planes' mean centroid), and the
+        segmentation's ``parameters``.
 
     Returns
     -------
@@ -396,24 +412,75 @@ def vector_features(
                                                     crs=crs))
         if box is not None:
             empty.attributes["at_buffer_edge"] = np.zeros(0, dtype=np.int64)
+        if summary is not None:
+            summary.update(_summary(pts, None, [], core))
         return empty
     from ..geometry.segmentation import segment_planes
 
     seg = segment_planes(pts, **seg_kw)
+    left: list[dict[str, Any]] = []
     if kind == "planes":
         feats: Segments | PointSet = _planes_pointset(seg, crs)
     elif kind == "edges":
         from ..geometry.edges import extract_edges
 
-        feats = extract_edges(pts, segmentation=seg, crs=crs, **opts)
+        feats = extract_edges(pts, segmentation=seg, crs=crs, left_out=left, **opts)
     else:
         from ..geometry.corners import extract_corners
 
-        feats = extract_corners(pts, segmentation=seg, crs=crs, **opts)
+        feats = extract_corners(pts, segmentation=seg, crs=crs, left_out=left, **opts)
+    if summary is not None:
+        summary.update(_summary(pts, seg, left, core))
     if box is not None:
         feats.attributes["at_buffer_edge"] = _at_box_edge(pts, seg, feats, kind, box,
                                                           seg.parameters.get("grow_radius"))
     return feats if core is None else keep_anchored(feats, core)
+
+
+def _summary(pts: np.ndarray, seg: Any, left: list[dict[str, Any]],
+             core: Where | None) -> dict[str, Any]:
+    """What `core` owns of a chunk's segmentation (see :func:`vector_features`)."""
+    from collections import Counter
+
+    def own(xy: np.ndarray) -> np.ndarray:
+        return owned(xy, core) if core is not None else np.ones(len(xy), dtype=bool)
+
+    mine = own(pts)
+    if seg is None:
+        return {"n_points": int(mine.sum()), "n_segmented_points": 0, "n_planes": 0,
+                "n_adjacent_pairs": 0, "left_out": {}, "parameters": {}}
+    cen = np.asarray(seg.centroid, dtype=np.float64).reshape(-1, 3)[:, :2]
+    adj = np.asarray(seg.adjacency, dtype=np.int64).reshape(-1, 2)
+    ids = [r["planes"] if "planes" in r else (r["plane_a"], r["plane_b"]) for r in left]
+    left_own = (own(cen[np.asarray(ids, dtype=np.int64)].mean(axis=1)) if ids
+                else np.zeros(0, dtype=bool))
+    return {"n_points": int(mine.sum()),
+            "n_segmented_points": int((mine & (np.asarray(seg.labels) >= 0)).sum()),
+            "n_planes": int(own(cen).sum()), "n_adjacent_pairs": int(own(cen[adj].mean(axis=1))
+                                                                    .sum()) if len(adj) else 0,
+            "left_out": dict(Counter(r["reason"] for r, k in zip(left, left_own, strict=True)
+                                     if k)),
+            "parameters": dict(seg.parameters)}
+
+
+def merge_summaries(parts: Sequence[VectorPart | None]) -> dict[str, object]:
+    """The whole area's summary: the sum of the parts' summaries (:func:`vector_features`)."""
+    from collections import Counter
+
+    counts: Counter[str] = Counter(dict.fromkeys(_COUNTS, 0))
+    left: Counter[str] = Counter()
+    params: object = {}
+    for p in parts:
+        if p is None or len(p) < 3:
+            continue
+        part = cast("dict[str, Any]", p[-1])
+        counts.update({k: int(part.get(k, 0)) for k in _COUNTS})
+        left.update(part.get("left_out", {}))
+        params = params or part.get("parameters", {})  # the first chunk's
+    return {**counts, "left_out": dict(left.most_common()), "parameters": params}
+
+
+_COUNTS = ("n_points", "n_segmented_points", "n_planes", "n_adjacent_pairs")
 
 
 def _at_box_edge(pts: np.ndarray, seg: Any, feats: Any, kind: str, box: Sequence[float],
@@ -487,8 +554,13 @@ class VectorTask:
         if self.kind not in KINDS:
             raise OptionError(f"kind must be one of {', '.join(KINDS)}, got {self.kind!r}")
 
-    def __call__(self, chunk_data: ChunkData) -> tuple[str, Segments | PointSet]:
-        """Features of one chunk (its buffer read too) anchored in its core, by chunk id."""
+    def __call__(self, chunk_data: ChunkData) -> tuple[str, Segments | PointSet,
+                                                        dict[str, object]]:
+        """Features of one chunk (its buffer read too) anchored in its core, by chunk id.
+
+        The third item is what the chunk owns of its segmentation (see
+        :func:`vector_features`'s `summary`).
+        """
         cloud = chunk_data.cloud
         if self.classes or self.source_id:
             cloud = cloud.select(classes=self.classes, source_id=self.source_id)
@@ -501,14 +573,15 @@ class VectorTask:
             if f != 1.0:
                 xyz = xyz.copy()
                 xyz[:, 2] *= f
+        summary: dict[str, object] = {}
         feats = vector_features(xyz, kind=self.kind, core=chunk_data.chunk,
                                 segment_options=self.segment_options, options=self.options,
                                 crs=cloud.crs, box=open_box(chunk_data.chunk.buffered,
-                                                            self.bounds))
+                                                            self.bounds), summary=summary)
         if f != 1.0:  # back to the cloud's vertical unit, as the single-file commands do
             if isinstance(feats, Segments):
                 feats.start[:, 2] /= f
                 feats.end[:, 2] /= f
             else:
                 feats.xyz[:, 2] /= f
-        return chunk_data.chunk.id, feats
+        return chunk_data.chunk.id, feats, summary

@@ -147,6 +147,7 @@ def run_checkpoints(ctx: RunContext, item: AnalysisItem) -> SectionResult:
     from ...io.vector import PointSet
     from ...tiling.source import is_catalog_input
     from .. import plots
+    from ..catalog_overview import with_overview
 
     mod = import_module("lidarqa.accuracy.checkpoints", "checkpoints")
     opts = item.options
@@ -349,11 +350,7 @@ def run_checkpoints(ctx: RunContext, item: AnalysisItem) -> SectionResult:
         paragraphs=paragraphs,
         caveats=caveats,
     )
-    if run is not None:
-        from ..catalog_overview import with_overview
-
-        out = with_overview(out, run, f"{opts['measured']}: chunks read")
-    return out
+    return with_overview(out, run, f"{opts['measured']}: chunks read")
 
 
 def _with_unit(key: str) -> str:

@@ -22,7 +22,7 @@ from ..html import Figure, Table
 
 def _edge_params(options: dict) -> dict[str, Any]:
     extract_edges = library_attr("lidarqa.geometry.edges", "extract_edges", "edges")
-    out = keyword_defaults(extract_edges, exclude=("segmentation", "crs"))
+    out = keyword_defaults(extract_edges, exclude=("segmentation", "crs", "left_out"))
     # extract_edges passes **segment_options to segment_planes: accept those names too.
     with contextlib.suppress(AnalysisUnavailableError):
         segment_planes = library_attr("lidarqa.geometry.segmentation", "segment_planes", "edges")

@@ -129,6 +129,7 @@ def run_heights(ctx: RunContext, item: AnalysisItem) -> SectionResult:
     """
     from ...tiling.jobs_api import catalog_heights
     from ...tiling.source import Source, is_catalog_input, open_source
+    from ..catalog_overview import with_overview
 
     mod = import_module("lidarqa.accuracy.heights", "heights")
     opts = item.options
@@ -177,11 +178,7 @@ def run_heights(ctx: RunContext, item: AnalysisItem) -> SectionResult:
     out = _heights_section(ctx, item, run.value, laser, ref_xyz, [], [],
                            f"Laser points: {label}. Map points: {map_label}. "
                            f"Reference: {ref_label}.")
-    if not on_catalog:
-        return out
-    from ..catalog_overview import with_overview
-
-    return with_overview(out, run, f"{opts['cloud']}: chunks")
+    return with_overview(out, run if on_catalog else None, f"{opts['cloud']}: chunks")
 
 
 def _heights_section(ctx: RunContext, item: AnalysisItem, rep: Any, laser: Any, ref_xyz: Any,

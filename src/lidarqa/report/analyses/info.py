@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import cast
+from typing import Any, cast
 
 import numpy as np
 
@@ -65,6 +65,12 @@ def run_info(ctx: RunContext, item: AnalysisItem) -> SectionResult:
                 "top view, coloured by height (1st–99th percentile)",
             )
         )
+    return _section(info, figures)
+
+
+def _section(info: dict[str, Any], figures: list[Figure],
+             catalog: dict[str, Any] | None = None) -> SectionResult:
+    """The tables and headline of a description (with a catalog's own section, if any)."""
     b = info["bounds"]
     rows = [
         ["points", info["n_points"]],
@@ -88,6 +94,8 @@ def run_info(ctx: RunContext, item: AnalysisItem) -> SectionResult:
     ]
     from ..plots import CLASS_NAMES
 
+    if catalog is not None:
+        rows += catalog["rows"]
     tables = [Table("Cloud", ["property", "value"], rows)]
     if info["classes"]:
         tables.append(
@@ -112,37 +120,35 @@ def run_info(ctx: RunContext, item: AnalysisItem) -> SectionResult:
         + (f", {len(info['point_source_ids'])} flight strips" if info["point_source_ids"] else "")
     )
     info.pop("header", None)
-    return SectionResult(results=info, headline=headline, figures=figures, tables=tables)
+    if catalog is None:
+        return SectionResult(results=info, headline=headline, figures=figures, tables=tables)
+    return SectionResult(results={**info, **catalog["results"]},
+                         headline=f"catalog of {catalog['results']['n_tiles']} tiles, " + headline,
+                         figures=catalog["figures"], tables=[*tables, *catalog["tables"]],
+                         notes=catalog["notes"])
 
 
 def _run_on_catalog(ctx: RunContext, item: AnalysisItem) -> SectionResult:
-    """The catalog summary from the tile headers, with the chunks a job would use."""
+    """The same description, read tile by tile, with the chunks a job would use."""
+    from ...io.info import describe_files
     from ...tiling import make_chunks, open_catalog
     from ...tiling.apply import CatalogRun
     from ..catalog_overview import catalog_section
 
     name = item.options["cloud"]
-    with ctx.step(f"Reading the headers of {name}"):
+    with ctx.step(f"Reading {name} tile by tile"):
         cat = open_catalog(str(ctx.config.inputs[name].path))
+        info = describe_files([t.path for t in cat.tiles], crs=cat.crs).to_dict()
     chunks = make_chunks(cat)
     run = CatalogRun(None, cat, tuple(chunks), ())  # no job: the chunks a job would use
     sec = catalog_section(run, title=f"{name}: catalog")
     d = cat.to_dict()
-    results = {**sec["results"], "crs_name": d.get("crs_name"), "crs_epsg": d.get("crs_epsg"),
-               "density_per_m2": d.get("density_per_m2"),
-               "gaps": len(cast(list, d.get("gaps", []))),
+    results = {**sec["results"], "gaps": len(cast(list, d.get("gaps", []))),
                "overlaps": len(cast(list, d.get("overlaps", []))),
                "chunk_size": chunks[0].size if chunks else None}
-    rows = [["tiles", len(cat.tiles)], ["points", int(cat.n_points)],
-            ["CRS", d.get("crs_name") or "none"], ["density (pts/m²)", d.get("density_per_m2")],
-            ["gaps (missing tile cells)", results["gaps"]],
+    rows = [["tiles", len(cat.tiles)], ["gaps (missing tile cells)", results["gaps"]],
             ["duplicate overlaps", results["overlaps"]],
             ["default chunks", f"{len(chunks)} of {results['chunk_size']:g} m"
              if chunks else "–"]]
-    headline = (f"catalog of {len(cat.tiles)} tiles, {int(cat.n_points):,} points"
-                + (f", {d['density_per_m2']:.1f} pts/m²" if d.get("density_per_m2") else ""))
-    return SectionResult(results=results, headline=headline,
-                         figures=sec["figures"],
-                         tables=[Table("Catalog", ["property", "value"], rows),
-                                 sec["tables"][1]],
-                         notes=sec["notes"])
+    return _section(info, [], {"results": results, "rows": rows, "figures": sec["figures"],
+                               "tables": [sec["tables"][1]], "notes": sec["notes"]})

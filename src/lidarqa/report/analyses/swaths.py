@@ -111,6 +111,7 @@ def run_swaths(ctx: RunContext, item: AnalysisItem) -> SectionResult:
     """Overlap differences, repeatability and offsets of the strips of one cloud."""
     from ...tiling.jobs_swaths import catalog_swaths
     from ...tiling.source import Source
+    from ..catalog_overview import with_overview
 
     # one job for a file (one region, from the cloud the report already holds) and a catalog
     # (chunk by chunk: every cell fitted by its owner)
@@ -124,14 +125,11 @@ def run_swaths(ctx: RunContext, item: AnalysisItem) -> SectionResult:
                              source_ids=opts["source_ids"], all_returns=not opts["last_returns"],
                              skip_failed=on_catalog, **item.params)
     out = swaths_section(ctx, item, run.value, run.catalog.crs)
-    if not on_catalog:
-        return out
-    from ..catalog_overview import with_overview
-
-    out.paragraphs.append(f"{name} is a catalog: every grid cell is fitted in the chunk "
-                          "that owns it, with all its points; the figures are those of one "
-                          "run over the whole block.")
-    return with_overview(out, run, f"{name}: chunks")
+    if on_catalog:
+        out.paragraphs.append(f"{name} is a catalog: every grid cell is fitted in the chunk "
+                              "that owns it, with all its points; the figures are those of one "
+                              "run over the whole block.")
+    return with_overview(out, run if on_catalog else None, f"{name}: chunks")
 
 
 def swaths_section(ctx: RunContext, item: AnalysisItem, rep: Any, crs: Any) -> SectionResult:
