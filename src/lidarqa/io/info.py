@@ -64,7 +64,7 @@ class _Accumulator:
         self.maxs = np.full(3, -np.inf)
         self.classes: Counter = Counter()
         self.psids: Counter = Counter()
-        self.cells: set[tuple[int, ...]] = set()
+        self.cells: list[np.ndarray] = []  # distinct occupied cell keys per piece
         self.rn_present = False
         self.rn_zero = 0
         self.rn_invalid = 0
@@ -82,11 +82,12 @@ class _Accumulator:
         for name, counter in (("classification", self.classes), ("point_source_id", self.psids)):
             values = cloud.fields.get(name)
             if values is not None:
-                u, c = np.unique(values, return_counts=True)
+                u, c = _value_counts(np.asarray(values))
                 counter.update(dict(zip(u.tolist(), c.tolist(), strict=True)))
                 ids = u if name == "point_source_id" else ids
         ij = np.floor(xyz[:, :2] / self.cell).astype(np.int64)
-        self.cells.update(map(tuple, np.unique(ij, axis=0).tolist()))
+        # one int64 key per cell (column in the high 32 bits): a 1-D unique, not rows
+        self.cells.append(np.unique((ij[:, 0] << 32) + (ij[:, 1] & 0xFFFFFFFF)))
         rn = cloud.fields.get("return_number")
         nr = cloud.fields.get("number_of_returns")
         if rn is not None and nr is not None:
@@ -94,6 +95,15 @@ class _Accumulator:
             self.rn_zero += int(np.count_nonzero(rn == 0))
             self.rn_invalid += int(np.count_nonzero((rn > nr) | (nr == 0)))
         return ids
+
+
+def _value_counts(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Distinct values and their counts; a bincount for small unsigned integers."""
+    if values.dtype.kind == "u" and values.dtype.itemsize <= 2 and values.size:
+        c = np.bincount(values, minlength=0)
+        u = np.flatnonzero(c)
+        return u.astype(values.dtype), c[u]
+    return np.unique(values, return_counts=True)
 
 
 def _finish(acc: _Accumulator, crs: Any, dims: list[str], header: dict) -> CloudInfo:
@@ -107,7 +117,8 @@ def _finish(acc: _Accumulator, crs: Any, dims: list[str], header: dict) -> Cloud
                 strict=True,
             )
         )
-    area = float(len(acc.cells)) * acc.cell**2 if acc.cells else 0.0
+    n_cells = np.unique(np.concatenate(acc.cells)).size if acc.cells else 0
+    area = float(n_cells) * acc.cell**2
     returns: dict[str, Any] = {"present": acc.rn_present}
     if acc.rn_present:
         returns.update(
