@@ -84,6 +84,6 @@ def test_ground_labels_of_a_forest_tile_and_its_four_chunks(tmp_path):
     b = _ground(tmp_path / "b", src, "--chunk-size", "150", "--workers", "1")
     assert len(a) == len(b) > 800_000
     agree = float(np.mean(a == b))
-    assert agree >= 0.98, agree  # the floor measured when this test was written (98.39 %)
-    if agree < TARGET:
-        pytest.xfail(f"forest tile: {agree:.4f} of the labels equal, the issue asks {TARGET}")
+    # 98.39 % with one seed cell of buffer; under a canopy (41 % of the last returns from
+    # multi-return pulses) the ground job reads two
+    assert agree >= TARGET, f"{agree:.5f} of the labels equal ({int((a != b).sum())} differ)"

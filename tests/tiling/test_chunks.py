@@ -218,3 +218,14 @@ def test_ground_buffer_is_the_seed_cell_capped_by_the_catalog():
     assert ground_buffer(big) == 60.0
     small = _grid_catalog(10.0, 10.0, n=2)  # 20 m across: a wider buffer reads nothing more
     assert ground_buffer(small) == pytest.approx(20.0)
+
+
+def test_ground_buffer_is_two_seed_cells_under_a_canopy():
+    from lidarqa.tiling.ground import ground_buffer
+
+    assert ground_buffer(cell_size=60.0, canopy=True) == 120.0
+    assert ground_buffer(cell_size=25.0, canopy=True) == 50.0
+    big = _grid_catalog(100.0, 10.0, n=3)  # 300 m across
+    assert ground_buffer(big, canopy=True) == 120.0
+    small = _grid_catalog(10.0, 10.0, n=2)
+    assert ground_buffer(small, canopy=True) == pytest.approx(20.0)  # still capped

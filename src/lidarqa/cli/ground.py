@@ -129,8 +129,8 @@ if TYPE_CHECKING:
 )
 @crs_option
 @catalog_options(
-    buffer="Catalog: margin read around each chunk, m (default: the seed cell, see "
-    "docs/catalogs.md).",
+    buffer="Catalog: margin read around each chunk, m (default: the seed cell, two under "
+    "a canopy, see docs/catalogs.md).",
     resume="Catalog: re-use the chunks finished by an interrupted run (kept in "
     "OUTPUT/.lidarqa-work).",
 )
