@@ -47,6 +47,34 @@ def test_info_json_document(data_dir, tmp_path):
     assert res["returns"]["present"] is True
 
 
+@pytest.mark.parametrize("as_folder", [False, True])
+def test_info_headers_only_agrees_with_the_points_and_reads_none(data_dir, tmp_path, as_folder):
+    src = data_dir / "samp11-utm.laz"
+    if as_folder:
+        (tmp_path / "f").mkdir()
+        (tmp_path / "f" / src.name).write_bytes(src.read_bytes())
+        src = tmp_path / "f"
+    full, head = tmp_path / "full.json", tmp_path / "head.json"
+    assert run("info", src, "--json", full, "-q").exit_code == 0
+    r = run("info", src, "--headers", "--json", head)
+    assert r.exit_code == 0, r.output
+    a, b = json.loads(full.read_text())["results"], json.loads(head.read_text())["results"]
+    assert b["n_points"] == a["n_points"] == 38010
+    assert b["crs_epsg"] == a["crs_epsg"]
+    # header bounds are the points' extent, to the header's scale (a catalog lists them)
+    assert b["bounds"] == pytest.approx(a["bounds"], abs=0.01)
+    assert b["points_read"] is False and a["points_read"] is True
+    assert b["classes"] == {} and b["density_per_m2"] is None and b["returns"] == {}
+    assert "not read (--headers)" in r.output
+
+
+def test_info_headers_refuses_a_point_list_in_one_line(tmp_path):
+    p = tmp_path / "c.csv"
+    p.write_text("x,y,z\n0,0,0\n1,1,1\n")
+    r = run("info", p, "--headers")
+    assert r.exit_code != 0 and "--headers" in r.output and "Traceback" not in r.output
+
+
 def test_info_demo_tile_strips_and_returns(demo_tile):
     r = run("info", demo_tile, "-q")
     assert r.exit_code == 0

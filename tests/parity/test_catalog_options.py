@@ -24,7 +24,7 @@ _MATCH = {"weight", "sensitivity", "threshold", "rotate", "denominator", "classe
 _HEIGHTS = {"map_path", "output", "classes", "spacing", "radius", "max_radius", "min_points",
             "sigma_point", "sigma_gps", "sigma_ins", "sigma_strip", "curvature"}
 HONOURED: dict[str, set[str]] = {
-    "info": {"paths", "strips"},
+    "info": {"paths", "strips", "headers"},
     "ground": {"paths", "output", "method", "preset", "sensor", "cell_size", "max_terrain_angle",
                "iter_angle", "iter_distance", "min_edge_length", "no_mirror", "accept_ratio",
                "orientation_thr", "scatter_thr", "grow_radius", "filter_density", "all_returns",

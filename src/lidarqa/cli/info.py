@@ -29,9 +29,17 @@ from ._common import (
     help="Read the input as a catalog (also for one file): its tiles, and the strips (point "
     "source ids) of each tile.",
 )
+@click.option(
+    "--headers",
+    is_flag=True,
+    help="Read the headers only: points, bounds, CRS and (catalog) tiles in seconds; classes, "
+    "strips, density and returns are not read.",
+)
 @crs_option
 @common_options
-def info(paths: tuple[str, ...], skip_bad: bool, strips: bool, crs: str | None) -> None:
+def info(
+    paths: tuple[str, ...], skip_bad: bool, strips: bool, headers: bool, crs: str | None
+) -> None:
     """Describe a point cloud: points, bounds, CRS, classes, strips, density, returns.
 
     With a catalog (a folder, glob pattern, .vpc or several files): the same, read tile
@@ -47,21 +55,36 @@ def info(paths: tuple[str, ...], skip_bad: bool, strips: bool, crs: str | None) 
         # --crs for tiles that declare none; a tile whose own CRS contradicts it is an error
         source = open_catalog_source(paths, {"skip_bad": skip_bad}, crs=given, z_to_metres=False)
         cat = source.catalog
-    if cat is None:
+    if cat is None and headers:
+        from pathlib import Path
+
+        from ..errors import OptionError
+        from ..io.crs import resolve_crs
+        from ..io.las import LasReader
+
+        if Path(paths[0]).suffix.lower() not in {".las", ".laz"}:
+            raise OptionError("--headers reads LAS/LAZ headers; a point list has none")
+        with LasReader(paths[0]) as reader:
+            own = resolve_crs(reader.crs, given, paths[0])
+        d = describe_files([paths[0]], crs=own, headers_only=True).to_dict()
+    elif cat is None:
         with Steps()("Reading " + paths[0]):
             d = describe(paths[0], crs=given).to_dict()
     else:
         per_tile: dict[str, list[int]] = {}
-        with Steps()(f"Reading the points of {len(cat.tiles)} tile(s)"):
+        with Steps()(f"Reading the {'headers' if headers else 'points'} of "
+                     f"{len(cat.tiles)} tile(s)"):
             d = describe_files([t.path for t in cat.tiles], crs=source.native_crs,
-                               ids_per_file=per_tile).to_dict()
+                               ids_per_file=None if headers else per_tile,
+                               headers_only=headers).to_dict()
         d = {**d, **_catalog_results(cat), "strips_per_tile": per_tile,
              "strips": {int(k): v for k, v in d["point_source_ids"].items()},
              # points per occupied area, as for one file (no longer points / tile area)
              "density_per_m2": d["density_per_m2"]}
     _echo_info(paths, d, given)
     finish("info", inputs={"paths": list(paths)} if cat is not None else {"path": paths[0]},
-           parameters={"catalog": True} if cat is not None else {"crs": crs}, results=d)
+           parameters={"catalog": True, "headers": headers} if cat is not None
+           else {"crs": crs, "headers": headers}, results=d)
 
 
 def _catalog_results(cat: Any) -> dict[str, Any]:
@@ -112,23 +135,29 @@ def _echo_info(paths: tuple[str, ...], d: dict[str, Any], given: Any) -> None:
     if catalog:
         echo(f"  tile size       {d['tile_size']:g} m (median)")
         echo("  point formats   " + ", ".join(str(f) for f in d["point_formats"]))
-    if d["classes"]:
-        echo("  classes         " + ", ".join(f"{k}: {v:,}" for k, v in d["classes"].items()))
-    echo("  strips          " + (", ".join(f"{k}: {v:,}" for k, v in d["point_source_ids"].items())
-                                 or "none") + " (point source ids: points)")
-    r = d["returns"]
-    echo(
-        "  returns         "
-        + (
-            "absent"
-            if not r["present"]
-            else (
-                "valid"
-                if r["valid"]
-                else f"present, {r['n_zero_return_number']:,} zero / {r['n_invalid']:,} invalid"
+    if not d.get("points_read", True):
+        echo("  classes, strips, density, returns: not read (--headers)")
+    else:
+        if d["classes"]:
+            echo("  classes         "
+                 + ", ".join(f"{k}: {v:,}" for k, v in d["classes"].items()))
+        echo("  strips          "
+             + (", ".join(f"{k}: {v:,}" for k, v in d["point_source_ids"].items()) or "none")
+             + " (point source ids: points)")
+        r = d["returns"]
+        echo(
+            "  returns         "
+            + (
+                "absent"
+                if not r["present"]
+                else (
+                    "valid"
+                    if r["valid"]
+                    else f"present, {r['n_zero_return_number']:,} zero / "
+                    f"{r['n_invalid']:,} invalid"
+                )
             )
         )
-    )
     if not catalog:
         return
     echo(f"  gaps            {len(d['gaps'])} missing tile cell(s)")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 from collections import Counter
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -31,6 +31,7 @@ class CloudInfo:
     returns: dict[str, Any]
     dimensions: list[str] = field(default_factory=list)
     header: dict[str, Any] = field(default_factory=dict)
+    points_read: bool = True
 
     def to_dict(self) -> dict[str, Any]:
         """The result as a dict of plain JSON types (units: ``lidarqa.units``)."""
@@ -163,6 +164,7 @@ def describe_files(
     crs: Any = None,
     chunk_size: int = 2_000_000,
     ids_per_file: dict[str, list[int]] | None = None,
+    headers_only: bool = False,
 ) -> CloudInfo:
     """Describe LAS/LAZ files as one cloud, streaming each in chunks (constant memory).
 
@@ -178,6 +180,10 @@ def describe_files(
         The CRS of the result (default: the first file's).
     chunk_size : int, default 2 000 000
         Points read at a time.
+    headers_only : bool, default False
+        Read the headers only (seconds for a delivery that takes hours to decompress):
+        point count, bounds, CRS and dimensions; the classes, strips, density and
+        returns are then not known (empty, None) and ``points_read`` is False.
     ids_per_file : dict, optional
         Filled with the sorted point source ids of each file, by path.
 
@@ -197,6 +203,16 @@ def describe_files(
     hi = np.max([h[1][3:] for h in heads], axis=0) if heads else np.zeros(3)
     acc = _Accumulator(_density_cell(lo, hi, sum(h[0] for h in heads)))
     header: dict[str, Any] = {}
+    if headers_only:
+        first = heads[0] if heads else (0, (), [], None)
+        if len(paths) == 1:
+            with LasReader(paths[0]) as r:
+                header = las_header_summary(r)
+        acc.n = sum(int(h[0]) for h in heads)
+        if acc.n:
+            acc.mins, acc.maxs = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
+        out = _finish(acc, crs if crs is not None else first[3], list(first[2]), header)
+        return replace(out, density_per_m2=None, returns={}, points_read=False)
     for path in paths:
         ids: set[int] = set()
         with LasReader(path) as r:
