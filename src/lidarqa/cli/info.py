@@ -55,21 +55,9 @@ def info(
         # --crs for tiles that declare none; a tile whose own CRS contradicts it is an error
         source = open_catalog_source(paths, {"skip_bad": skip_bad}, crs=given, z_to_metres=False)
         cat = source.catalog
-    if cat is None and headers:
-        from pathlib import Path
-
-        from ..errors import OptionError
-        from ..io.crs import resolve_crs
-        from ..io.las import LasReader
-
-        if Path(paths[0]).suffix.lower() not in {".las", ".laz"}:
-            raise OptionError("--headers reads LAS/LAZ headers; a point list has none")
-        with LasReader(paths[0]) as reader:
-            own = resolve_crs(reader.crs, given, paths[0])
-        d = describe_files([paths[0]], crs=own, headers_only=True).to_dict()
-    elif cat is None:
-        with Steps()("Reading " + paths[0]):
-            d = describe(paths[0], crs=given).to_dict()
+    if cat is None:
+        with Steps()(("Reading the header of " if headers else "Reading ") + paths[0]):
+            d = describe(paths[0], crs=given, headers_only=headers).to_dict()
     else:
         per_tile: dict[str, list[int]] = {}
         with Steps()(f"Reading the {'headers' if headers else 'points'} of "

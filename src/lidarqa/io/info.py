@@ -196,18 +196,17 @@ def describe_files(
     from .las import LasReader
 
     heads = []
+    header: dict[str, Any] = {}
     for path in paths:  # the header pass: the cells of the whole area
         with LasReader(path) as r:
             heads.append((r.n_points, r.bounds, r.dimension_names, r.crs))
+            if headers_only and len(paths) == 1:
+                header = las_header_summary(r)
     lo = np.min([h[1][:3] for h in heads], axis=0) if heads else np.zeros(3)
     hi = np.max([h[1][3:] for h in heads], axis=0) if heads else np.zeros(3)
     acc = _Accumulator(_density_cell(lo, hi, sum(h[0] for h in heads)))
-    header: dict[str, Any] = {}
+    first = heads[0] if heads else (0, (), [], None)
     if headers_only:
-        first = heads[0] if heads else (0, (), [], None)
-        if len(paths) == 1:
-            with LasReader(paths[0]) as r:
-                header = las_header_summary(r)
         acc.n = sum(int(h[0]) for h in heads)
         if acc.n:
             acc.mins, acc.maxs = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
@@ -222,18 +221,22 @@ def describe_files(
             header = las_header_summary(r) if len(paths) == 1 else {}  # as read (after points)
         if ids_per_file is not None:
             ids_per_file[str(path)] = sorted(int(i) for i in ids)
-    first = heads[0] if heads else (0, (), [], None)
     return _finish(acc, crs if crs is not None else first[3], list(first[2]), header)
 
 
 def describe(
-    path: str | os.PathLike, *, chunk_size: int = 2_000_000, crs: Any = None
+    path: str | os.PathLike,
+    *,
+    chunk_size: int = 2_000_000,
+    crs: Any = None,
+    headers_only: bool = False,
 ) -> CloudInfo:
     """Describe a point cloud file, streaming LAS/LAZ in chunks (constant memory).
 
     `crs` (a pyproj CRS) stands for the CRS of a file that declares none.
     A point list that is not a cloud (CSV with text ids, GeoPackage, GeoJSON)
-    is described by its points.
+    is described by its points. `headers_only`: see :func:`describe_files` (LAS/LAZ
+    only).
     """
     from . import read
     from .crs import resolve_crs
@@ -243,8 +246,11 @@ def describe(
 
         with LasReader(path) as reader:
             own = resolve_crs(reader.crs, crs, path)
-        return describe_files([path], crs=own, chunk_size=chunk_size)
-    from ..errors import ReadError
+        return describe_files([path], crs=own, chunk_size=chunk_size, headers_only=headers_only)
+    from ..errors import OptionError, ReadError
+
+    if headers_only:
+        raise OptionError(f"--headers reads LAS/LAZ headers; {path} is a point list, with none")
     from .vector import VECTOR_SUFFIXES, read_points
 
     try:
