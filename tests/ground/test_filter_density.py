@@ -9,6 +9,7 @@ airborne clouds only; catalogs estimate the surface-growing radius the same way.
 from __future__ import annotations
 
 import math
+import sys
 
 import numpy as np
 import pytest
@@ -27,6 +28,9 @@ from lidarqa.ground import (
 from lidarqa.ground.auto import FILTER_MIN_EDGE
 from lidarqa.ground.segment_ptd import thin_lowest
 from lidarqa.testing import make_scene
+
+# the module (its name is shadowed by the function lidarqa.ground.segment_ptd)
+segment_ptd_module = sys.modules[thin_lowest.__module__]
 
 
 def _reference_thin(p: np.ndarray, cell: float):
@@ -61,6 +65,31 @@ def test_thin_lowest_matches_a_sort_and_ignores_order(n, cell, dup, seed):
     perm = rng.permutation(len(p))
     w2, _, _ = thin_lowest(p[perm], cell)
     assert sorted(map(tuple, p[perm][w2])) == sorted(map(tuple, p[win]))
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    n=st.integers(1, 600),
+    cell=st.sampled_from([0.05, 0.5, 1.4, 7.3, 100.0]),
+    dup=st.booleans(),
+    seed=st.integers(0, 2**16),
+)
+def test_thin_median_matches_a_lexsort(n, cell, dup, seed):
+    # the terrain model's median point per cell: (z, x, y, index) order, middle one;
+    # 100 m cells put hundreds of points in one cell (the merge-sort branch)
+    rng = np.random.default_rng(seed)
+    p = np.round(rng.uniform(-20, 20, (n, 3)), 1) + [600000.0, 6800000.0, 0.0]
+    if dup:
+        p = np.vstack([p, p[: n // 2]])
+    idx = np.sort(rng.choice(len(p), max(1, len(p) * 3 // 4), replace=False))
+    q = p[idx]
+    key = np.floor(q[:, :2] / cell)
+    order = np.lexsort((np.arange(len(q)), q[:, 1], q[:, 0], q[:, 2], key[:, 1], key[:, 0]))
+    ks = key[order]
+    starts = np.flatnonzero(np.r_[True, (ks[1:] != ks[:-1]).any(axis=1)])
+    ends = np.r_[starts[1:], len(q)]
+    ref = np.sort(idx[order[(starts + ends - 1) // 2]])
+    np.testing.assert_array_equal(segment_ptd_module._thin_median(p, idx, cell), ref)
 
 
 @pytest.fixture(scope="module")

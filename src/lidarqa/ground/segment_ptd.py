@@ -810,12 +810,83 @@ def _thin_median(xyz: np.ndarray, idx: np.ndarray, cell: float) -> np.ndarray:
     if cell <= 0 or idx.size == 0:
         return idx
     p = xyz[idx]
-    _, inv, _ = thin_lowest(p, cell)
-    order = np.lexsort((p[:, 1], p[:, 0], p[:, 2], inv))
-    g = inv[order]
-    starts = np.flatnonzero(np.r_[True, g[1:] != g[:-1]])
-    ends = np.r_[starts[1:], g.size]
-    return np.sort(idx[order[(starts + ends - 1) // 2]])
+    _, inv, cells = thin_lowest(p, cell)
+    return np.sort(idx[_median_per_group(inv, p, cells.shape[0])])
+
+
+@njit(cache=True)
+def _before(p, u, v):  # pragma: no cover - numba
+    """Row `u` of `p` comes before row `v` in (z, x, y, row) order."""
+    if p[u, 2] != p[v, 2]:
+        return p[u, 2] < p[v, 2]
+    if p[u, 0] != p[v, 0]:
+        return p[u, 0] < p[v, 0]
+    if p[u, 1] != p[v, 1]:
+        return p[u, 1] < p[v, 1]
+    return u < v
+
+
+@njit(cache=True)
+def _median_per_group(inv, p, n_groups):  # pragma: no cover - numba
+    """Per group of `inv`, the row of `p` at position (m - 1) // 2 in (z, x, y, row) order.
+
+    The order of ``np.lexsort((y, x, z, inv))`` without sorting every point: a
+    counting sort by group, then each group sorted on its own (insertion sort for
+    the few points of a thinning cell, merge sort beyond 32).
+    """
+    n = inv.size
+    start = np.zeros(n_groups + 1, dtype=np.int64)
+    for i in range(n):
+        start[inv[i] + 1] += 1
+    big = 0
+    for g in range(n_groups):
+        big = max(big, start[g + 1])
+        start[g + 1] += start[g]
+    fill = start[:-1].copy()
+    rows = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        rows[fill[inv[i]]] = i
+        fill[inv[i]] += 1
+    out = np.empty(n_groups, dtype=np.int64)
+    tmp = np.empty(big, dtype=np.int64)
+    for g in range(n_groups):
+        s, m = start[g], start[g + 1] - start[g]
+        r = rows[s : s + m]
+        if m <= 32:
+            for a in range(1, m):
+                v = r[a]
+                b = a - 1
+                while b >= 0 and _before(p, v, r[b]):
+                    r[b + 1] = r[b]
+                    b -= 1
+                r[b + 1] = v
+        else:
+            w = 1
+            while w < m:  # bottom-up merge sort
+                for lo in range(0, m, 2 * w):
+                    mid = min(lo + w, m)
+                    hi = min(lo + 2 * w, m)
+                    i, j, k = lo, mid, lo
+                    while i < mid and j < hi:
+                        if _before(p, r[j], r[i]):
+                            tmp[k] = r[j]
+                            j += 1
+                        else:
+                            tmp[k] = r[i]
+                            i += 1
+                        k += 1
+                    while i < mid:
+                        tmp[k] = r[i]
+                        i += 1
+                        k += 1
+                    while j < hi:
+                        tmp[k] = r[j]
+                        j += 1
+                        k += 1
+                r[:m] = tmp[:m]
+                w *= 2
+        out[g] = r[(m - 1) // 2]
+    return out
 
 
 def _thin(xyz: np.ndarray, idx: np.ndarray, cell: float) -> np.ndarray:
