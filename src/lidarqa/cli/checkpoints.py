@@ -18,8 +18,8 @@ from ._catalog import (
     wants_catalog,
 )
 from ._common import (
-    INT_LIST,
     Steps,
+    classes_option,
     common_options,
     crs_option,
     echo,
@@ -149,12 +149,7 @@ def _scaled(xyz: Any, fh: float, fv: float) -> Any:
     is_flag=True,
     help="MEASURED is a point cloud: compare CHECK heights with a TIN of its ground points.",
 )
-@click.option(
-    "--classes",
-    type=INT_LIST,
-    default=None,
-    help="With --vertical: classes forming the ground TIN [default: 2].",
-)
+@classes_option(help="With --vertical: classes forming the ground TIN [default: 2].")
 @source_id_option
 @click.option(
     "--max-edge",
