@@ -85,6 +85,15 @@ class ParamDefaults(dict):
         #: optional ``validate(params)`` run by the config parser (raises on a bad value)
         self.validate: Callable[[dict[str, Any]], None] | None = None
 
+    def add_missing(self, other: ParamDefaults) -> ParamDefaults:
+        """Add `other`'s parameters (and annotations) that this one lacks; return self."""
+        for k, v in other.items():
+            if k not in self:
+                self[k] = v
+                if k in other.annotations:
+                    self.annotations[k] = other.annotations[k]
+        return self
+
 
 def keyword_defaults(func: Any, *, exclude: tuple[str, ...] = ()) -> ParamDefaults:
     """Keyword parameters of `func` with their defaults (required ones map to None).
