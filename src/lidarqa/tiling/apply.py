@@ -36,7 +36,7 @@ from typing import TYPE_CHECKING, Any, Generic, TypeVar, cast
 import numpy as np
 
 if TYPE_CHECKING:
-    from ._types import PathInput, PathsInput, Tiles
+    from ._types import CRSInput, IntsInput, PathInput, PathsInput, Tiles
     from .catalog import Catalog
     from .chunks import Chunk
     from .engine import ChunkOutcome, Engine
@@ -50,7 +50,7 @@ V = TypeVar("V")
 V_co = TypeVar("V_co", covariant=True)
 
 __all__ = ["CatalogRun", "ChunkStore", "apply", "chunk_status", "default_work_dir", "engine_for",
-           "region_chunks"]
+           "open_sources", "region_chunks"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -201,6 +201,24 @@ class ChunkStore:
             self.path(c).unlink(missing_ok=True)
 
 
+def open_sources(sources: PathsInput | Catalog | Source, *, skip_bad: bool = False,
+                 crs: CRSInput = None, classes: IntsInput = None, source_id: IntsInput = None,
+                 z_to_metres: bool = True) -> Source:
+    """A :class:`~lidarqa.tiling.source.Source` (see :func:`~lidarqa.tiling.source.open_source`).
+
+    A Source given keeps its CRS and units and takes the selection given here when
+    one is given.
+    """
+    from .source import Source, open_source
+
+    if isinstance(sources, Source):
+        if classes is None and source_id is None:
+            return sources
+        return sources.select(classes=classes, source_id=source_id)
+    return open_source(sources, skip_bad=skip_bad, crs=crs, classes=classes,
+                       source_id=source_id, z_to_metres=z_to_metres)
+
+
 @contextlib.contextmanager
 def engine_for(engine: Engine | None = None, *, workers: int | None = None,
                scheduler: str | None = None) -> Iterator[Engine]:
@@ -303,9 +321,8 @@ def apply(
         ``value`` (the merged result), the source, the chunks and their outcomes.
     """
     from .engine import ChunkOutcome, run_chunks
-    from .source import open_source
 
-    source = open_source(source)
+    source = open_sources(source)
     if chunks is None:
         chunks = region_chunks(source, task, chunk_size=chunk_size, buffer=buffer,
                                origin=origin, one_region=one_region)
