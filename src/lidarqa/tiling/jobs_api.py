@@ -39,9 +39,8 @@ from numpy.typing import ArrayLike
 
 from ..errors import OptionError
 from ..io.vector import PointSet
-from .apply import CatalogRun, chunk_status, region_chunks  # noqa: F401
+from .apply import CatalogRun, chunk_status, open_sources, region_chunks  # noqa: F401
 from .jobs_vector import owned
-from .source import open_source
 
 if TYPE_CHECKING:
     from ._types import PathsInput
@@ -57,6 +56,7 @@ __all__ = [
     "catalog_heights",
     "catalog_repeatability",
     "catalog_vertical_check",
+    "open_sources",
 ]
 
 
@@ -142,7 +142,7 @@ def catalog_features(
     )
 
     open_opts, chunk_opts, run_opts = _split(dict(common))
-    catalog = open_source(sources, classes=classes or None, source_id=source_id or None,
+    catalog = open_sources(sources, classes=classes or None, source_id=source_id or None,
                            z_to_metres=False, **open_opts)
     seg_keys = set(inspect.signature(segment_planes).parameters) - {"points", "progress"}
     given = dict(options or {})
@@ -201,7 +201,7 @@ def catalog_vertical_check(
     )
 
     open_opts, chunk_opts, run_opts = _split(dict(common))
-    catalog = open_source(sources, source_id=source_id or None, **open_opts)
+    catalog = open_sources(sources, source_id=source_id or None, **open_opts)
     cp = _as_pointset(check, "check")
     if catalog.z_factor != 1.0:
         xyz = cp.xyz.copy()
@@ -253,7 +253,7 @@ def catalog_heights(
     from .jobs_accuracy import HeightsTask, merge_heights
 
     open_opts, chunk_opts, run_opts = _split(dict(common))
-    catalog = open_source(sources, classes=classes or None, source_id=source_id or None,
+    catalog = open_sources(sources, classes=classes or None, source_id=source_id or None,
                            **open_opts)
     mxy = np.asarray(map_xy, dtype=np.float64)
     mxy = mxy.reshape(-1, mxy.shape[-1] if mxy.ndim == 2 else 2)[:, :2]
@@ -329,7 +329,7 @@ def catalog_repeatability(
     from .jobs_vector import feature_buffer
 
     open_opts, chunk_opts, run_opts = _split(dict(common))
-    catalog = open_source(sources, classes=classes or None, source_id=source_id or None,
+    catalog = open_sources(sources, classes=classes or None, source_id=source_id or None,
                            z_to_metres=False, **open_opts)
     samples = strip_samples(catalog)
     fixed = strip_options(samples, segment_options=segment_options, edge_options=edge_options)

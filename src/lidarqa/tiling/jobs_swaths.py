@@ -287,14 +287,14 @@ def catalog_swaths(
         swaths_from_planes,
     )
     from . import make_chunks
-    from .jobs_api import COMMON_KEYS, CatalogRun, _run, _split, open_source
+    from .jobs_api import COMMON_KEYS, CatalogRun, _run, _split, open_sources
 
     opts: dict[str, Any] = options  # the same dict: what is left are assess_swaths options
     common = {k: opts.pop(k) for k in list(opts) if k in COMMON_KEYS}
     assess_options(min_points=min_points, max_roughness=max_roughness, max_slope=max_slope,
                    range_cell=range_cell, cell_size=cell_size, **opts)
     open_opts, chunk_opts, run_opts = _split(common)
-    catalog = open_source(sources, **open_opts)
+    catalog = open_sources(sources, **open_opts)
     cls = tuple(int(c) for c in classes) if classes else None
     labels = ({} if by_source_id
               else {k + 1: str(t.path) for k, t in enumerate(catalog.tiles)})
