@@ -19,16 +19,9 @@ import click
 from ._common import Steps, echo, finish, settings
 
 __all__ = ["bad_lines", "catalog_engine", "catalog_options", "catalog_options_given",
-           "echo_run", "failed_exit", "finish_run", "is_catalog", "job_options",
+           "echo_run", "failed_exit", "finish_run", "job_options",
            "open_catalog_source", "option_given", "pop_catalog_options", "reproducible_vectors",
            "run_job", "run_summary", "sigterm_as_interrupt", "wants_catalog"]
-
-
-def is_catalog(paths: Sequence[str]) -> bool:
-    """True for several paths, a folder, a glob pattern or a ``.vpc`` file."""
-    from ..tiling.source import is_catalog_input
-
-    return is_catalog_input(list(paths))
 
 
 @contextlib.contextmanager
@@ -100,8 +93,10 @@ def catalog_options_given(opts: dict[str, Any]) -> bool:
 
 
 def wants_catalog(paths: Sequence[str], opts: dict[str, Any]) -> bool:
-    """A catalog input, or a catalog option given."""
-    return is_catalog(paths) or catalog_options_given(opts)
+    """A catalog input (several paths, a folder, a glob, a ``.vpc``), or a catalog option given."""
+    from ..tiling.source import is_catalog_input
+
+    return is_catalog_input(list(paths)) or catalog_options_given(opts)
 
 
 def pop_catalog_options(opts: dict[str, Any]) -> dict[str, Any]:

@@ -137,14 +137,18 @@ def crs_option(func: Callable[..., Any]) -> Callable[..., Any]:
     return click.option("--crs", "crs", default=None, metavar="CRS", help=CRS_HELP)(func)
 
 
-def classes_option(func: Callable[..., Any]) -> Callable[..., Any]:
-    """``--classes INT[,INT...]``: use only points of these LAS classes."""
-    return click.option(
-        "--classes",
-        type=INT_LIST,
-        default=None,
-        help="Use only points of these LAS classes (e.g. 6 for buildings, 2,6).",
-    )(func)
+def classes_option(func: Callable[..., Any] | None = None, /, *, default: str | None = None,
+                   help: str = "Use only points of these LAS classes (e.g. 6 for buildings, 2,6)."
+                   ) -> Callable[..., Any]:
+    """``--classes INT[,INT...]``: use only points of these LAS classes.
+
+    ``@classes_option``, or ``@classes_option(help=..., default=...)`` with a command's own
+    help text and default.
+    """
+    if func is None:
+        return lambda f: classes_option(f, default=default, help=help)
+    return click.option("--classes", type=INT_LIST, default=default,
+                        show_default=default is not None, help=help)(func)
 
 
 def source_id_option(func: Callable[..., Any]) -> Callable[..., Any]:

@@ -86,16 +86,14 @@ def _demo_kernels_cached() -> bool:
     return kernels_cached(_tin._judge_kernel, _kernels.knn_grid, _kernels.surface_growing_kernel)
 
 
+#: ``-o/--out DIR`` of ``assess`` and ``demo``
+_out_option = click.option("-o", "--out", "out", required=True, type=click.Path(file_okay=False),
+                           help="Output folder: report.html, report.json and outputs/.")
+
+
 @click.command()
 @click.argument("config", type=click.Path(dir_okay=False))
-@click.option(
-    "-o",
-    "--out",
-    "out",
-    required=True,
-    type=click.Path(file_okay=False),
-    help="Output folder: report.html, report.json and outputs/.",
-)
+@_out_option
 @common_options
 def assess(config: str, out: str) -> None:
     """Run the accuracy assessment described by CONFIG (TOML) and write an HTML report.
@@ -120,14 +118,7 @@ def assess(config: str, out: str) -> None:
 
 
 @click.command()
-@click.option(
-    "-o",
-    "--out",
-    "out",
-    required=True,
-    type=click.Path(file_okay=False),
-    help="Output folder: report.html, report.json and outputs/.",
-)
+@_out_option
 @common_options
 def demo(out: str) -> None:
     """Assess the bundled IGN LiDAR HD tile (IGN – LiDAR HD, Licence Ouverte 2.0).

@@ -18,8 +18,8 @@ from ._catalog import (
     wants_catalog,
 )
 from ._common import (
-    INT_LIST,
     Steps,
+    classes_option,
     common_options,
     crs_option,
     echo,
@@ -69,26 +69,18 @@ def _read_control_file(path: str) -> list[str]:
 def _unit_factors(crs: Any, what: str) -> tuple[float, float, str | None, str | None]:
     """(horizontal, vertical) factors to metres and unit names; refuses geographic CRSs."""
     from ..errors import CRSMismatchError
-    from ..io.crs import vertical_unit, z_to_metres_factor
+    from ..io.crs import horizontal_unit, vertical_unit, z_to_metres_factor
 
     if crs is None:
         return 1.0, 1.0, None, None
-    subs = list(crs.sub_crs_list) if crs.is_compound else [crs]
-    h_factor, h_name = 1.0, None
-    for c in subs:
-        for axis in c.axis_info:
-            if axis.direction in ("east", "north", "west", "south"):
-                if str(axis.unit_name).lower().startswith("deg") or c.is_geographic:
-                    raise CRSMismatchError(
-                        f"{what} is in a geographic CRS ({crs.name}, degrees): reproject it "
-                        "to a projected CRS in metres first"
-                    )
-                h_factor, h_name = float(axis.unit_conversion_factor), str(axis.unit_name)
-                break
-        if h_name:
-            break
+    h_name, h_factor = horizontal_unit(crs)
+    if h_name is not None and (h_name.lower().startswith("deg") or crs.is_geographic):
+        raise CRSMismatchError(
+            f"{what} is in a geographic CRS ({crs.name}, degrees): reproject it "
+            "to a projected CRS in metres first"
+        )
     v_name, _ = vertical_unit(crs)
-    return h_factor, z_to_metres_factor(crs), h_name, v_name
+    return float(h_factor or 1.0), z_to_metres_factor(crs), h_name, v_name
 
 
 def _units(measured: Any, check: Any, notes: list[str]) -> tuple[Any, float, float]:
@@ -157,12 +149,7 @@ def _scaled(xyz: Any, fh: float, fv: float) -> Any:
     is_flag=True,
     help="MEASURED is a point cloud: compare CHECK heights with a TIN of its ground points.",
 )
-@click.option(
-    "--classes",
-    type=INT_LIST,
-    default=None,
-    help="With --vertical: classes forming the ground TIN [default: 2].",
-)
+@classes_option(help="With --vertical: classes forming the ground TIN [default: 2].")
 @source_id_option
 @click.option(
     "--max-edge",

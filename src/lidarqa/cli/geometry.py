@@ -59,9 +59,6 @@ def _selection_options(func: Callable[..., Any]) -> Callable[..., Any]:
     return catalog_options(func)
 
 
-_SEGMENT_KEYS = ("grow_radius", "grow_dist", "seed_method", "min_segment_size", "max_rmse")
-
-
 def _run(kind: str, paths: tuple[str, ...], output: str, classes: Any, source_id: Any,
          opts: dict[str, Any], options: dict[str, Any]) -> None:
     """One job for one file (one region) and a catalog (chunks with buffers).
@@ -77,12 +74,12 @@ def _run(kind: str, paths: tuple[str, ...], output: str, classes: Any, source_id
     on_catalog = wants_catalog(paths, cat)
     _check_suffix(output)
     prepare_outputs(output, inputs=tuple(paths))
-    source = open_catalog_source(paths, cat, crs=input_crs(opts.get("crs")), z_to_metres=False)
+    crs = input_crs(opts.pop("crs", None))
+    source = open_catalog_source(paths, cat, crs=crs, z_to_metres=False)
     # fitted in metres: x, y in feet or degrees mixed with z in metres would distort them
     require_metric_xy(source.crs, source.label, "planes, edges and corners need")
     run = run_job(catalog_features, source, cat, on_catalog, kind=kind, classes=classes,
-                  source_id=source_id, options=options,
-                  segment_options={k: opts[k] for k in _SEGMENT_KEYS if k in opts})
+                  source_id=source_id, options={**opts, **options})
     extra: dict[str, Any] = run.extra  # the job's details
     f, s = run.value, extra["summary"]
     if s["n_points"] < 3:

@@ -31,8 +31,8 @@ from ._catalog import (
     wants_catalog,
 )
 from ._common import (
-    INT_LIST,
     Steps,
+    classes_option,
     common_options,
     crs_option,
     echo,
@@ -219,12 +219,7 @@ def _fmt(v: float, scale: float = 1.0, unit: str = "m") -> str:
     show_default=True,
     help="Significance level of the w-tests (0..1; 0.001 -> critical value 3.29).",
 )
-@click.option(
-    "--classes",
-    type=INT_LIST,
-    default=None,
-    help="Use only laser points of these classes, e.g. 2 or 2,11.",
-)
+@classes_option(help="Use only laser points of these classes, e.g. 2 or 2,11.")
 @source_id_option
 @click.option(
     "--spacing",

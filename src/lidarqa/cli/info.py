@@ -46,12 +46,12 @@ def info(
     by tile as one cloud, with the catalog's tiles, gaps, overlaps and default chunks.
     """
     from ..io.info import describe, describe_files
-    from ._catalog import is_catalog, open_catalog_source
+    from ._catalog import open_catalog_source, wants_catalog
 
     given = input_crs(crs)
     prepare_outputs(inputs=tuple(paths))
     cat = None
-    if is_catalog(paths) or skip_bad or strips:
+    if wants_catalog(paths, {"skip_bad": skip_bad}) or strips:
         # --crs for tiles that declare none; a tile whose own CRS contradicts it is an error
         source = open_catalog_source(paths, {"skip_bad": skip_bad}, crs=given, z_to_metres=False)
         cat = source.catalog

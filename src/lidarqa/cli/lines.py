@@ -23,6 +23,7 @@ from ._catalog import (
 from ._common import (
     INT_LIST,
     Steps,
+    classes_option,
     common_options,
     crs_option,
     echo,
@@ -71,12 +72,7 @@ def _matching_options(func: Callable[..., Any]) -> Callable[..., Any]:
             show_default=True,
             help="OLHD denominator: lengths of matched pairs, or of all segments.",
         ),
-        click.option(
-            "--classes",
-            type=INT_LIST,
-            default=None,
-            help="Point-cloud input: classes whose edges are extracted, e.g. 6.",
-        ),
+        classes_option(help="Point-cloud input: classes whose edges are extracted, e.g. 6."),
         crs_option,
     ]
     for opt in reversed(opts):

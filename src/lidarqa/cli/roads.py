@@ -12,8 +12,8 @@ from ..accuracy.heights import (
     SIGMA_STRIP,
 )
 from ._common import (
-    INT_LIST,
     Steps,
+    classes_option,
     common_options,
     crs_option,
     echo,
@@ -51,13 +51,7 @@ def _fmt_cm(v: float) -> str:
     type=click.Path(dir_okay=False),
     help="GeoPackage with layers map_points, polygons_3d and tin.",
 )
-@click.option(
-    "--classes",
-    type=INT_LIST,
-    default="2,17",
-    show_default=True,
-    help="Laser point classes used (ground/road and bridge deck).",
-)
+@classes_option(default="2,17", help="Laser point classes used (ground/road and bridge deck).")
 @click.option(
     "--spacing",
     type=float,

@@ -22,7 +22,7 @@ from ._catalog import (
     run_job,
     wants_catalog,
 )
-from ._common import INT_LIST, Steps, common_options, echo, settings
+from ._common import Steps, classes_option, common_options, echo, settings
 
 
 def _csv(rows: list[dict[str, Any]]) -> str:
@@ -86,12 +86,8 @@ def _m(v: float | None) -> str:
     show_default=True,
     help="Smooth surface for dz: slope at most this (degrees).",
 )
-@click.option(
-    "--classes",
-    type=INT_LIST,
-    default=None,
-    help="Compare these classes [default: 2,6 (ground, buildings); all but noise if absent].",
-)
+@classes_option(help="Compare these classes [default: 2,6 (ground, buildings); all but noise "
+                     "if absent].")
 @click.option("--all-returns", is_flag=True, help="Use every return, not only last/single.")
 @click.option("--rotations", is_flag=True, help="Also estimate small rotations per strip.")
 @click.option("--no-offsets", is_flag=True, help="Skip the strip offsets.")

@@ -85,6 +85,15 @@ class ParamDefaults(dict):
         #: optional ``validate(params)`` run by the config parser (raises on a bad value)
         self.validate: Callable[[dict[str, Any]], None] | None = None
 
+    def add_missing(self, other: ParamDefaults) -> ParamDefaults:
+        """Add `other`'s parameters (and annotations) that this one lacks; return self."""
+        for k, v in other.items():
+            if k not in self:
+                self[k] = v
+                if k in other.annotations:
+                    self.annotations[k] = other.annotations[k]
+        return self
+
 
 def keyword_defaults(func: Any, *, exclude: tuple[str, ...] = ()) -> ParamDefaults:
     """Keyword parameters of `func` with their defaults (required ones map to None).
@@ -274,17 +283,11 @@ class RunContext:
 
 def _catalog_edges(source: Any, classes: Any, source_id: Any, options: dict[str, Any]) -> Any:
     """The edges of a selection of a source (a path or a Source), each edge once."""
-    import inspect
-
     from ..errors import AnalysisError
-    from ..geometry.segmentation import segment_planes
     from ..tiling.jobs_api import catalog_features
 
-    params = dict(options)
-    keys = set(inspect.signature(segment_planes).parameters) - {"points", "progress"}
-    seg_opts: dict[str, Any] = {k: params.pop(k) for k in sorted(keys) if k in params}
     run = catalog_features(source, kind="edges", classes=classes, source_id=source_id,
-                           segment_options=seg_opts, options=params)
+                           options=options)
     if run.failed:
         raise AnalysisError(f"edges of the catalog {source}: chunk(s) {', '.join(run.failed)} "
                             "failed")

@@ -371,14 +371,6 @@ def _read_tile(path: str) -> TileInfo:
 
 def _read_tiles(files: Sequence[str]) -> list[TileInfo | Exception]:
     """Headers of many files, read by a few threads (the work is file system latency)."""
-    if len(files) < 16:
-        out: list[TileInfo | Exception] = []
-        for f in files:
-            try:
-                out.append(_read_tile(f))
-            except CatalogError as exc:
-                out.append(exc)
-        return out
     from concurrent.futures import ThreadPoolExecutor
 
     def safe(f: str) -> TileInfo | Exception:
@@ -387,12 +379,10 @@ def _read_tiles(files: Sequence[str]) -> list[TileInfo | Exception]:
         except CatalogError as exc:
             return exc
 
+    if len(files) < 16:
+        return [safe(f) for f in files]
     with ThreadPoolExecutor(max_workers=8) as ex:
         return list(ex.map(safe, files))
-
-
-def _crs_key(wkt: str | None) -> str | None:
-    return wkt
 
 
 def open_catalog(
@@ -469,7 +459,7 @@ def open_catalog(
     default_crs = parse_crs(crs)
     groups: dict[str | None, list[TileInfo]] = {}
     for t in tiles:
-        groups.setdefault(_crs_key(t.crs_wkt), []).append(t)
+        groups.setdefault(t.crs_wkt, []).append(t)
     named = {k: v for k, v in groups.items() if k is not None}
     if len(named) > 1:
         from pyproj import CRS

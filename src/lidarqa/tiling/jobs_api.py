@@ -29,6 +29,7 @@ Example
 
 from __future__ import annotations
 
+import inspect
 import math
 from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any
@@ -109,7 +110,9 @@ def catalog_features(
     classes, source_id : sequence of int, optional
         Point selection (e.g. ``(6,)`` for buildings).
     segment_options, options : dict, optional
-        Plane segmentation and edge/corner options. Data-driven defaults
+        Plane segmentation and edge/corner options (a keyword of
+        :func:`~lidarqa.geometry.segmentation.segment_planes` given in `options`
+        is a segmentation option). Data-driven defaults
         (growing radius, support distance) are measured once on the source's
         central sample window and used for every chunk. The default buffer is
         the task's (:func:`~lidarqa.tiling.jobs_vector.feature_buffer`: the
@@ -129,6 +132,7 @@ def catalog_features(
         ``options`` and the ``summary`` of the chunks' segmentations
         (:func:`~lidarqa.tiling.jobs_vector.merge_summaries`).
     """
+    from ..geometry.segmentation import segment_planes
     from .jobs_vector import (
         VectorTask,
         feature_buffer,
@@ -140,9 +144,13 @@ def catalog_features(
     open_opts, chunk_opts, run_opts = _split(dict(common))
     catalog = open_sources(sources, classes=classes or None, source_id=source_id or None,
                            z_to_metres=False, **open_opts)
+    seg_keys = set(inspect.signature(segment_planes).parameters) - {"points", "progress"}
+    given = dict(options or {})
+    seg_opts = {**{k: v for k, v in given.items() if k in seg_keys}, **dict(segment_options or {})}
     sample = catalog.sample().xyz
-    seg_opts, opts = fixed_auto_options(sample, kind=kind,
-                                        segment_options=segment_options, options=options)
+    seg_opts, opts = fixed_auto_options(sample, kind=kind, segment_options=seg_opts,
+                                        options={k: v for k, v in given.items()
+                                                 if k not in seg_keys})
     margin = None
     if chunk_opts["buffer"] is None and (catalog.is_catalog or chunk_opts["chunk_size"]):
         margin = feature_buffer(sample, segment_options=seg_opts)

@@ -345,17 +345,8 @@ class Source:
         """One chunk holding the whole area (the in-memory run's single region)."""
         from .chunks import Chunk
 
-        if self.catalog is not None:
-            xmin, ymin, xmax, ymax = self.catalog.bounds
-            tiles = tuple(range(len(self.catalog.tiles)))
-        else:
-            xyz = self._memory.xyz
-            if len(xyz):
-                xmin, ymin = (float(v) for v in xyz[:, :2].min(0))
-                xmax, ymax = (float(v) for v in xyz[:, :2].max(0))
-            else:
-                xmin = ymin = xmax = ymax = 0.0
-            tiles = (0,)
+        xmin, ymin, xmax, ymax = self.area_bounds
+        tiles = tuple(range(len(self.catalog.tiles))) if self.catalog is not None else (0,)
         size = max(xmax - xmin, ymax - ymin, 1.0) * 2.0 + 2.0
         box = (xmin - 1.0, ymin - 1.0, xmin - 1.0 + size, ymin - 1.0 + size)
         return Chunk(id="c0000_r0000", row=0, col=0, core=box,

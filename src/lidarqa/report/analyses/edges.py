@@ -26,12 +26,7 @@ def _edge_params(options: dict) -> dict[str, Any]:
     # extract_edges passes **segment_options to segment_planes: accept those names too.
     with contextlib.suppress(AnalysisUnavailableError):
         segment_planes = library_attr("lidarqa.geometry.segmentation", "segment_planes", "edges")
-        extra = keyword_defaults(segment_planes)
-        for k, v in extra.items():
-            if k not in out:
-                out[k] = v
-                if k in extra.annotations:
-                    out.annotations[k] = extra.annotations[k]
+        out.add_missing(keyword_defaults(segment_planes))
     return out
 
 

@@ -35,12 +35,7 @@ def _ground_params(options: dict) -> dict[str, Any]:
     filter_cls = library_attr(
         "lidarqa.ground", _GROUND_CLASSES[options.get("method") or "segment-ptd"], "ground"
     )
-    fields = dataclass_defaults(filter_cls)
-    for k, v in fields.items():
-        if k not in out:
-            out[k] = v
-            if k in fields.annotations:
-                out.annotations[k] = fields.annotations[k]
+    out.add_missing(dataclass_defaults(filter_cls))
     own = set(keyword_defaults(classify_ground))
 
     def validate(params: dict[str, Any]) -> None:

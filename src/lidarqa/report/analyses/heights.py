@@ -175,14 +175,14 @@ def run_heights(ctx: RunContext, item: AnalysisItem) -> SectionResult:
     with ctx.step(f"Heights of {len(map_xy):,} map points, {len(ref_xyz):,} reference points"):
         run = catalog_heights(source, map_xy, ref_xyz, options=dict(item.params),
                               skip_failed=on_catalog)
-    out = _heights_section(ctx, item, run.value, laser, ref_xyz, [], [],
+    out = _heights_section(ctx, item, run.value, laser, ref_xyz,
                            f"Laser points: {label}. Map points: {map_label}. "
                            f"Reference: {ref_label}.")
     return with_overview(out, run if on_catalog else None, f"{opts['cloud']}: chunks")
 
 
 def _heights_section(ctx: RunContext, item: AnalysisItem, rep: Any, laser: Any, ref_xyz: Any,
-                     notes: list[str], paragraphs: list[str], what: str) -> SectionResult:
+                     what: str) -> SectionResult:
     """The section half: tables, figures and outputs of a HeightReport (file or catalog)."""
     from ...io.vector import PointSet
     from .. import plots
@@ -200,7 +200,8 @@ def _heights_section(ctx: RunContext, item: AnalysisItem, rep: Any, laser: Any, 
         n_reference_outside=int(rep.n_outside),
         flags=list(rep.flags),
     )
-    paragraphs.append(what)
+    notes: list[str] = []
+    paragraphs = [what]
     # Outputs.
     mp_set = PointSet(
         ids=np.arange(len(mpts)),
