@@ -138,3 +138,32 @@ def test_grid_knn_matches_kdtree() -> None:
     d = np.sort(np.linalg.norm(pts[nn] - pts[:, None, :], axis=2), axis=1)
     np.testing.assert_allclose(d, d_ref, atol=1e-12)
     assert (nn >= 0).all()
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    n=st.integers(1, 800),
+    radius=st.sampled_from([1e-6, 0.3, 2.0, 40.0, 1e4]),
+    seed=st.integers(0, 2**16),
+)
+def test_grid_count_matches_a_kd_tree(n, radius, seed):
+    # the neighbour count behind the local-radius check, against an independent cKDTree
+    from scipy.spatial import cKDTree
+
+    from lidarqa.geometry import _kernels as K
+
+    rng = np.random.default_rng(seed)
+    p = np.round(rng.uniform(0, 30, (n, 3)), 2) * [1.0, 1.0, 0.1]
+    rows = np.linspace(0, n - 1, min(n, 64)).astype(np.int64)
+    g = K.build_grid(p, radius)
+    got = K.grid_count(p, rows, radius * radius, *g[:8])
+    want = cKDTree(p).query_ball_point(p[rows], radius, return_length=True)
+    np.testing.assert_array_equal(got, want)
+
+
+def test_a_radius_that_is_not_local_is_refused():
+    rng = np.random.default_rng(5)
+    pts = np.column_stack([rng.uniform(0, 20, (3000, 2)), np.zeros(3000)])
+    with pytest.raises(OptionError, match="neighbours per point"):
+        surface_growing(pts, grow_radius=50.0)
+    assert surface_growing(pts, grow_radius=1.0).max() >= 0  # a local radius runs

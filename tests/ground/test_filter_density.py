@@ -234,3 +234,20 @@ def test_join_below_is_chosen_for_dense_ground_based_scans_only():
         assert params.get("join_below", False) is want
         if want:
             assert sources["join_below"] == "preset"
+
+
+@settings(max_examples=25, deadline=None)
+@given(n=st.integers(1, 300), spread=st.sampled_from([5.0, 5000.0]), seed=st.integers(0, 2**16))
+def test_cell_planes_same_with_and_without_the_raster_lookup(n, spread, seed):
+    # the raster lookup of neighbour cells (compact cells) and the bisection (scattered
+    # cells, or forced here) give the same planes
+    rng = np.random.default_rng(seed)
+    p = np.round(rng.uniform(0, spread, (n, 3)), 1) + [600000.0, 6800000.0, 0.0]
+    win, _, cells = thin_lowest(p, 0.5)
+    wp = np.ascontiguousarray(p[win])
+    wg = rng.random(win.size) < 0.7
+    m = segment_ptd_module
+    got = m._cell_planes(cells, wp, wg, 0.15, True)
+    empty = np.zeros(0, dtype=np.int64)
+    want = m._cell_planes_kernel(cells, empty, 0.0, 0.0, 0, wp, wg, 0.15, True)
+    np.testing.assert_array_equal(got, want)

@@ -222,6 +222,39 @@ def grid_neighbours(pts, q, r2, cx, cy, cz, nyz, nz, cell_keys, cell_start, orde
     return m
 
 
+@njit(cache=True)
+def grid_count(pts, queries, r2, cx, cy, cz, nyz, nz, cell_keys, cell_start, order):
+    """Number of points within sqrt(r2) of each point `queries` (itself included).
+
+    The grid's cell must be at least sqrt(r2) (see :func:`build_grid`).
+    """
+    ncell = cell_keys.shape[0]
+    out = np.zeros(queries.size, dtype=np.int64)
+    for t in range(queries.size):
+        q = queries[t]
+        px = pts[q, 0]
+        py = pts[q, 1]
+        pz = pts[q, 2]
+        z0 = max(cz[q] - 1, 0)
+        z1 = min(cz[q] + 1, nz - 1)
+        m = 0
+        for dx in range(-1, 2):
+            for dy in range(-1, 2):
+                col = (cx[q] + dx) * nyz + (cy[q] + dy) * nz
+                c = np.searchsorted(cell_keys, col + z0)
+                while c < ncell and cell_keys[c] <= col + z1:
+                    for a in range(cell_start[c], cell_start[c + 1]):
+                        j = order[a]
+                        ddx = pts[j, 0] - px
+                        ddy = pts[j, 1] - py
+                        ddz = pts[j, 2] - pz
+                        if ddx * ddx + ddy * ddy + ddz * ddz <= r2:
+                            m += 1
+                    c += 1
+        out[t] = m
+    return out
+
+
 def build_grid(pts: np.ndarray, cell: float, offset: np.ndarray | None = None):
     """A hashed voxel grid of cell size `cell` (m) over `pts` (NumPy, vectorised).
 
@@ -737,6 +770,7 @@ def knn(pts: np.ndarray, k: int, *, by_index: bool = False) -> np.ndarray:
     k = min(k, n)
     cell = knn_cell_size(pts, k)
     # refine the density estimate from the occupancy of the cells actually used
+    g = None
     for _ in range(6):
         g = build_grid(pts, cell)
         counts = np.diff(g[6])
@@ -744,9 +778,11 @@ def knn(pts: np.ndarray, k: int, *, by_index: bool = False) -> np.ndarray:
         dens = occ / (cell * cell)
         new = 1.6 * math.sqrt(k / (math.pi * dens))
         if 0.8 * cell <= new <= 1.25 * cell:
-            break
+            break  # converged: the grid just built is the one to search
         cell = new
-    g = build_grid(pts, cell)
+        g = None
+    if g is None:
+        g = build_grid(pts, cell)
     cx, cy, cz, nyz, nz, cell_keys, cell_start, order, max_cell = g
     max_cand = int(min(max(343 * max_cell, k), 2_000_000))
     out = knn_grid(pts, k, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, order, 3, max_cand,

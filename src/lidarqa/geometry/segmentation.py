@@ -239,17 +239,18 @@ def _check_neighbourhood(pts: np.ndarray, radius: float, name: str) -> None:
 
     Counted exactly on an evenly spread sample of at most 256 points.
     """
-    from scipy.spatial import cKDTree
-
     n = len(pts)
     if n <= MAX_MEAN_NEIGHBOURS:
         return
-    sample = pts[np.linspace(0, n - 1, min(n, 256)).astype(np.int64)]
-    tree = cKDTree(pts)
-    mean = float(tree.query_ball_point(sample, radius, return_length=True).mean())
+    rows = np.linspace(0, n - 1, min(n, 256)).astype(np.int64)
+    # counted on a grid of one radius (a cKDTree of every point cost more than the count)
+    cx, cy, cz, nyz, nz, keys, starts, order, _ = K.build_grid(pts, radius)
+    counts = K.grid_count(pts, rows, float(radius) ** 2, cx, cy, cz, nyz, nz, keys, starts, order)
+    mean = float(counts.mean())
     if mean > MAX_MEAN_NEIGHBOURS:
         # the radius that takes in about the allowed number, for the message
-        dist, _ = tree.query(sample, k=MAX_MEAN_NEIGHBOURS)
+        sample = pts[rows]
+        dist, _ = cKDTree(pts).query(sample, k=MAX_MEAN_NEIGHBOURS)
         usable = float(np.median(dist[:, -1]))
         raise OptionError(
             f"{name} {radius:g} m takes in ~{mean:,.0f} neighbours per point "

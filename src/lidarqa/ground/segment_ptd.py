@@ -703,8 +703,49 @@ def _find_cell(cells, cx, cy):  # pragma: no cover - numba
     return -1
 
 
+def _cell_lut(cells: np.ndarray) -> tuple[np.ndarray, float, float, int]:
+    """Row of each cell in a raster over the cells' bounding box (-1 = empty), for O(1) lookups.
+
+    Returns ``(lut, x0, y0, ny)``; `lut` is empty when the box holds far more cells than
+    there are (scattered cells: the lookups then search the sorted rows).
+    """
+    m = cells.shape[0]
+    if m == 0:
+        return np.zeros(0, dtype=np.int64), 0.0, 0.0, 0
+    lo = colmin(cells)
+    span = colmax(cells) - lo + 1.0
+    if not float(span[0]) * float(span[1]) <= 4 * m + 1_000_000:
+        return np.zeros(0, dtype=np.int64), 0.0, 0.0, 0
+    ny = int(span[1])
+    lut = np.full(int(span[0]) * ny, -1, dtype=np.int64)
+    ij = (cells - lo).astype(np.int64)
+    lut[ij[:, 0] * ny + ij[:, 1]] = np.arange(m)
+    return lut, float(lo[0]), float(lo[1]), ny
+
+
+@njit(cache=True)
+def _cell_row(cells, lut, x0, y0, ny, cx, cy):  # pragma: no cover - numba
+    """Row of cell (cx, cy): from the raster `lut` when there is one, else by bisection."""
+    if lut.size == 0:
+        return _find_cell(cells, cx, cy)
+    i = cx - x0
+    j = cy - y0
+    if i < 0 or j < 0 or j >= ny:
+        return -1
+    k = int(i) * ny + int(j)
+    if k >= lut.size:
+        return -1
+    return lut[k]
+
+
+def _cell_planes(cells, wp, wg, tol, below):
+    """Per cell: (a, b, c, has) of z = a + b·dx + c·dy about its lowest point (see the kernel)."""
+    lut, x0, y0, ny = _cell_lut(cells)
+    return _cell_planes_kernel(cells, lut, x0, y0, ny, wp, wg, tol, below)
+
+
 @njit(cache=True, parallel=True)
-def _cell_planes(cells, wp, wg, tol, below):  # pragma: no cover - numba
+def _cell_planes_kernel(cells, lut, x0, y0, ny, wp, wg, tol, below):  # pragma: no cover - numba
     """Per cell: (a, b, c, has) of z = a + b·dx + c·dy about its lowest point.
 
     Least squares through the lowest ground points of the 3 × 3 cells around it; a
@@ -722,7 +763,7 @@ def _cell_planes(cells, wp, wg, tol, below):  # pragma: no cover - numba
         cnt = 0
         for dx in range(-1, 2):
             for dy in range(-1, 2):
-                j = _find_cell(cells, cells[i, 0] + dx, cells[i, 1] + dy)
+                j = _cell_row(cells, lut, x0, y0, ny, cells[i, 0] + dx, cells[i, 1] + dy)
                 if j >= 0 and wg[j]:
                     nb[cnt] = j
                     cnt += 1
