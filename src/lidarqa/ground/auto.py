@@ -98,8 +98,8 @@ from typing import Any
 import numpy as np
 from numba import njit
 
+from .._gridkernels import grid_keys
 from .._validate import check_choice
-from ..geometry._kernels import grid_keys
 
 __all__ = [
     "CloudMeasures",

@@ -135,12 +135,12 @@ class QCResult:
 def _read_exclude(path: Any, crs: Any) -> bytes | None:
     if path is None:
         return None
-    from ..io.vector import _read_ogr
+    from ..io.vector import read_features
 
     p = Path(path)
     if not p.is_file():
         raise ReadError(f"exclude file {p} does not exist")
-    _, _, geoms, _ = _read_ogr(p)
+    _, _, geoms, _ = read_features(p)
     import shapely
 
     polys = [g for g in geoms if g is not None and g.geom_type in ("Polygon", "MultiPolygon")]
