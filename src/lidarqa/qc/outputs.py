@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import WriteError
+from .conformance import CHECK_ORDER
 
 __all__ = ["OUTPUT_NAMES", "check_outputs", "write_outputs", "block_map_png"]
 
@@ -88,7 +89,6 @@ def _write_gpkg(result: Any, path: Path, *, overwrite: bool) -> None:
 
     pyogrio = require("pyogrio", "vector")
     shapely = require("shapely", "vector")
-    from .run import CHECK_ORDER
 
     names = [k for k in CHECK_ORDER if any(k in t.checks for t in result.tiles)]
     tiles = [t for t in result.tiles]
@@ -240,7 +240,6 @@ def _write_html(result: Any, path: Path, *, overwrite: bool) -> None:
     from .._atomic import atomic_output
     from .._version import __version__
     from ..report.html import Figure, Report, Section, SummaryRow, Table, render_html
-    from .run import CHECK_ORDER
 
     spec = result.spec
     summ = result.summary()
