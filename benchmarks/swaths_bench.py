@@ -159,8 +159,8 @@ def real() -> None:
 def lines() -> None:
     """Strip-to-strip line pairs per IGN 50 m tile and on St-Barth, four edge/threshold set-ups."""
     from lidarqa import read
-    from lidarqa.accuracy._lines_io import with_point_spacing
     from lidarqa.accuracy.lines import match_segments, match_strips
+    from lidarqa.accuracy.lines_io import with_point_spacing
     from lidarqa.geometry.edges import extract_edges
     from lidarqa.geometry.segmentation import segment_planes
 

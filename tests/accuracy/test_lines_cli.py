@@ -253,7 +253,7 @@ def strips_laz(tmp_path, monkeypatch):
     lidarqa.geometry.edges: strip selection, classes, names, pairs and the table.
     """
     import lidarqa
-    from lidarqa.accuracy import _lines_io
+    from lidarqa.accuracy import lines_io
     from lidarqa.io import PointCloud
 
     s = make_segment_sets(n_model=60, seed=11)
@@ -273,7 +273,7 @@ def strips_laz(tmp_path, monkeypatch):
         pts = np.asarray(points).reshape(-1, 2, 3)
         return Segments(np.arange(len(pts)), pts[:, 0], pts[:, 1], crs=crs)
 
-    monkeypatch.setattr(_lines_io, "extract_segments", fake_extract)
+    monkeypatch.setattr(lines_io, "extract_segments", fake_extract)
 
     # a cloud's edges go through the area engine (one region for one file); jobs_lines is
     # imported before jobs_vector is patched (it binds vector_features at import)

@@ -9,8 +9,8 @@ import pytest
 from click.testing import CliRunner
 from datapaths import SHARED, needs_shared
 
-from lidarqa.accuracy._lines_io import pool_passes
 from lidarqa.accuracy._lines_synthetic import make_segment_sets
+from lidarqa.accuracy.lines_io import pool_passes
 from lidarqa.cli.main import cli
 from lidarqa.errors import InvalidPointsError
 from lidarqa.io.vector import Segments
@@ -48,7 +48,7 @@ def test_pool_passes_joins_strips_across_files():
 def _write_tiles(tmp_path, monkeypatch, n_model=60):
     """Two strips' segments (end points as points) split into a west and an east tile."""
     import lidarqa
-    from lidarqa.accuracy import _lines_io
+    from lidarqa.accuracy import lines_io
     from lidarqa.io import PointCloud
 
     s = make_segment_sets(n_model=n_model, seed=5)
@@ -73,7 +73,7 @@ def _write_tiles(tmp_path, monkeypatch, n_model=60):
         pts = np.asarray(points).reshape(-1, 2, 3)
         return Segments(np.arange(len(pts)), pts[:, 0], pts[:, 1], crs=crs)
 
-    monkeypatch.setattr(_lines_io, "extract_segments", fake_extract)
+    monkeypatch.setattr(lines_io, "extract_segments", fake_extract)
     return paths, s
 
 

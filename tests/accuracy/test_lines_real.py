@@ -16,7 +16,7 @@ TILE = "ign-lidarhd/test_data_77055_627755_LA93_IGN69.laz"
 @pytest.fixture(scope="module")
 def strips(shared_data):
     pytest.importorskip("lidarqa.geometry.edges", reason="edge extraction is not available yet")
-    from lidarqa.accuracy._lines_io import load_segments
+    from lidarqa.accuracy.lines_io import load_segments
 
     path = shared_data / TILE
     a = load_segments(path, classes=[6], source_id=[706])
@@ -64,8 +64,8 @@ def test_repeatability_cli_on_an_ign_tile(strips, tmp_path):
 
 def test_st_barthelemy_strips(shared_data):
     pytest.importorskip("lidarqa.geometry.edges", reason="edge extraction is not available yet")
-    from lidarqa.accuracy._lines_io import load_segments
     from lidarqa.accuracy.lines import match_segments
+    from lidarqa.accuracy.lines_io import load_segments
 
     path = shared_data / "ign-lidarhd/St_Barth_RGAF09_UTM20N_IGN_1988_SB_subset_100m.laz"
     a = load_segments(path, classes=[6], source_id=[4320])

@@ -53,7 +53,7 @@ def test_segmentation_and_matching_report_progress():
 
 def test_edge_extraction_of_passes_reports_progress(tmp_path):
     """lines/repeatability read clouds and segment them: the longest step of both."""
-    from lidarqa.accuracy._lines_io import load_passes, load_segments
+    from lidarqa.accuracy.lines_io import load_passes, load_segments
     from lidarqa.testing import make_scene
 
     scene = make_scene(seed=3, size=(40.0, 40.0), density=10.0, strips=2, n_buildings=2,

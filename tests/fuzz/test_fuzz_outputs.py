@@ -90,7 +90,7 @@ def test_disk_full(command, baseline, tmp_path, monkeypatch):
     """The temporary output is /dev/full: every write fails with ENOSPC."""
     if not os.path.exists("/dev/full"):
         pytest.skip("no /dev/full")
-    import lidarqa.io._atomic as atomic
+    import lidarqa._atomic as atomic
 
     real = atomic.tempfile.mkstemp
 
@@ -112,7 +112,7 @@ def test_disk_full(command, baseline, tmp_path, monkeypatch):
 @pytest.mark.parametrize("err", [errno.EACCES, errno.EROFS, errno.ENOSPC, errno.EIO])
 def test_unwritable_folder(err, baseline, tmp_path, monkeypatch):
     """Creating the temporary file fails (read-only folder, read-only file system, ...)."""
-    import lidarqa.io._atomic as atomic
+    import lidarqa._atomic as atomic
 
     def refuse(*a, **k):
         raise OSError(err, os.strerror(err))

@@ -2,6 +2,8 @@
 
 - :mod:`lidarqa.accuracy.lines` — Poreba & Goulette (2013): 3D edge segments matched with the
   modified line-segment Hausdorff distance, for absolute accuracy and repeatability.
+- :mod:`lidarqa.accuracy.lines_io` — the inputs of line matching: segment files, or the
+  edges of a cloud (per file or per flight strip).
 - :mod:`lidarqa.accuracy.checkpoints` and :mod:`lidarqa.accuracy.transforms` — Fang & Huang:
   corners vs check points, least-squares transformations, RMSE to ASPRS (2023) and NSSDA.
 - :mod:`lidarqa.accuracy.heights` — Oude Elberink & Vosselman: plane-fitted heights with error

@@ -24,19 +24,6 @@ TOO_FEW_SEGMENT = "too_few_segment_points"
 COLLINEAR = "collinear"
 
 
-def spatial_order(xy: np.ndarray, lo: np.ndarray, cell: float) -> np.ndarray:
-    """A permutation that puts points of the same 64x64-cell tile, then cell, together.
-
-    Only for memory locality of KD-tree builds and queries (about 2x faster
-    for 10^6 points); results do not depend on it.
-    """
-    c = np.floor((xy - lo) / cell).astype(np.int64)
-    c = np.maximum(c, 0)
-    tile = c >> 6
-    key = ((tile[:, 0] * (1 << 24) + tile[:, 1]) << 12) + ((c[:, 0] & 63) << 6) + (c[:, 1] & 63)
-    return np.argsort(key, kind="stable")
-
-
 def growth_radius(
     need: np.ndarray, *, radius: float, max_radius: float, growth: float | None
 ) -> np.ndarray:

@@ -19,7 +19,17 @@ N_SUMS = 10  # n, sx, sy, sz, sxx, sxy, syy, sxz, syz, szz
 
 @dataclass(frozen=True)
 class Grid:
-    """A square grid anchored at (x0, y0) (lower-left corner), `nx` × `ny` cells."""
+    """A square grid anchored at (x0, y0) (lower-left corner), `nx` × `ny` cells.
+
+    Attributes
+    ----------
+    x0, y0 : float
+        Lower-left corner (m).
+    cell_size : float
+        Side of a cell (m).
+    nx, ny : int
+        Number of columns and rows; a cell's flat key is ``iy * nx + ix``.
+    """
 
     x0: float
     y0: float
@@ -44,7 +54,21 @@ class Grid:
 
 
 def grid_for(xy: np.ndarray, cell_size: float) -> Grid:
-    """A grid snapped to multiples of `cell_size` that covers every xy."""
+    """A grid snapped to multiples of `cell_size` that covers every xy.
+
+    Parameters
+    ----------
+    xy : ndarray of shape (N, 2)
+        Points (or corners of an extent) to cover (m).
+    cell_size : float
+        Side of a cell (m).
+
+    Returns
+    -------
+    Grid
+        Anchored at the multiple of `cell_size` at or below the smallest x and y,
+        so grids of neighbouring chunks share their cells.
+    """
     lo = np.floor(xy.min(axis=0) / cell_size) * cell_size
     hi = xy.max(axis=0)
     n = np.maximum(np.floor((hi - lo) / cell_size).astype(np.int64) + 1, 1)
@@ -54,8 +78,22 @@ def grid_for(xy: np.ndarray, cell_size: float) -> Grid:
 def cell_sums(points: np.ndarray, grid: Grid, z0: float) -> tuple[np.ndarray, np.ndarray]:
     """Sufficient statistics of the points per occupied cell.
 
-    Returns ``keys`` (M,) sorted ascending and ``sums`` (M, 10). Coordinates are
-    local: x, y relative to the cell centre, z relative to `z0`.
+    Parameters
+    ----------
+    points : ndarray of shape (N, 3)
+        x, y, z (m).
+    grid : Grid
+        The cells.
+    z0 : float
+        Height the z sums are taken about (m), the same for every chunk.
+
+    Returns
+    -------
+    keys : ndarray of shape (M,) int64
+        Flat keys of the occupied cells, ascending.
+    sums : ndarray of shape (M, 10)
+        n, Σx, Σy, Σz, Σx², Σxy, Σy², Σxz, Σyz, Σz² per cell, with x, y relative
+        to the cell centre and z to `z0`: additive over chunks.
     """
     keys = grid.cell_of(points[:, :2])
     ukeys, inv = np.unique(keys, return_inverse=True)
@@ -151,11 +189,32 @@ def residual_extremes(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Highest and lowest plane residual and point count per (sub-)cell.
 
-    The mergeable part of :func:`residual_ranges`: ``(keys, hi, lo, count)`` for
-    every selected cell (``split == 1``, keys of ``planes.keys[selected]``) or
-    sub-cell (``cell_index * split² + row * split + col``, cell_index into the
-    selected cells) that holds points. Chunks of a block give parts that
-    :func:`merge_extremes` combines exactly (max, min, sum per key).
+    The mergeable part of :func:`residual_ranges`. Chunks of a block give parts
+    that :func:`merge_extremes` combines exactly (max, min, sum per key).
+
+    Parameters
+    ----------
+    points : ndarray of shape (N, 3)
+        x, y, z (m).
+    grid : Grid
+        The cells of `planes`.
+    planes : CellPlanes
+        Per-cell planes (``keys``, ``a``, ``b``, ``c``).
+    selected : ndarray of shape (M,) bool
+        The cells of `planes` whose residuals count.
+    split : int, default 1
+        Sub-cells per side of a cell.
+
+    Returns
+    -------
+    keys : ndarray of int64
+        Keys of the selected cells (``split == 1``, from ``planes.keys[selected]``)
+        or sub-cells (``cell_index * split² + row * split + col``, cell_index into
+        the selected cells) that hold points.
+    hi, lo : ndarray of float
+        Highest and lowest residual (m) per key.
+    count : ndarray of int64
+        Points per key.
     """
     sel_keys = planes.keys[selected]
     empty = np.empty(0, dtype=np.int64)
@@ -193,7 +252,19 @@ def residual_extremes(
 def merge_extremes(
     parts: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]],
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Combine :func:`residual_extremes` parts of several chunks (same planes)."""
+    """Combine :func:`residual_extremes` parts of several chunks (same planes).
+
+    Parameters
+    ----------
+    parts : list of tuple
+        ``(keys, hi, lo, count)`` per chunk.
+
+    Returns
+    -------
+    tuple
+        ``(keys, hi, lo, count)`` with every key once: the max of `hi`, the min
+        of `lo` and the sum of `count` over the parts.
+    """
     parts = [p for p in parts if len(p[0])]
     if not parts:
         e = np.empty(0, dtype=np.int64)
@@ -236,7 +307,22 @@ def residual_ranges(
 def ranges_from_extremes(
     extremes: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray], *, min_points: int = 3
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``(keys, max − min)`` of the (sub-)cells with at least `min_points` points."""
+    """``(keys, max − min)`` of the (sub-)cells with at least `min_points` points.
+
+    Parameters
+    ----------
+    extremes : tuple
+        ``(keys, hi, lo, count)`` from :func:`residual_extremes` or
+        :func:`merge_extremes`.
+    min_points : int, default 3
+        Fewest points a (sub-)cell needs.
+
+    Returns
+    -------
+    keys : ndarray of int64
+    ranges : ndarray of float
+        Max − min residual (m) per kept key.
+    """
     keys, hi, lo, n = extremes
     keep = n >= min_points
     return keys[keep], (hi - lo)[keep]

@@ -65,7 +65,7 @@ from ..errors import (
     NothingToMeasureError,
     OptionError,
 )
-from ..io.vector import PointSet
+from ..io.vector import PointSet, as_pointset
 from .transforms import TRANSFORMS, TransformFit, estimate_transform
 
 __all__ = [
@@ -459,17 +459,6 @@ def asprs2023_accuracy(
 # ================================================================ matching
 
 
-def _as_pointset(obj: Any, name: str) -> PointSet:
-    if isinstance(obj, PointSet):
-        return obj
-    xyz = np.asarray(obj, dtype=np.float64)
-    if xyz.ndim != 2 or xyz.shape[1] != 3:
-        raise InvalidPointsError(
-            f"{name} must be a PointSet or an (N, 3) array, got shape {xyz.shape}"
-        )
-    return PointSet(ids=np.arange(len(xyz)), xyz=xyz)
-
-
 def _keys(ids: np.ndarray) -> np.ndarray:
     out = []
     for v in np.asarray(ids).tolist():
@@ -575,8 +564,8 @@ def match_points(
     check_choice(match, ("id", "nearest"), "match")
     if max_distance is not None:
         max_distance = check_positive(max_distance, "max_distance")
-    mp = _as_pointset(measured, "measured")
-    cp = _as_pointset(check, "check")
+    mp = as_pointset(measured, "measured")
+    cp = as_pointset(check, "check")
     if len(mp) == 0 or len(cp) == 0:
         raise InvalidPointsError(f"no points to match (measured: {len(mp)}, check: {len(cp)})")
     mk, ck = _keys(mp.ids), _keys(cp.ids)
@@ -826,8 +815,8 @@ def assess_checkpoints(
     check_choice(transform, TRANSFORMS, "transform")
     if int(ddof) != ddof or ddof < 0:
         raise OptionError(f"ddof must be a non-negative integer, got {ddof!r}")
-    mp = _as_pointset(measured, "measured")
-    cp = _as_pointset(check, "check")
+    mp = as_pointset(measured, "measured")
+    cp = as_pointset(check, "check")
     pm = match_points(mp, cp, match=match, max_distance=max_distance)
     ci, mi = pm.check_index, pm.measured_index
     m = len(ci)
@@ -1159,7 +1148,7 @@ def vertical_check(
     from scipy.spatial import Delaunay, QhullError, cKDTree
 
     pts = as_points(points, "points")
-    cp = _as_pointset(check, "check")
+    cp = as_pointset(check, "check")
     ck = _keys(cp.ids)
     _check_ids(ck, "check")
     _check_finite(cp, "check")

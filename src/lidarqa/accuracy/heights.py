@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from .._arrays import spatial_order
 from .._validate import as_points, check_choice, check_positive, check_range, require
 from ..errors import DegenerateGeometryError, InvalidPointsError, OptionError, ReadError
 from . import _heights_kernels as _k
@@ -512,11 +513,11 @@ def map_point_heights(
         from scipy.spatial import cKDTree
 
         origin = pts[:, :2].min(axis=0)
-        order = _k.spatial_order(pts[:, :2], origin, cell)
+        order = spatial_order(pts[:, :2], origin, cell)
         tree = cKDTree(pts[order, :2] - origin, balanced_tree=False)
     else:
         origin = np.zeros(2)
-    q_order = _k.spatial_order(mxy, origin, cell) if m else np.empty(0, dtype=np.int64)
+    q_order = spatial_order(mxy, origin, cell) if m else np.empty(0, dtype=np.int64)
     q_group, q_index, q_r, q_n = _k.neighbourhoods(
         tree, mxy[q_order] - origin, radius=r, max_radius=rmax, min_points=k, growth=growth
     )
@@ -1183,7 +1184,7 @@ def read_map_points(path: str | os.PathLike, *, spacing: float = 10.0, crs: Any 
         z is NaN (map heights come from the laser points).
     """
     from ..io.crs import resolve_crs
-    from ..io.vector import PointSet, _crs_from_meta, read_points
+    from ..io.vector import PointSet, read_features, read_points
 
     p = Path(path)
     suffix = p.suffix.lower()
@@ -1195,13 +1196,7 @@ def read_map_points(path: str | os.PathLike, *, spacing: float = 10.0, crs: Any 
             raise ReadError(f"cannot read {p}: {exc}") from exc
         gtype = str(info.get("geometry_type") or "")
         if "polygon" in gtype.lower():
-            shapely = require("shapely", "vector")
-            try:
-                meta, _, wkb, field_data = pyogrio.raw.read(str(p))
-            except Exception as exc:
-                raise ReadError(f"cannot read {p}: {exc}") from exc
-            names = [n.lower() for n in meta["fields"]]
-            geoms = shapely.from_wkb(wkb)
+            map_crs, names, geoms, field_data = read_features(p)
             ids = (
                 np.asarray(field_data[names.index("id")])
                 if "id" in names
@@ -1213,6 +1208,6 @@ def read_map_points(path: str | os.PathLike, *, spacing: float = 10.0, crs: Any 
                 ids=np.arange(len(xy)),
                 xyz=xyz,
                 attributes={"polygon": ids[poly]},
-                crs=resolve_crs(_crs_from_meta(meta), crs, p),
+                crs=resolve_crs(map_crs, crs, p),
             )
     return read_points(p, require_z=False, crs=crs)

@@ -1151,31 +1151,24 @@ def read_road_polygons(path: Any) -> tuple[np.ndarray, np.ndarray, Any]:
     """
     from pathlib import Path
 
+    from .._atomic import check_input
     from ..errors import ReadError
-    from ..io._atomic import check_input
-    from ..io.vector import _crs_from_meta
+    from ..io.vector import read_features
 
     p = check_input(path)
-    pyogrio = require("pyogrio", "vector")
     shapely = require("shapely", "vector")
     if Path(p).suffix.lower() not in (".gpkg", ".geojson", ".json"):
         raise ReadError(f"cannot read polygons from {p}: use a .gpkg or .geojson file")
-    try:
-        meta, _, wkb, field_data = pyogrio.raw.read(str(p))
-    except Exception as exc:
-        raise ReadError(f"cannot read {p}: {exc}") from exc
-    geoms = shapely.from_wkb(wkb) if len(wkb) else np.empty(0, dtype=object)
+    crs, names, geoms, field_data = read_features(p)
     if len(geoms) == 0:
         raise InvalidPointsError(f"{p} holds no polygons: the map is empty")
     kinds = set(shapely.get_type_id(geoms).tolist()) - {3, 6}
     if kinds:
-        raise InvalidPointsError(
-            f"{p} must hold Polygon/MultiPolygon features, got {meta.get('geometry_type')}"
-        )
-    names = [n.lower() for n in meta["fields"]]
+        got = ", ".join(sorted({g.geom_type for g in geoms if g is not None})) or "no geometry"
+        raise InvalidPointsError(f"{p} must hold Polygon/MultiPolygon features, got {got}")
     ids = np.asarray(field_data[names.index("id")]) if "id" in names else np.arange(len(geoms))
     geoms = shapely.force_2d(geoms)
-    return np.asarray(geoms, dtype=object), ids, _crs_from_meta(meta)
+    return np.asarray(geoms, dtype=object), ids, crs
 
 
 def write_roads(
@@ -1193,8 +1186,8 @@ def write_roads(
     import warnings
     from pathlib import Path
 
+    from .._atomic import atomic_path
     from ..errors import WriteError
-    from ..io._atomic import atomic_path
 
     pyogrio = require("pyogrio", "vector")
     shapely = require("shapely", "vector")

@@ -43,9 +43,10 @@ QL2    ≤ 0.06 m                         ≤ 0.08 m             ≤ ±0.16 m
 QL3    ≤ 0.12 m                         ≤ 0.16 m             ≤ ±0.32 m
 =====  ===============================  ==================  =================
 
-All sums behind the per-cell planes are additive (see
-``lidarqa.accuracy._swaths_kernels``), so a tile catalog can accumulate them
-per chunk and solve once.
+All sums behind the per-cell planes are additive (:func:`cell_sums` on a
+:class:`Grid` from :func:`grid_for`; the residual extremes of
+:func:`residual_extremes` combine with :func:`merge_extremes`), so a tile
+catalog can accumulate them per chunk and solve once.
 """
 
 from __future__ import annotations
@@ -58,6 +59,14 @@ import numpy as np
 from .._validate import as_points, check_choice, check_positive, check_range
 from ..errors import DegenerateGeometryError, InvalidPointsError, OptionError
 from . import _swaths_kernels as K
+from ._swaths_kernels import (
+    Grid,
+    cell_sums,
+    grid_for,
+    merge_extremes,
+    ranges_from_extremes,
+    residual_extremes,
+)
 
 __all__ = [
     "QUALITY_LEVELS",
@@ -77,6 +86,13 @@ __all__ = [
     "strip_planes",
     "range_plan",
     "swaths_from_planes",
+    # the per-region half, for chunked runs: sums and residual extremes per grid cell
+    "Grid",
+    "grid_for",
+    "cell_sums",
+    "residual_extremes",
+    "merge_extremes",
+    "ranges_from_extremes",
 ]
 
 #: Relative vertical accuracy (m): (intraswath max difference, interswath RMSDz,
@@ -563,7 +579,7 @@ def swaths_from_planes(
     What :func:`assess_swaths` does after fitting the planes, for callers that
     fit them another way (a tile catalog adds the cell sums of its chunks).
     ``extremes(i, selected, split)`` gives the residual extremes of strip ``i``
-    (:func:`~lidarqa.accuracy._swaths_kernels.residual_extremes`) for its
+    (:func:`residual_extremes`) for its
     ``selected`` cells split ``split × split``. `z0` is the height of the
     rotation centre (with `rotations`).
     """

@@ -19,9 +19,9 @@ from typing import Any
 
 import click
 
+from .._atomic import atomic_path, check_distinct, check_output
 from .._json import to_jsonable
 from .._version import __version__
-from ..io._atomic import atomic_path, check_distinct, check_output
 
 __all__ = [
     "Settings",

@@ -79,11 +79,10 @@ def _run(
 
 def _demo_kernels_cached() -> bool:
     """Whether the compiled kernels the demo needs (ground TIN, kNN, surface growing) are cached."""
-    from .._jitcache import kernels_cached
-    from ..geometry import _kernels
-    from ..ground import _tin
+    from ..geometry import kernels_cached as geometry_cached
+    from ..ground import kernels_cached as ground_cached
 
-    return kernels_cached(_tin._judge_kernel, _kernels.knn_grid, _kernels.surface_growing_kernel)
+    return ground_cached() and geometry_cached()
 
 
 #: ``-o/--out DIR`` of ``assess`` and ``demo``

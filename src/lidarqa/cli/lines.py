@@ -144,8 +144,8 @@ def lines(
     two strips of one file can be compared). A cloud may be a catalog (several files, a
     folder, a glob, a .vpc): its edges are then found chunk by chunk, each edge once.
     """
-    from ..accuracy._lines_io import read_pairs
     from ..accuracy.lines import match_segments
+    from ..accuracy.lines_io import read_pairs
 
     given = input_crs(crs)
     inputs = tuple(x for x in (test, model, ground_truth) if x)
@@ -172,7 +172,7 @@ def lines(
             ground_truth=gt,
             progress=progress,
         )
-    from ..io._atomic import atomic_path
+    from .._atomic import atomic_path
 
     overwrite = settings().overwrite
     if matrix:
@@ -239,7 +239,7 @@ def _side_segments(side: str, path: str, label: str, classes: Any, source_id: An
     """
     import numpy as np
 
-    from ..accuracy._lines_io import load_segments
+    from ..accuracy.lines_io import load_segments
     from ..tiling.source import is_catalog_input
 
     if is_catalog_input(path) or Path(path).suffix.lower() in (".las", ".laz"):
@@ -249,7 +249,7 @@ def _side_segments(side: str, path: str, label: str, classes: Any, source_id: An
         try:
             import lidarqa.geometry.edges  # noqa: F401
         except ImportError:
-            from ..accuracy._lines_io import extract_segments
+            from ..accuracy.lines_io import extract_segments
 
             extract_segments(np.empty((0, 3)))  # raises the clear "not available" error
         source = open_catalog_source([path], cat_opts, crs=given, z_to_metres=False)
@@ -417,7 +417,7 @@ def repeatability(
     give the same figures and the same JSON results: ``{"pairs": [rows],
     "strips": {strip: n_edges}, "catalog": {...}}``.
     """
-    from ..accuracy._lines_io import is_segment_file, load_passes, pool_passes
+    from ..accuracy.lines_io import is_segment_file, load_passes, pool_passes
     from ..errors import OptionError
     from ..tiling.jobs_lines import strip_pairs
 

@@ -84,7 +84,7 @@ class LazyGroup(click.Group):
 
     def invoke(self, ctx: click.Context) -> Any:
         """Run the command; turn every error into one line and its exit status."""
-        from ..io._atomic import Terminated, install_signal_handlers, output_session
+        from .._atomic import Terminated, install_signal_handlers, output_session
 
         saved = None if _STANDALONE else _save_signals()  # in-process callers get theirs back
         install_signal_handlers(exit_immediately=_STANDALONE)

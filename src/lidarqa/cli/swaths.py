@@ -135,8 +135,8 @@ def swaths(
     catalog option): the strips are then compared over the whole block, chunk by
     chunk, with the figures of one in-memory run.
     """
+    from .._atomic import atomic_path, check_output
     from ..errors import InvalidPointsError, OutputExistsError, WriteError
-    from ..io._atomic import atomic_path, check_output
     from ..io.crs import ensure_same_crs, parse_crs
     from ..io.raster import write_geotiff
 

@@ -78,11 +78,8 @@ def warmup() -> None:
 
 def _warm_qc(folder: Path) -> None:
     """Compile qc's per-tile kernels on one small synthetic delivery tile."""
-    from types import SimpleNamespace
-
-    from ..qc import get_spec
-    from ..qc._task import TileTask
+    from ..qc import run_qc
     from ..testing import make_delivery
 
     d = make_delivery(folder, nx=1, ny=1, tile_size=40.0)
-    TileTask(get_spec("usgs-ql2"))(SimpleNamespace(path=d.paths[0]))
+    run_qc(d.paths[0], "usgs-ql2", html=False)  # no `out`: nothing written

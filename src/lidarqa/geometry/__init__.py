@@ -30,9 +30,30 @@ __all__ = [
     "extract_edges",
     "fit_plane",
     "fit_plane_iterative",
+    "kernels_cached",
     "plane_covariance",
     "plane_pair_segment",
     "ransac",
     "segment_planes",
     "surface_growing",
 ]
+
+
+def kernels_cached() -> bool:
+    """True when numba's on-disk cache holds plane segmentation's compiled kernels.
+
+    The kernels are compiled with ``cache=True``: the first run after installing
+    (or upgrading) spends tens of seconds compiling, later runs load them. The
+    CLI uses this (with :func:`lidarqa.ground.kernels_cached`) to say so before a
+    first run. It asks numba whether the cache index of the kNN and surface
+    growing kernels is valid for the installed source.
+
+    Returns
+    -------
+    bool
+        False when a kernel would be compiled on its next call.
+    """
+    from .._jitcache import kernels_cached as _cached
+    from . import _kernels
+
+    return _cached(_kernels.knn_grid, _kernels.surface_growing_kernel)

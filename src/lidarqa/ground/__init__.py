@@ -26,9 +26,12 @@ import numpy as np
 from .._validate import check_choice
 from ..errors import DataQualityWarning, OptionError
 from .auto import (
+    ALS_PARAMS,
+    ALS_SEGMENT_PARAMS,
     DENSE_ALS,
     FILTER_DENSITY,
-    PERCHED_STEP,
+    PRESET_CHOICES,
+    PRESETS,
     SENSORS,
     CloudMeasures,
     auto_parameters,
@@ -89,46 +92,6 @@ __all__ = [
 
 METHODS = ("segment-ptd", "ptd")
 NOISE_CLASSES = (7, 18)
-
-#: One parameter set for airborne scans (about 1 pt/m², ISPRS filter test), used on
-#: every ISPRS sample; the library defaults are Lin & Zhang's Table 1 (MLS). Lengths
-#: in m, angles in degrees. ``ALS_PARAMS`` is point-PTD's set, ``ALS_SEGMENT_PARAMS``
-#: segment-PTD's (scatterness does not separate ground from vegetation at 1 pt/m², so
-#: it is switched off; steep terrain segments need a steeper façade threshold). Both
-#: were chosen on the 15 ISPRS reference samples themselves (no held-out data): the
-#: ISPRS tests (tests/ground/test_isprs.py) are regression guards, not a validation;
-#: ``benchmarks/ground_isprs.py --loso`` gives the leave-one-site-out figure per constant.
-ALS_PARAMS: dict[str, Any] = {
-    "iter_angle": 16.0,
-    "iter_distance": 0.8,
-    "mirror_max_distance": 3.0,
-    "final_distance": 0.4,
-}
-ALS_SEGMENT_PARAMS: dict[str, Any] = {
-    "iter_angle": 16.0,
-    "iter_distance": 0.7,
-    "mirror_max_distance": 3.0,
-    "final_distance": 0.3,
-    "accept_ratio": 0.7,
-    "reject_ratio": 0.3,
-    "scatter_thr": 1.0,
-    "orientation_thr": 70.0,
-    "grow_radius_factor": 1.5,
-    "raised_step": 2.0,
-    "connect_min_size": 20,
-    "connect_ratio": 0.6,
-    "below_pass": True,
-    "perched_step": PERCHED_STEP,
-    "facade_distance": 0.7,  # = iter_distance: steep banks grown into façade segments
-    "roof_ratio": 0.15,  # final roof check: gable pairs with a raised border
-}
-PRESETS: dict[str, dict[str, dict[str, Any]]] = {
-    "mls": {"ptd": {}, "segment-ptd": {}},
-    "als": {"ptd": ALS_PARAMS, "segment-ptd": ALS_SEGMENT_PARAMS},
-}
-#: every accepted `preset`: "auto" (the default) measures the cloud and chooses
-PRESET_CHOICES = ("auto", *PRESETS)
-
 
 @dataclass(frozen=True)
 class GroundResult:

@@ -358,7 +358,7 @@ class _Surface:
     def __init__(self, vertices: np.ndarray) -> None:
         import startinpy
 
-        from ..accuracy._heights_kernels import spatial_order
+        from .._arrays import spatial_order
 
         self._order = spatial_order
         self.dt = None

@@ -20,10 +20,10 @@ import numpy as np
 from numba import njit, prange
 
 from .._arrays import colmax, colmin
+from .._gridkernels import centred_moments, grid_keys
 from .._progress import ProgressCallback, report, stage
 from .._validate import as_points, check_choice, check_positive, check_range
 from ..errors import DegenerateGeometryWarning, InvalidPointsError, OptionError
-from ..geometry._kernels import centred_moments, grid_keys
 from ._perched import perched_mask
 from ._tin import TIN, build_tin, tree_workers, virtual_hull
 from .features import (

@@ -8,8 +8,8 @@ import os
 from pathlib import Path
 from typing import Any
 
+from .._atomic import atomic_path, check_distinct, check_output
 from ..errors import ReadError, WriteError
-from ._atomic import atomic_path, check_distinct, check_output
 from .las import LasReader, las_header_summary, read_las, write_las
 from .pointcloud import PointCloud
 from .text import read_text, write_text

@@ -119,7 +119,7 @@ def read_crs_sidecar(path: str | os.PathLike) -> Any:
 
 def write_crs_sidecar(path: str | os.PathLike, crs: Any, *, overwrite: bool = False) -> Path | None:
     """Write (or, when `crs` is None, remove a stale) ``.prj`` sidecar of `path`, atomically."""
-    from ._atomic import atomic_path
+    from .._atomic import atomic_path
 
     prj = sidecar_path(path)
     if crs is None:  # a sidecar left from an earlier version of this file would lie

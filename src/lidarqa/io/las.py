@@ -13,8 +13,8 @@ from typing import Any
 import numpy as np
 
 from .._arrays import colmin
+from .._atomic import atomic_path, check_input, check_output
 from ..errors import InvalidPointsError, LasReadError, WriteError
-from ._atomic import atomic_path, check_input, check_output
 from ._lasheader import check_las_header
 from .pointcloud import PointCloud
 

@@ -33,7 +33,7 @@ _TYPES = {
 
 def read_ply(path: str | os.PathLike) -> PointCloud:
     """Read the ``vertex`` element of a PLY file; x, y, z plus scalar properties as fields."""
-    from ._atomic import check_input
+    from .._atomic import check_input
 
     p = check_input(path)
     try:

@@ -115,7 +115,7 @@ def read_polar_csv(
     ``hz``), and either an elevation (``elevation``, ``beta``, ``vertical_angle``)
     or a zenith angle (``zenith``, ``zenith_angle``, ``v``). An ``id`` column is kept.
     """
-    from ._atomic import check_input
+    from .._atomic import check_input
     from .vector import _read_csv_table
 
     p = check_input(path)

@@ -8,8 +8,8 @@ from typing import Any
 
 import numpy as np
 
+from .._atomic import atomic_path
 from .._validate import require
-from ._atomic import atomic_path
 
 __all__ = ["write_geotiff", "NODATA"]
 

@@ -10,8 +10,8 @@ from typing import Any
 
 import numpy as np
 
+from .._atomic import atomic_path, check_input, check_output
 from ..errors import InvalidPointsError, ReadError
-from ._atomic import atomic_path, check_input, check_output
 from .crs import read_crs_sidecar, resolve_crs, sidecar_path, write_crs_sidecar
 from .pointcloud import PointCloud
 

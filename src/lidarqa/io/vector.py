@@ -24,20 +24,22 @@ from typing import Any
 
 import numpy as np
 
+from .._atomic import atomic_path, check_input, check_output
 from .._validate import MAX_COORDINATE
 from ..errors import InvalidPointsError, ReadError, WriteError
 from ..units import format_coordinate, format_decimal
-from ._atomic import atomic_path, check_input, check_output
 from .crs import read_crs_sidecar, resolve_crs, sidecar_path, write_crs_sidecar
 from .text import DECIMAL_COMMA, dialect_hint
 
 __all__ = [
     "Segments",
     "PointSet",
+    "as_pointset",
     "read_segments",
     "write_segments",
     "read_points",
     "write_points",
+    "read_features",
     "VECTOR_SUFFIXES",
 ]
 
@@ -133,6 +135,37 @@ class PointSet:
             {k: np.asarray(v)[index] for k, v in self.attributes.items()},
             self.crs,
         )
+
+
+def as_pointset(obj: Any, name: str = "points") -> PointSet:
+    """`obj` as a :class:`PointSet`: a PointSet as it is, an ``(N, 3)`` array numbered 0..N-1.
+
+    Parameters
+    ----------
+    obj : PointSet or array_like of shape (N, 3)
+        Named points, or bare coordinates (x, y, z; m).
+    name : str, default "points"
+        What `obj` is, for the error message.
+
+    Returns
+    -------
+    PointSet
+        `obj` itself when it is a PointSet (not copied), else new points with
+        ids ``0..N-1`` and no CRS.
+
+    Raises
+    ------
+    InvalidPointsError
+        `obj` is neither a PointSet nor an ``(N, 3)`` array.
+    """
+    if isinstance(obj, PointSet):
+        return obj
+    xyz = np.asarray(obj, dtype=np.float64)
+    if xyz.ndim != 2 or xyz.shape[1] != 3:
+        raise InvalidPointsError(
+            f"{name} must be a PointSet or an (N, 3) array, got shape {xyz.shape}"
+        )
+    return PointSet(ids=np.arange(len(xyz)), xyz=xyz)
 
 
 # --------------------------------------------------------------------- helpers
@@ -276,13 +309,37 @@ def _check_unique(ids: np.ndarray, p: Path) -> None:
         raise ReadError(f"input {p}: duplicate id(s) {', '.join(u[c > 1][:5])}")
 
 
-def _read_ogr(p: Path) -> tuple[Any, list[str], np.ndarray, list]:
-    """CRS, lower-cased field names, shapely geometries and field arrays of a vector file."""
+def read_features(path: str | os.PathLike) -> tuple[Any, list[str], np.ndarray, list]:
+    """Every feature of a GeoPackage/GeoJSON layer: CRS, field names, geometries, field values.
+
+    Parameters
+    ----------
+    path : str or path-like
+        A vector file GDAL/OGR reads (its first layer is read).
+
+    Returns
+    -------
+    crs : pyproj.CRS or None
+        The layer's CRS (None when it declares none or it is not understood).
+    names : list of str
+        The attribute field names, lower-cased.
+    geometries : ndarray of shape (F,) object
+        Shapely geometries (None for a feature without one).
+    fields : list of ndarray
+        One array of F values per name, in the order of `names`.
+
+    Raises
+    ------
+    ReadError
+        The file cannot be read.
+    MissingDependencyError
+        pyogrio or shapely is not installed (the ``vector`` extra).
+    """
     pyogrio, shapely = _gis()
     try:
-        meta, _, wkb, field_data = pyogrio.raw.read(str(p))
+        meta, _, wkb, field_data = pyogrio.raw.read(str(path))
     except Exception as exc:
-        raise ReadError(f"cannot read {p}: {exc}") from exc
+        raise ReadError(f"cannot read {path}: {exc}") from exc
     names = [n.lower() for n in meta["fields"]]
     return _crs_from_meta(meta), names, shapely.from_wkb(wkb), field_data
 
@@ -320,7 +377,7 @@ def read_segments(path: str | os.PathLike, *, crs: Any = None) -> Segments:
             k: v for k, v in table.items() if k not in {"id", "x1", "y1", "z1", "x2", "y2", "z2"}
         }
     else:
-        crs, names, geoms, field_data = _read_ogr(p)
+        crs, names, geoms, field_data = read_features(p)
         starts, ends, ids_l, rows = [], [], [], []
         base_ids = field_data[names.index("id")] if "id" in names else np.arange(len(geoms))
         for i, g in enumerate(geoms):
@@ -416,7 +473,7 @@ def read_points(path: str | os.PathLike, *, require_z: bool = True, crs: Any = N
         ids = _ids(table, len(xyz))
         attrs = {k: v for k, v in table.items() if k not in {"id", "x", "y", "z"}}
     else:
-        crs, names, geoms, field_data = _read_ogr(p)
+        crs, names, geoms, field_data = read_features(p)
         if len(geoms) and not all(g is not None and g.geom_type == "Point" for g in geoms):
             raise ReadError(f"input {p}: expected Point features")
         if require_z and len(geoms) and not all(g.has_z for g in geoms):

@@ -25,10 +25,18 @@ __all__ = [
     "PASS",
     "WARN",
     "FAIL",
+    "CHECK_ORDER",
 ]
 
 PASS, WARN, FAIL = "pass", "warn", "fail"
 _RANK = {PASS: 0, WARN: 1, FAIL: 2}
+
+#: The per-tile checks, in report order.
+CHECK_ORDER = (
+    "readable", "las_version", "point_format", "crs", "gps_time", "return_numbers", "classes",
+    "header", "duplicates", "source_ids", "flags", "scan_angle", "density",
+    "spatial_distribution", "voids", "classification",
+)
 
 
 @dataclass(frozen=True)

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import WriteError
+from .conformance import CHECK_ORDER
 
 __all__ = ["OUTPUT_NAMES", "check_outputs", "write_outputs", "block_map_png"]
 
@@ -21,7 +22,7 @@ _COLOURS = {"pass": "#3a9a4a", "warn": "#e0a526", "fail": "#c8352b"}
 
 def check_outputs(out: str | os.PathLike, *, overwrite: bool = False) -> Path:
     """Refuse an output folder that holds a previous run's files (unless `overwrite`)."""
-    from ..io._atomic import check_output_folder
+    from .._atomic import check_output_folder
 
     return check_output_folder(out, OUTPUT_NAMES.values(), overwrite=overwrite)
 
@@ -29,7 +30,7 @@ def check_outputs(out: str | os.PathLike, *, overwrite: bool = False) -> Path:
 def write_outputs(result: Any, out: str | os.PathLike, *, overwrite: bool = False,
                   html: bool = True, document: dict | None = None) -> dict[str, str]:
     """Write every output of `result` into folder `out`; returns name -> path."""
-    from ..io._atomic import note_created
+    from .._atomic import note_created
 
     d = Path(out)
     if not d.exists():
@@ -62,8 +63,8 @@ def write_outputs(result: Any, out: str | os.PathLike, *, overwrite: bool = Fals
     js = d / OUTPUT_NAMES["json"]
     paths["json"] = str(js)
     doc = document or qc_document(result, paths)
+    from .._atomic import atomic_output
     from .._json import to_jsonable
-    from ..io._atomic import atomic_output
 
     with atomic_output(js, overwrite=overwrite) as tmp:
         tmp.write_text(json.dumps(to_jsonable(doc), indent=2, allow_nan=False) + "\n",
@@ -83,12 +84,11 @@ def qc_document(result: Any, paths: dict[str, str]) -> dict[str, Any]:
 
 
 def _write_gpkg(result: Any, path: Path, *, overwrite: bool) -> None:
+    from .._atomic import atomic_output
     from .._validate import require
-    from ..io._atomic import atomic_output
 
     pyogrio = require("pyogrio", "vector")
     shapely = require("shapely", "vector")
-    from .run import CHECK_ORDER
 
     names = [k for k in CHECK_ORDER if any(k in t.checks for t in result.tiles)]
     tiles = [t for t in result.tiles]
@@ -148,9 +148,9 @@ def block_map_png(result: Any) -> bytes:
     from matplotlib.collections import PolyCollection
     from matplotlib.patches import Patch
 
-    from ..report.plots import _plt, _png
+    from .._plotting import png, pyplot
 
-    plt = _plt()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(7.5, 6.0))
     tiles = [t for t in result.tiles if t.footprint]
     if tiles:
@@ -190,14 +190,14 @@ def block_map_png(result: Any) -> bytes:
                        Patch(facecolor="none", edgecolor="#1b4f9c", label="void")],
               loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
     ax.set_title(f"{result.spec.title}: {n['n_tiles']} tile(s)")
-    return _png(fig)
+    return png(fig)
 
 
 def _share_png(r: dict[str, Any]) -> bytes:
     """A 0-1 share raster (row 0 north) as a PNG."""
-    from ..report.plots import _plt, _png
+    from .._plotting import png, pyplot
 
-    plt = _plt()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(7.0, 5.5))
     a = r["array"]
     h, w = a.shape
@@ -206,7 +206,7 @@ def _share_png(r: dict[str, Any]) -> bytes:
     fig.colorbar(im, ax=ax, label="share of points disagreeing")
     ax.set_xlabel(f"x − {r['x0']:,.0f} (m)")
     ax.set_ylabel(f"y − {r['y1'] - h * r['cell']:,.0f} (m)")
-    return _png(fig)
+    return png(fig)
 
 
 def _void_path(geoms: list[Any], x0: float, y0: float) -> Any:
@@ -237,10 +237,9 @@ def _void_path(geoms: list[Any], x0: float, y0: float) -> Any:
 
 
 def _write_html(result: Any, path: Path, *, overwrite: bool) -> None:
+    from .._atomic import atomic_output
     from .._version import __version__
-    from ..io._atomic import atomic_output
     from ..report.html import Figure, Report, Section, SummaryRow, Table, render_html
-    from .run import CHECK_ORDER
 
     spec = result.spec
     summ = result.summary()

@@ -19,17 +19,10 @@ from typing import Any, cast
 import numpy as np
 
 from ..errors import OptionError, ReadError
-from .conformance import FAIL, PASS, WARN, Check, worst
+from .conformance import CHECK_ORDER, FAIL, PASS, WARN, Check, worst
 from .profiles import QCSpec, get_spec
 
 __all__ = ["TileReport", "QCResult", "run_qc", "CHECK_ORDER", "VEGETATED"]
-
-#: The per-tile checks, in report order.
-CHECK_ORDER = (
-    "readable", "las_version", "point_format", "crs", "gps_time", "return_numbers", "classes",
-    "header", "duplicates", "source_ids", "flags", "scan_angle", "density",
-    "spatial_distribution", "voids", "classification",
-)
 
 #: Land-cover values (lower case) that make a check point *vegetated* (VVA); any other
 #: value is non-vegetated (NVA).
@@ -135,12 +128,12 @@ class QCResult:
 def _read_exclude(path: Any, crs: Any) -> bytes | None:
     if path is None:
         return None
-    from ..io.vector import _read_ogr
+    from ..io.vector import read_features
 
     p = Path(path)
     if not p.is_file():
         raise ReadError(f"exclude file {p} does not exist")
-    _, _, geoms, _ = _read_ogr(p)
+    _, _, geoms, _ = read_features(p)
     import shapely
 
     polys = [g for g in geoms if g is not None and g.geom_type in ("Polygon", "MultiPolygon")]

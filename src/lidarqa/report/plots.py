@@ -6,11 +6,13 @@ it as a ``data:`` URI and nothing touches the display or the network.
 
 from __future__ import annotations
 
-import io
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
+
+from .._plotting import png as _png
+from .._plotting import pyplot as _plt
 
 __all__ = [
     "CLASS_NAMES",
@@ -84,23 +86,6 @@ SIGMA_CLASSES = (
 )
 
 _MAX_PLOT_POINTS = 80_000
-
-
-def _plt() -> Any:
-    from .._validate import require
-
-    mpl = require("matplotlib", "report")
-    mpl.use("Agg", force=True)
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-def _png(fig: Any) -> bytes:
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=100, bbox_inches="tight")
-    _plt().close(fig)
-    return buf.getvalue()
 
 
 def _thin(n: int, limit: int = _MAX_PLOT_POINTS, seed: int = 0) -> np.ndarray:

@@ -82,7 +82,7 @@ def check_out_dir(out_dir: str | os.PathLike, *, overwrite: bool = False) -> Pat
     ``outputs/`` exist and `overwrite` is false, and :class:`WriteError` when
     the path is a file.
     """
-    from ..io._atomic import check_output_folder
+    from .._atomic import check_output_folder
 
     return check_output_folder(out_dir, (REPORT_HTML, REPORT_JSON, OUTPUTS_DIR),
                                overwrite=overwrite)
@@ -294,7 +294,7 @@ def run_assessment(
     out = check_out_dir(out_dir, overwrite=overwrite)
     created = not out.exists()
     out.mkdir(parents=True, exist_ok=True)
-    from ..io._atomic import note_created, register_temp, unregister_temp
+    from .._atomic import note_created, register_temp, unregister_temp
 
     if created:
         note_created(out)  # removed with everything in it if the command fails or is stopped

@@ -484,7 +484,7 @@ def catalog_auto_parameters(
 
 def _plain_name(name: str) -> str:
     """Output name of input tile `name`: a COPC tile is written as a plain LAZ (``.laz``)."""
-    from ..io._atomic import COPC_SUFFIX
+    from .._atomic import COPC_SUFFIX
 
     if name.lower().endswith(COPC_SUFFIX):
         return name[: -len(COPC_SUFFIX)] + ".laz"

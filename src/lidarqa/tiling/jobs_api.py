@@ -191,7 +191,7 @@ def catalog_vertical_check(
     NothingToMeasureError
         No check point could be compared (as for one file).
     """
-    from ..accuracy.checkpoints import _as_pointset
+    from ..io.vector import as_pointset
     from .jobs_accuracy import (
         CheckSpacingTask,
         VerticalCheckTask,
@@ -202,7 +202,7 @@ def catalog_vertical_check(
 
     open_opts, chunk_opts, run_opts = _split(dict(common))
     catalog = open_sources(sources, source_id=source_id or None, **open_opts)
-    cp = _as_pointset(check, "check")
+    cp = as_pointset(check, "check")
     if catalog.z_factor != 1.0:
         xyz = cp.xyz.copy()
         xyz[:, 2] *= catalog.z_factor

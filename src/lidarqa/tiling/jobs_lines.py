@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING, Any, TypeVar, cast
 
 import numpy as np
 
-from ..accuracy._lines_io import with_point_spacing
+from ..accuracy.lines_io import with_point_spacing
 from ..errors import CRSMismatchError, InvalidPointsError, LidarQAError
 from ..io.vector import Segments
 from .jobs_vector import merge_vector_parts, vector_features

@@ -36,8 +36,7 @@ import numpy as np
 from ..errors import InvalidPointsError, OptionError
 
 if TYPE_CHECKING:
-    from ..accuracy._swaths_kernels import Grid
-    from ..accuracy.swaths import SwathReport
+    from ..accuracy.swaths import Grid, SwathReport
     from ._types import PathsInput
     from .apply import CatalogRun
     from .catalog import Catalog
@@ -169,10 +168,13 @@ class SwathCellsTask:
         self, data: ChunkData
     ) -> dict[int, _StripCells] | tuple[Grid | None, dict[int, _StripCells]]:
         """Per-strip plane fits of the chunk's core cells (with the grid when planned here)."""
-        from ..accuracy import _swaths_kernels as K
         from ..accuracy.swaths import (
             cell_size_from_occupancy,
+            cell_sums,
+            grid_for,
+            merge_extremes,
             range_plan,
+            ranges_from_extremes,
             strip_occupancy,
             strip_planes,
         )
@@ -185,11 +187,11 @@ class SwathCellsTask:
         if grid is None:
             size = cell_size_from_occupancy(strip_occupancy(xyz, sid), target=self.cell_target)
             b = self.clamp
-            grid = K.grid_for(np.array([[b[0], b[1]], [b[2], b[3]]]), size)
+            grid = grid_for(np.array([[b[0], b[1]], [b[2], b[3]]]), size)
         out: dict[int, _StripCells] = {}
         for s in np.unique(sid).tolist():
             pts = xyz[sid == s]
-            keys, sums = K.cell_sums(pts, grid, self.z0)
+            keys, sums = cell_sums(pts, grid, self.z0)
             centres = grid.centres(keys)
             np.clip(centres[:, 0], self.clamp[0], self.clamp[2], out=centres[:, 0])
             np.clip(centres[:, 1], self.clamp[1], self.clamp[3], out=centres[:, 1])
@@ -213,18 +215,20 @@ class SwathCellsTask:
             else:
                 splits = cast("tuple[int, ...]", self.splits)
             for k in splits:
-                ext[k] = self._extremes(K, pts, grid, planes, smooth, keys, k)
+                ext[k] = self._extremes(pts, grid, planes, smooth, keys, k)
             if planned and 1 not in ext and not len(
-                    K.ranges_from_extremes(K.merge_extremes([ext[splits[0]]]), min_points=3)[1]):
-                ext[1] = self._extremes(K, pts, grid, planes, smooth, keys, 1)
+                    ranges_from_extremes(merge_extremes([ext[splits[0]]]), min_points=3)[1]):
+                ext[1] = self._extremes(pts, grid, planes, smooth, keys, 1)
             out[int(s)] = _StripCells(keys, sums, ext)
         return out if self.grid is not None else (grid, out)
 
     @staticmethod
-    def _extremes(K: Any, pts: np.ndarray, grid: Grid, planes: Any, smooth: np.ndarray,
+    def _extremes(pts: np.ndarray, grid: Grid, planes: Any, smooth: np.ndarray,
                   keys: np.ndarray, k: int) -> tuple:
         """Residual extremes of the range cells (split `k`), keyed block-wide."""
-        sub, hi, lo, n = K.residual_extremes(pts, grid, planes, smooth, split=k)
+        from ..accuracy.swaths import residual_extremes
+
+        sub, hi, lo, n = residual_extremes(pts, grid, planes, smooth, split=k)
         # cell index into this chunk's smooth cells -> the block-wide cell key
         cell = keys[smooth][sub // (k * k)] if k > 1 else sub
         return (cell * (k * k) + sub % (k * k) if k > 1 else cell, hi, lo, n)
@@ -277,11 +281,12 @@ def catalog_swaths(
         ``value`` the :class:`~lidarqa.accuracy.swaths.SwathReport`; ``extra``
         holds ``labels`` (strip id -> name) and ``cell_size``.
     """
-    from ..accuracy import _swaths_kernels as K
     from ..accuracy.swaths import (
         CELL_TARGET_POINTS,
         assess_options,
         cell_size_from_occupancy,
+        grid_for,
+        merge_extremes,
         range_split,
         strip_planes,
         swaths_from_planes,
@@ -326,7 +331,7 @@ def catalog_swaths(
             raise InvalidPointsError("no point to compare in the catalog (check --classes)")
         cell_size = cell_size_from_occupancy(occupancy, target=target)
     grid = (None if cell_size is None
-            else K.grid_for(np.array([[b[0], b[1]], [b[2], b[3]]]), float(cell_size)))
+            else grid_for(np.array([[b[0], b[1]], [b[2], b[3]]]), float(cell_size)))
     if one_region:
         chunks = [catalog.whole_chunk()]
     else:
@@ -379,7 +384,7 @@ def catalog_swaths(
         o = np.argsort(keys, kind="stable")
         planes.append(strip_planes(keys[o], sums[o], z0, cell_size=float(cell_size),
                                    min_points=int(min_points)))
-        merged.append({k: K.merge_extremes([c.extremes[k] for c in cells])
+        merged.append({k: merge_extremes([c.extremes[k] for c in cells])
                        for k in cells[0].extremes})
         if by_source_id:
             labels[s] = f"point_source_id {s}"

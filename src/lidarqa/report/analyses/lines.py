@@ -130,7 +130,7 @@ def run_lines(ctx: RunContext, item: AnalysisItem) -> SectionResult:
     notes: list[str] = []
     gt = None
     if opts["ground_truth"] is not None:
-        from ...accuracy._lines_io import read_pairs
+        from ...accuracy.lines_io import read_pairs
 
         gt = read_pairs(opts["ground_truth"])
     if len(test) == 0 or len(model) == 0:

@@ -29,7 +29,7 @@ import threading
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
-from ..errors import OutputExistsError, ReadError, WriteError
+from .errors import OutputExistsError, ReadError, WriteError
 
 __all__ = [
     "atomic_output",

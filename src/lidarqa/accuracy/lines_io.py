@@ -1,4 +1,11 @@
-"""Inputs of line matching: segment files, or clouds whose edges are extracted (I/O, no kernel)."""
+"""Inputs of line matching: segment files, or clouds whose edges are extracted (I/O, no kernel).
+
+What ``lidarqa lines``, the ``lines`` analysis of ``lidarqa assess`` and the catalog
+job share: :func:`load_segments` (a segment file, or the edges of a cloud's
+selected points), :func:`load_passes` / :func:`pool_passes` (one pass per file or
+per flight strip), :func:`read_pairs` (the ``test_id,model_id`` pairs file) and
+:func:`with_point_spacing` (the sampling the automatic threshold is bounded by).
+"""
 
 from __future__ import annotations
 
@@ -20,6 +27,7 @@ __all__ = [
     "pool_passes",
     "read_pairs",
     "extract_segments",
+    "with_point_spacing",
 ]
 
 _VECTOR_ONLY = {".gpkg", ".geojson", ".json"}
