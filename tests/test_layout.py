@@ -258,3 +258,42 @@ def test_no_module_level_import_cycles():
     assert not cycles, "module-level import cycles:\n  " + "\n  ".join(
         " <-> ".join(c) for c in cycles
     )
+
+
+def _exception_classes(package_dir: Path) -> list[tuple[str, str]]:
+    """(module path, class name) of every class that looks like an exception or warning."""
+    found = []
+    for path in sorted(package_dir.rglob("*.py")):
+        rel = path.relative_to(package_dir).as_posix()
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if not isinstance(node, ast.ClassDef):
+                continue
+            bases = [
+                b.id if isinstance(b, ast.Name) else getattr(b, "attr", "") for b in node.bases
+            ]
+            if any(b.endswith(("Error", "Exception", "Warning")) for b in bases):
+                found.append((rel, node.name))
+    return found
+
+
+def test_exceptions_live_in_errors_py(tmp_path):
+    # the checker finds a planted public exception outside errors.py, and lets a private one be
+    (tmp_path / "errors.py").write_text("class AError(Exception):\n    pass\n")
+    (tmp_path / "mod.py").write_text(
+        "from errors import AError\n\nclass BError(AError):\n    pass\n\n"
+        "class _Signal(Exception):\n    pass\n"
+    )
+    planted = [
+        c for c in _exception_classes(tmp_path) if c[0] != "errors.py" and not c[1].startswith("_")
+    ]
+    assert planted == [("mod.py", "BError")]
+    # the package: every public exception or warning class is defined in lidarqa/errors.py;
+    # private control-flow signals of private modules (lidarqa._atomic.Terminated) may stay
+    stray = [
+        f"{mod}: {name}"
+        for mod, name in _exception_classes(PACKAGE_DIR)
+        if mod != "errors.py"
+        and not name.startswith("_")
+        and not any(part.startswith("_") and part != "__init__.py" for part in mod.split("/"))
+    ]
+    assert not stray, "exceptions outside errors.py: " + ", ".join(stray)

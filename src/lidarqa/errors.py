@@ -7,6 +7,8 @@ matching builtin (``ValueError``, ``OSError``) so generic handlers still work.
 
 from __future__ import annotations
 
+from typing import Any
+
 __all__ = [
     "LidarQAError",
     "InvalidPointsError",
@@ -25,6 +27,10 @@ __all__ = [
     "TilingError",
     "CatalogError",
     "MissingDependencyError",
+    "ChunkFailedError",
+    "ConfigCRSMismatchError",
+    "AnalysisUnavailableError",
+    "EdgeExtractionUnavailableError",
     "LidarQAWarning",
     "DegenerateGeometryWarning",
     "DataQualityWarning",
@@ -108,6 +114,29 @@ class CatalogError(TilingError, ReadError):
 
 class MissingDependencyError(LidarQAError, ImportError):
     """An optional dependency (extra) is needed but not installed."""
+
+
+class ChunkFailedError(TilingError):
+    """Some chunks failed after their retries; ``.outcomes`` holds every outcome.
+
+    The outcomes are :class:`lidarqa.tiling.engine.ChunkOutcome` objects, one per chunk.
+    """
+
+    def __init__(self, message: str, outcomes: list[Any] | None = None) -> None:
+        super().__init__(message)
+        self.outcomes = outcomes or []
+
+
+class ConfigCRSMismatchError(ConfigError, CRSMismatchError):
+    """Inputs of an assessment declare different CRSs."""
+
+
+class AnalysisUnavailableError(ConfigError):
+    """An analysis needs a part of lidarqa (or an extra) that this installation lacks."""
+
+
+class EdgeExtractionUnavailableError(MissingDependencyError):
+    """Point-cloud input needs lidarqa.geometry.edges.extract_edges, which is not available."""
 
 
 class LidarQAWarning(UserWarning):

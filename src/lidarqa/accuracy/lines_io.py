@@ -17,7 +17,13 @@ from typing import Any
 import numpy as np
 
 from .._progress import ProgressCallback, report, stage
-from ..errors import InvalidPointsError, LidarQAError, MissingDependencyError, ReadError
+from ..errors import (
+    EdgeExtractionUnavailableError,
+    InvalidPointsError,
+    LidarQAError,
+    MissingDependencyError,
+    ReadError,
+)
 from ..io.vector import Segments, read_segments
 
 __all__ = [
@@ -32,10 +38,6 @@ __all__ = [
 
 _VECTOR_ONLY = {".gpkg", ".geojson", ".json"}
 _SEGMENT_COLUMNS = {"x1", "y1", "z1", "x2", "y2", "z2"}
-
-
-class EdgeExtractionUnavailableError(MissingDependencyError):
-    """Point-cloud input needs lidarqa.geometry.edges.extract_edges, which is not available."""
 
 
 def is_segment_file(path: str | os.PathLike) -> bool:

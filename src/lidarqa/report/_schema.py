@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ..errors import ConfigError, CRSMismatchError
+from ..errors import AnalysisUnavailableError, ConfigCRSMismatchError, ConfigError
 
 __all__ = [
     "ConfigCRSMismatchError",
@@ -32,13 +32,6 @@ __all__ = [
     "need_input",
     "describe",
 ]
-
-class ConfigCRSMismatchError(ConfigError, CRSMismatchError):
-    """Inputs of an assessment declare different CRSs."""
-
-
-class AnalysisUnavailableError(ConfigError):
-    """An analysis needs a part of lidarqa (or an extra) that this installation lacks."""
 
 
 

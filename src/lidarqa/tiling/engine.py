@@ -30,7 +30,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Generic, TypeVar, cast
 
-from ..errors import MissingDependencyError, OptionError, TilingError
+from ..errors import ChunkFailedError, MissingDependencyError, OptionError, TilingError
 
 if TYPE_CHECKING:
     from ._types import Tiles
@@ -56,14 +56,6 @@ __all__ = [
     "run_tile_task",
     "run_tiles",
 ]
-
-
-class ChunkFailedError(TilingError):
-    """Some chunks failed after their retries; ``.outcomes`` holds every outcome."""
-
-    def __init__(self, message: str, outcomes: list[ChunkOutcome] | None = None) -> None:
-        super().__init__(message)
-        self.outcomes = outcomes or []
 
 
 @dataclass(frozen=True)
