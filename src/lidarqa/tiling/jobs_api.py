@@ -306,12 +306,8 @@ def points_in_metres(points: PointSet, source: Source, what: str) -> PointSet:
 
     crs = points.crs if points.crs is not None else source.given_crs
     ensure_same_crs_parts(source.native_crs, crs, what=("cloud", what))
-    factor = z_to_metres_factor(crs if crs is not None else source.native_crs)
-    if factor == 1.0 or not len(points):
-        return points if crs is points.crs else PointSet(points.ids, points.xyz,
-                                                         dict(points.attributes), crs=crs)
-    xyz = points.xyz.copy()
-    xyz[:, 2] *= factor
+    xyz = np.array(points.xyz, dtype=np.float64)
+    xyz[:, 2] *= z_to_metres_factor(crs if crs is not None else source.native_crs)
     return PointSet(points.ids, xyz, dict(points.attributes), crs=crs)
 
 
@@ -375,17 +371,14 @@ def catalog_roads(
     if map_crs is None:  # the CRS of inputs that declare none
         given = parse_crs(open_opts["crs"])
         map_crs = given if given is not None else catalog.given_crs
-    check_map_crs(catalog.crs, map_crs, polys, polygons)
+    check_map_crs(catalog.native_crs, map_crs, polys, polygons)
     recon: dict[str, Any] = dict(options or {})
     rec = reconstruct_roads(cloud.xyz, polys, ids=ids, **recon)
     comp, ref_xyz = None, None
     if reference is not None:
-        ref = reference if isinstance(reference, PointSet) else PointSet(
-            np.arange(len(np.asarray(reference).reshape(-1, 3))),
-            np.asarray(reference, dtype=np.float64).reshape(-1, 3))
-        if isinstance(reference, PointSet):
-            ref = points_in_metres(ref, catalog, "reference")
-        ref_xyz = ref.xyz
+        ref_xyz = (points_in_metres(reference, catalog, "reference").xyz
+                   if isinstance(reference, PointSet)
+                   else np.asarray(reference, dtype=np.float64).reshape(-1, 3))
         compare: dict[str, Any] = dict(compare_options or {})
         comp = compare_road_heights(rec, ref_xyz, **compare)
     return CatalogRun(rec, catalog, (), (),
