@@ -303,3 +303,29 @@ check = "chk"
     assert c["rmse_z"] == pytest.approx(np.sqrt(np.mean(d[:, 2] ** 2)) * FT, rel=1e-6)
     for k in ("n_check", "rmse_x", "rmse_y", "rmse_z", "rmse_h", "rmse_3d", "mean_z"):
         assert r[k] == pytest.approx(c[k], abs=1e-6), (k, r[k], c[k])
+
+
+@pytest.mark.parametrize("side", ["file", "folder"])
+def test_vertical_check_in_feet_gives_the_same_answer_through_the_cli_and_assess(feet, tmp_path,
+                                                                                 side):
+    """Regression: the report's vertical check compared TIN and check heights in feet."""
+    c = cli_results(tmp_path, "checkpoints", feet[side], feet["chk"], "--vertical",
+                    *(("--workers", "1") if side == "folder" else ()))
+    m = cli_results(tmp_path, "checkpoints", feet["metres"], feet["chk_m"], "--vertical")
+    doc = assess(tmp_path, f"""
+title = "vertical"
+[inputs.clouds]
+cloud = "{feet[side].as_posix()}"
+[inputs.points]
+chk = "{feet['chk'].as_posix()}"
+[checkpoints]
+measured = "cloud"
+check = "chk"
+vertical = true
+""")
+    assert not doc["errors"], doc["errors"]
+    r = doc["results"]["checkpoints"]
+    assert r["n_check"] == c["n_check"] == m["n_check"] > 10
+    for k in ("rmse_z", "mean_z", "std_z"):
+        assert r[k] == pytest.approx(c[k], abs=1e-3), (k, r[k], c[k])
+        assert c[k] == pytest.approx(m[k], abs=1e-3), k
