@@ -33,7 +33,8 @@ def test_every_parameter_of_the_demo_has_a_label(demo_doc) -> None:
     missing = []
     for sid, p in demo_doc["parameters"].items():
         tree = {"options": p["options"], "parameters": p["params"], "targets": p["targets"]}
-        missing += [f"{sid}: {k}" for k in _leaves(tree) if labels.lookup(k) is None]
+        missing += [f"{sid}: {k}" for k in _leaves(tree)
+                    if labels.lookup(f"{p['kind']}.{k}") is None]
     assert not missing, f"parameters without a label: {missing}"
 
 
@@ -99,3 +100,20 @@ def test_target_lines_use_the_headline_digits(demo_doc, demo_run) -> None:
             assert f"{shown} ≤" in target_cell, f"{sid}: {target_cell!r} should show {shown!r}"
             checked += 1
     assert checked >= 3
+
+
+def test_each_target_is_labelled_as_its_analysis_defines_it() -> None:
+    """Regression: ``targets.max_abs`` was one label for heights (max |Δh|) and swaths
+    (max |dz|), so the swaths target read "max |Δh|"."""
+    from lidarqa.report import _registry
+    from lidarqa.report.html import _parameter_rows
+
+    specs = _registry.specs()
+    rows = {kind: _parameter_rows({"kind": kind, "targets": {"max_abs": 0.1}})
+            for kind in ("swaths", "heights")}
+    assert rows["swaths"] == [["target: max |dz| at most (m)", 0.1, "target_max_abs"]]
+    assert rows["heights"] == [["target: max |Δh| at most (m)", 0.1, "target_max_abs"]]
+    for kind, spec in specs.items():  # every target's label is its definition's
+        for t in spec.targets.values():
+            lab = labels.lookup(f"{kind}.targets.{t.metric}")
+            assert lab is not None and t.label in lab.text and lab.unit == t.unit, (kind, t)

@@ -72,6 +72,7 @@ def test_every_key_and_parameter_of_every_kind_has_a_label() -> None:
                 continue
         missing += [f"[{kind}] {n}" for n in sorted(names) if labels.lookup(n) is None]
         missing += [
-            f"[{kind}] {t}" for t in spec.targets if labels.lookup(f"targets.{t[7:]}") is None
+            f"[{kind}] {t}" for t in spec.targets
+            if labels.lookup(f"{kind}.targets.{t[7:]}") is None
         ]
     assert not missing, f"keys without a report label: {missing}"

@@ -83,6 +83,8 @@ __all__ = [
     "asprs2023_accuracy",
     "match_points",
     "assess_checkpoints",
+    "metric_units",
+    "scale_points",
     "summarise_vertical",
     "vertical_check",
 ]
@@ -457,6 +459,68 @@ def asprs2023_accuracy(
 
 
 # ================================================================ matching
+
+
+def metric_units(measured_crs: Any, check_crs: Any) -> tuple[Any, float, float, list[str]]:
+    """The CRS measured and check points share, its factors to metres, and notes.
+
+    The one unit rule of ``lidarqa checkpoints`` and the report's check points: the
+    CRS is MEASURED's, else CHECK's (a missing one is taken to share the other's);
+    x, y are scaled by the horizontal unit and z by the vertical unit to metres.
+
+    Returns
+    -------
+    crs : pyproj.CRS or None
+    fh, fv : float
+        Horizontal and vertical factors to metres (1.0 for metres).
+    notes : list of str
+        What was converted (empty for metres).
+
+    Raises
+    ------
+    CRSMismatchError
+        The two CRSs differ, or the shared one is geographic (degrees).
+    """
+    from ..errors import CRSMismatchError
+    from ..io.crs import ensure_same_crs, horizontal_unit, vertical_unit, z_to_metres_factor
+
+    ensure_same_crs(measured_crs, check_crs, what=("MEASURED", "CHECK"))
+    crs = measured_crs if measured_crs is not None else check_crs
+    if crs is None:
+        return None, 1.0, 1.0, []
+    h_name, h_factor = horizontal_unit(crs)
+    if h_name is not None and (h_name.lower().startswith("deg") or crs.is_geographic):
+        raise CRSMismatchError(
+            f"{'MEASURED' if measured_crs is not None else 'CHECK'} is in a geographic CRS "
+            f"({crs.name}, degrees): reproject it to a projected CRS in metres first")
+    v_name, _ = vertical_unit(crs)
+    fh, fv = float(h_factor or 1.0), z_to_metres_factor(crs)
+    notes = []
+    if fv != 1.0 or fh != 1.0:
+        notes.append(f"coordinates converted to metres (horizontal unit: {h_name or 'metre'}, "
+                     f"vertical unit: {v_name or 'metre'})")
+        if measured_crs is None or check_crs is None:
+            notes.append("one input has no CRS and is taken to share the other's CRS and units")
+    return crs, fh, fv, notes
+
+
+def scale_points(points: PointSet, fh: float, fv: float) -> PointSet:
+    """`points` with x, y multiplied by `fh` and z by `fv` (a copy; ids and attributes kept).
+
+    Parameters
+    ----------
+    points : PointSet
+    fh, fv : float
+        Horizontal and vertical factors (e.g. from :func:`metric_units`).
+
+    Returns
+    -------
+    PointSet
+    """
+    xyz = np.array(points.xyz, dtype=np.float64, copy=True)
+    xyz[:, :2] *= fh
+    xyz[:, 2] *= fv
+    return PointSet(points.ids, xyz, dict(points.attributes), crs=points.crs)
 
 
 def _keys(ids: np.ndarray) -> np.ndarray:

@@ -66,46 +66,13 @@ def _read_control_file(path: str) -> list[str]:
     return ids
 
 
-def _unit_factors(crs: Any, what: str) -> tuple[float, float, str | None, str | None]:
-    """(horizontal, vertical) factors to metres and unit names; refuses geographic CRSs."""
-    from ..errors import CRSMismatchError
-    from ..io.crs import horizontal_unit, vertical_unit, z_to_metres_factor
-
-    if crs is None:
-        return 1.0, 1.0, None, None
-    h_name, h_factor = horizontal_unit(crs)
-    if h_name is not None and (h_name.lower().startswith("deg") or crs.is_geographic):
-        raise CRSMismatchError(
-            f"{what} is in a geographic CRS ({crs.name}, degrees): reproject it "
-            "to a projected CRS in metres first"
-        )
-    v_name, _ = vertical_unit(crs)
-    return float(h_factor or 1.0), z_to_metres_factor(crs), h_name, v_name
-
-
 def _units(measured: Any, check: Any, notes: list[str]) -> tuple[Any, float, float]:
-    """The CRS both inputs are in (MEASURED's, else CHECK's) and its factors to metres.
+    """The CRS both inputs are in and its factors to metres (notes added to `notes`)."""
+    from ..accuracy.checkpoints import metric_units
 
-    A conversion is noted in `notes`; differing CRSs are refused.
-    """
-    from ..io.crs import ensure_same_crs
-
-    ensure_same_crs(measured, check, what=("MEASURED", "CHECK"))
-    crs = measured if measured is not None else check
-    fh, fv, hname, vname = _unit_factors(crs, "MEASURED" if measured is not None else "CHECK")
-    if fv != 1.0 or fh != 1.0:
-        notes.append(f"coordinates converted to metres (horizontal unit: {hname or 'metre'}, "
-                     f"vertical unit: {vname or 'metre'})")
-        if measured is None or check is None:
-            notes.append("one input has no CRS and is taken to share the other's CRS and units")
+    crs, fh, fv, more = metric_units(measured, check)
+    notes.extend(more)
     return crs, fh, fv
-
-
-def _scaled(xyz: Any, fh: float, fv: float) -> Any:
-    out = xyz.astype(float, copy=True)
-    out[:, :2] *= fh
-    out[:, 2] *= fv
-    return out
 
 
 @click.command()
@@ -219,6 +186,7 @@ def checkpoints(
     glob, a .vpc): each check point is compared in the chunk whose core holds
     it, reading only those chunks; the figures equal one whole-area run.
     """
+    from ..accuracy.checkpoints import scale_points
     from ..errors import OptionError
     from ..io.crs import crs_name
     from ..io.vector import VECTOR_SUFFIXES, PointSet, read_points, write_points
@@ -287,8 +255,8 @@ def checkpoints(
         crs_used, fh, fv = _units(mea.crs, chk.crs, notes)
         with steps("Matching and estimating"):
             report = assess_checkpoints(
-                PointSet(mea.ids, _scaled(mea.xyz, fh, fv)),
-                PointSet(chk.ids, _scaled(chk.xyz, fh, fv)),
+                PointSet(mea.ids, scale_points(mea, fh, fv).xyz),
+                PointSet(chk.ids, scale_points(chk, fh, fv).xyz),
                 transform=transform,
                 control_ids=ctrl,
                 match=match,
@@ -300,9 +268,8 @@ def checkpoints(
     if output is not None:
         res = report.residual_points()
         # write the check points in their own (unconverted) coordinates
-        out = PointSet(
-            res.ids, _scaled(res.xyz, 1.0 / fh, 1.0 / fv), res.attributes, crs=chk.crs or crs_used
-        )
+        out = scale_points(res, 1.0 / fh, 1.0 / fv)
+        out.crs = chk.crs or crs_used
         with steps("Writing " + output), reproducible_vectors():
             write_points(out, output, overwrite=settings().overwrite)
 

@@ -46,12 +46,6 @@ from ._common import (
 OUT_SUFFIXES = (".csv", ".gpkg", ".geojson")  # GeoJSON: unfitted map points are written 2D
 
 
-def _check_crs(a: Any, b: Any, names: tuple[str, str]) -> None:
-    from ..io.crs import ensure_same_crs_parts
-
-    ensure_same_crs_parts(a, b, what=names)
-
-
 def _read_reference(path: str, crs: Any = None) -> Any:
     from ..io.vector import PointSet, read_points
 
@@ -306,7 +300,7 @@ def heights(
     """
     from ..accuracy.heights import read_map_points
     from ..errors import OptionError
-    from ..io.crs import require_metric_xy, z_to_metres_factor
+    from ..io.crs import require_metric_xy
     from ..tiling.jobs_api import catalog_heights
 
     if output is not None and Path(output).suffix.lower() not in OUT_SUFFIXES:
@@ -338,22 +332,18 @@ def heights(
         if _is_polygon_map(map_path):
             return _heights_by_levels(
                 steps, source.select(classes=classes, source_id=source_id), cloud, map_path,
-                reference, output, classes=classes, spacing=spacing, **common,
+                _read_reference(reference, given), reference, output, classes=classes,
+                source_id=source_id, spacing=spacing, **common,
             )  # fmt: skip
         with steps("Reading map and reference points"):
             mp = read_map_points(map_path, spacing=spacing, crs=given)
             ref = _read_reference(reference, given)
-            _check_crs(native, mp.crs, ("cloud", "map"))
-            _check_crs(native, ref.crs, ("cloud", "reference"))
-            _check_crs(mp.crs, ref.crs, ("map", "reference"))
-            ref_xyz = ref.xyz.copy()
-            ref_xyz[:, 2] *= z_to_metres_factor(ref.crs if ref.crs is not None else native)
         options: dict[str, Any] = dict(
             common, correlation=correlation, eq8_diagonal=eq8_diagonal, posterior=posterior,
             largest_segment=largest_segment,
         )
         with steps(f"Fitting {len(mp):,} map points, testing {len(ref):,} reference points"):
-            run = catalog_heights(source, mp.xyz[:, :2], ref_xyz, classes=classes,
+            run = catalog_heights(source, mp, ref, classes=classes,
                                   source_id=source_id, options=options, **run_opts)
     report = run.value
     done = report.to_dict()
@@ -434,10 +424,12 @@ def _heights_by_levels(
     source: Any,
     cloud: str,
     map_path: str,
+    ref: Any,
     reference: str,
     output: str | None,
     *,
     classes: Any,
+    source_id: Any,
     spacing: float,
     alpha: float,
     sigma_ref: float,
@@ -445,24 +437,16 @@ def _heights_by_levels(
     **opts: Any,
 ) -> None:
     """``lidarqa heights`` with road polygons: test each reference point on its own level."""
-    from ..accuracy.roads import compare_road_heights, read_road_polygons, reconstruct_roads
-    from ..io.crs import check_map_crs, z_to_metres_factor
+    from ..tiling.jobs_api import catalog_roads
 
-    with steps("Reading " + cloud):
-        pc = source.read()  # the whole area: roads are reconstructed in one piece (heights in m)
-    with steps("Reading road polygons and reference points"):
-        polys, ids, crs = read_road_polygons(map_path)
-        ref = _read_reference(reference)
-        check_map_crs(pc.crs, crs, polys, map_path)
-        _check_crs(pc.crs, ref.crs, ("cloud", "reference"))
-        ref_xyz = ref.xyz.copy()
-        ref_xyz[:, 2] *= z_to_metres_factor(ref.crs if ref.crs is not None else pc.crs)
-    with steps(f"Reconstructing {len(polys):,} road polygons on their height levels"):
-        rec = reconstruct_roads(pc.xyz, polys, ids=ids, spacing=spacing, **opts)
-    with steps(f"Testing {len(ref):,} reference points on their levels"):
-        comp = compare_road_heights(
-            rec, ref_xyz, sigma_ref=sigma_ref, alpha=alpha, estimate_offset=estimate_offset
-        )
+    with steps(f"Reconstructing the roads of {map_path} from {cloud}, testing "
+               f"{len(ref):,} reference points on their levels"):
+        run = catalog_roads(source, map_path, reference=ref, classes=classes,
+                            source_id=source_id, options=dict(opts, spacing=spacing),
+                            compare_options=dict(sigma_ref=sigma_ref, alpha=alpha,
+                                                 estimate_offset=estimate_offset))
+    extra: dict[str, Any] = run.extra
+    rec, comp, ref_xyz = run.value, extra["comparison"], extra["reference_xyz"]
     mp = rec.map_points
     if output is not None:
         from ..io.vector import write_points
@@ -471,7 +455,7 @@ def _heights_by_levels(
             mp, mp.xy_laser, ref_xyz,
             {"model_height": comp.height, "model_sigma": comp.sigma, "dh": comp.comparison.dh,
              "sigma_dh": comp.comparison.sigma_dh, "w": comp.w.w, "outlier": comp.w.outlier},
-            _ids(np.arange(len(mp)), ref.ids), pc.crs or crs or ref.crs,
+            _ids(np.arange(len(mp)), ref.ids), run.extra["crs"] or ref.crs,
             (*_MAP_FIELDS, "failed", "reason"), road=np.concatenate([mp.road, comp.road]))
         with steps("Writing " + output):
             write_points(rows, output, overwrite=settings().overwrite, layer="heights")
@@ -480,8 +464,8 @@ def _heights_by_levels(
     c, w = res["comparison"], res["w"]
     dx, dy = res_roads["shift"]
     echo(
-        f"road levels       {res_roads['n_roads']:,} road(s) from {len(polys):,} polygons; "
-        f"map shift dx {dx:+.3f} m, dy {dy:+.3f} m"
+        f"road levels       {res_roads['n_roads']:,} road(s) from "
+        f"{run.extra['n_polygons']:,} polygons; map shift dx {dx:+.3f} m, dy {dy:+.3f} m"
     )
     echo(f"map points        {res_roads['n_map_points']:,} ({res_roads['n_failed']:,} not fitted)")
     echo(f"  σ mean / p95    {_fmt(res_roads['sigma_mean'])} / {_fmt(res_roads['sigma_p95'])}")

@@ -133,46 +133,25 @@ def roads(
     (plane, laser block and model terms). The map-to-laser shift is estimated
     unless given. Writes 3D map points, 3D polygons (one per level) and a TIN.
     """
-    from ..accuracy.roads import read_road_polygons, reconstruct_roads, write_roads
-    from ..io.crs import check_map_crs, z_to_metres_factor
-    from ..tiling.source import open_source
+    from ..accuracy.roads import write_roads
+    from ..tiling.jobs_api import catalog_roads
 
     given_crs = input_crs(crs)
     prepare_outputs(output, inputs=(cloud, map_path))
     given = _parse_shift(shift)
     steps = Steps()
-    with steps("Reading " + cloud):
-        # a file, or a catalog (folder, glob, .vpc) read as one region through its source
-        pc = open_source(cloud, crs=given_crs, classes=classes or None,
-                         z_to_metres=False).read(require_points=False)
-        xyz = pc.xyz.copy()
-        xyz[:, 2] *= z_to_metres_factor(pc.crs)
-    with steps("Reading map polygons"):
-        polys, ids, map_crs = read_road_polygons(map_path)
-        if map_crs is None and given_crs is not None:
-            map_crs = given_crs  # --crs: the CRS of inputs that declare none
-        check_map_crs(pc.crs, map_crs, polys, map_path)
-    with steps(f"Reconstructing {len(polys):,} polygons from {len(xyz):,} points"):
-        rec = reconstruct_roads(
-            xyz,
-            polys,
-            ids=ids,
-            spacing=spacing,
-            shift=given,
-            max_shift=max_shift,
-            tolerance=tolerance,
-            min_area=min_area,
-            radius=radius,
-            max_radius=max_radius,
-            min_points=min_points,
-            sigma_point=sigma_point,
-            sigma_gps=sigma_gps,
-            sigma_ins=sigma_ins,
-            sigma_strip=sigma_strip,
-            curvature=curvature,
-        )
+    with steps(f"Reconstructing the roads of {map_path} from {cloud}"):
+        # a file, or a catalog (folder, glob, .vpc) read as one region, heights in metres
+        run = catalog_roads(
+            cloud, map_path, classes=classes or None, crs=given_crs,
+            options=dict(spacing=spacing, shift=given, max_shift=max_shift,
+                         tolerance=tolerance, min_area=min_area, radius=radius,
+                         max_radius=max_radius, min_points=min_points, sigma_point=sigma_point,
+                         sigma_gps=sigma_gps, sigma_ins=sigma_ins, sigma_strip=sigma_strip,
+                         curvature=curvature))
+    rec = run.value
     with steps("Writing " + output):
-        write_roads(rec, output, crs=pc.crs or map_crs, overwrite=settings().overwrite)
+        write_roads(rec, output, crs=run.extra["crs"], overwrite=settings().overwrite)
     res = rec.to_dict()
     dx, dy = res["shift"]
     how = "estimated" if res["shift_estimated"] else "given"

@@ -221,6 +221,20 @@ class RunContext:
             self._clouds[name] = cloud
         return self._clouds[name]
 
+    def source(self, name: str, classes: Any = None, source_id: Any = None) -> Any:
+        """Cloud input `name` as a :class:`~lidarqa.tiling.source.Source` with a selection.
+
+        The one way an analysis reads a cloud, as the CLI does: its CRS, heights converted
+        to metres and the selection applied at read time, for a file (the cloud read once,
+        one in-memory region) and for a catalog (read chunk by chunk) alike.
+        """
+        from ..tiling.source import open_source
+
+        spec = self.config.inputs[name]
+        src: Any = str(spec.path) if self.is_catalog(name) else self.cloud(name)
+        return open_source(src, crs=spec.effective_crs or self.crs, classes=classes,
+                           source_id=source_id)
+
     def segments(self, name: str) -> Any:
         if name not in self._segments:
             from ..io.vector import read_segments

@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from ._schema import Key, Target
+from .labels import Label
 
 __all__ = [
     "AnalysisSpec",
@@ -124,9 +125,12 @@ def register(
         Report labels (with units) of the kind's own parameters and figures
         that :data:`lidarqa.report.labels.LABELS` does not have yet.
     """
-    if labels:
-        from . import labels as _labels
+    from . import labels as _labels
 
+    # the targets' labels from their own definitions, per kind: swaths' max |dz| is not
+    # heights' max |Δh| (a target row is looked up as ``<kind>.targets.<metric>``)
+    _labels.add({f"{kind}.targets.{t.metric}": target_label(t) for t in (targets or {}).values()})
+    if labels:
         _labels.add(labels)
 
     def deco(func: Callable[..., Any]) -> Callable[..., Any]:
@@ -154,6 +158,12 @@ def register(
         return func
 
     return deco
+
+
+def target_label(target: Target) -> Label:
+    """The report label of a target: ``"target: RMSE z at most"``, with its unit and scale."""
+    bound = "at most" if target.direction == "max" else "at least"
+    return Label(f"target: {target.label} {bound}", target.unit, target.scale)
 
 
 def _load_builtin() -> None:

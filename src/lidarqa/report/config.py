@@ -522,8 +522,20 @@ def _check_crs(inputs: dict[str, InputSpec], expected: Any, used: set[str]) -> d
         except Exception:
             return a == b
 
+    def same_parts(a: Any, b: Any) -> bool:
+        # as the commands compare inputs: horizontal and vertical parts apart, so a 2D map
+        # matches a cloud whose CRS adds a vertical datum (heights converted to metres)
+        from ..errors import CRSMismatchError
+        from ..io.crs import ensure_same_crs_parts
+
+        try:
+            ensure_same_crs_parts(a, b)
+        except CRSMismatchError:
+            return False
+        return True
+
     out: dict[str, InputSpec] = {}
-    first: tuple[str, Any] | None = None
+    seen: list[tuple[str, Any]] = []
     for name, spec in inputs.items():
         file_crs = read_header_crs(spec)
         if file_crs is not None and spec.crs is not None and not same(file_crs, spec.crs):
@@ -536,7 +548,7 @@ def _check_crs(inputs: dict[str, InputSpec], expected: Any, used: set[str]) -> d
         crs = spec.effective_crs
         if crs is None:
             continue
-        if expected is not None and not same(crs, expected):
+        if expected is not None and not same_parts(crs, expected):
             raise ConfigCRSMismatchError(
                 f"input {name!r} has CRS {crs_name(crs)} but the config's 'crs' is "
                 f"{crs_name(expected)}; "
@@ -544,11 +556,11 @@ def _check_crs(inputs: dict[str, InputSpec], expected: Any, used: set[str]) -> d
             )
         if name not in used:
             continue
-        if first is None:
-            first = (name, crs)
-        elif not same(crs, first[1]):
-            raise ConfigCRSMismatchError(
-                f"inputs {first[0]!r} ({crs_name(first[1])}) and {name!r} ({crs_name(crs)}) have "
-                "different CRSs; reproject one of them first"
-            )
+        for other, other_crs in seen:
+            if not same_parts(crs, other_crs):
+                raise ConfigCRSMismatchError(
+                    f"inputs {other!r} ({crs_name(other_crs)}) and {name!r} ({crs_name(crs)}) "
+                    "have different CRSs; reproject one of them first"
+                )
+        seen.append((name, crs))
     return out

@@ -287,8 +287,15 @@ def _verdict(v: str) -> str:
 
 
 def _parameter_rows(params: dict[str, Any]) -> list[list[Any]]:
-    """Label rows of one analysis' parameters; a nested copy equal to the top level is dropped."""
-    rows = labelled_rows(params, none="auto")
+    """Label rows of one analysis' parameters; a nested copy equal to the top level is dropped.
+
+    Labels are looked up under the analysis kind first (``swaths.targets.max_abs``).
+    """
+    params = dict(params)
+    kind = params.pop("kind", None)
+    rows = labelled_rows(params, prefix=kind or "", none="auto")
+    if kind:
+        rows = [[label, value, path.split(".", 1)[1]] for label, value, path in rows]
     seen = {r[2].split(".")[-1]: r[1] for r in rows if r[2].count(".") == 1}
     out = []
     for label, value, path in rows:

@@ -431,6 +431,7 @@ def run_assessment(
             sections=sections,
             parameters={
                 pid: {
+                    "kind": p["kind"],
                     "options": p["options"],
                     "parameters": p["params"],
                     **({"targets": p["targets"]} if p["targets"] else {}),

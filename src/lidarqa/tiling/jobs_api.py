@@ -11,6 +11,8 @@ chunk results into the result of one in-memory run over the whole area:
 * :func:`catalog_vertical_check` -- ``checkpoints --vertical``;
 * :func:`catalog_heights` -- map point heights and w-tests against reference
   points (:mod:`lidarqa.tiling.jobs_accuracy`);
+* :func:`catalog_roads` -- 3D roads from map polygons (one region: the roads are
+  reconstructed in one piece), reference points tested on their levels;
 * :func:`catalog_repeatability` -- line repeatability of every flight-strip
   pair over the whole block (:mod:`lidarqa.tiling.jobs_lines`).
 
@@ -31,6 +33,7 @@ from __future__ import annotations
 
 import inspect
 import math
+import os
 from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
@@ -55,6 +58,7 @@ __all__ = [
     "catalog_features",
     "catalog_heights",
     "catalog_repeatability",
+    "catalog_roads",
     "catalog_vertical_check",
     "open_sources",
 ]
@@ -230,8 +234,8 @@ def catalog_vertical_check(
 
 def catalog_heights(
     sources: Sources,
-    map_xy: ArrayLike,
-    reference_xyz: ArrayLike,
+    map_xy: PointSet | ArrayLike,
+    reference_xyz: PointSet | ArrayLike,
     *,
     classes: Sequence[int] | None = None,
     source_id: Sequence[int] | None = None,
@@ -241,7 +245,11 @@ def catalog_heights(
     """Height quality (map point heights, TIN, w-tests) over a catalog.
 
     The laser points are read through the source: its selection (``classes``,
-    ``source_id``) and its heights in metres; `reference_xyz` must be in metres.
+    ``source_id``) and its heights in metres. Map and reference points given as
+    :class:`~lidarqa.io.vector.PointSet` are checked against the source's CRS
+    (horizontal and vertical parts; ``crs`` is theirs when they declare none) and
+    the reference heights converted to metres (:func:`points_in_metres`); arrays
+    are taken as already in the source's CRS, heights in metres.
     One file (without `chunk_size` or `buffer`) is one region: the in-memory run.
 
     Map points are fitted from the chunk that owns them; a chunk whose buffer
@@ -255,6 +263,14 @@ def catalog_heights(
     open_opts, chunk_opts, run_opts = _split(dict(common))
     catalog = open_sources(sources, classes=classes or None, source_id=source_id or None,
                            **open_opts)
+    if isinstance(map_xy, PointSet) and isinstance(reference_xyz, PointSet):
+        from ..io.crs import ensure_same_crs_parts
+
+        ensure_same_crs_parts(map_xy.crs, reference_xyz.crs, what=("map", "reference"))
+    if isinstance(map_xy, PointSet):
+        map_xy = points_in_metres(map_xy, catalog, "map").xyz[:, :2]
+    if isinstance(reference_xyz, PointSet):
+        reference_xyz = points_in_metres(reference_xyz, catalog, "reference").xyz
     mxy = np.asarray(map_xy, dtype=np.float64)
     mxy = mxy.reshape(-1, mxy.shape[-1] if mxy.ndim == 2 else 2)[:, :2]
     ref = np.asarray(reference_xyz, dtype=np.float64).reshape(-1, 3)
@@ -271,6 +287,103 @@ def catalog_heights(
     outcomes, parts = _run(catalog, chunks, task, run_opts, "Heights")
     value = merge_heights(parts, mxy, ref, options=dict(options or {}))
     return CatalogRun(value, catalog, tuple(chunks), tuple(outcomes))
+
+
+def points_in_metres(points: PointSet, source: Source, what: str) -> PointSet:
+    """`points` checked against `source`'s CRS, heights in metres (as the source reads its own).
+
+    The CRS of `points` (the source's given one, ``--crs``, when they declare none) must
+    agree with the source's files on the horizontal and on the vertical part; heights are
+    converted with the factor of their own vertical unit (the source's when they have no
+    CRS). x, y stay in the CRS's units, as the source's points.
+
+    Raises
+    ------
+    CRSMismatchError
+        The CRSs differ (named with `what`).
+    """
+    from ..io.crs import ensure_same_crs_parts, z_to_metres_factor
+
+    crs = points.crs if points.crs is not None else source.given_crs
+    ensure_same_crs_parts(source.native_crs, crs, what=("cloud", what))
+    xyz = np.array(points.xyz, dtype=np.float64)
+    xyz[:, 2] *= z_to_metres_factor(crs if crs is not None else source.native_crs)
+    return PointSet(points.ids, xyz, dict(points.attributes), crs=crs)
+
+
+def catalog_roads(
+    sources: Sources,
+    polygons: str | os.PathLike[str],
+    *,
+    reference: PointSet | ArrayLike | None = None,
+    classes: Sequence[int] | None = (2, 17),
+    source_id: Sequence[int] | None = None,
+    options: Mapping[str, object] | None = None,
+    compare_options: Mapping[str, object] | None = None,
+    **common: object,
+) -> CatalogRun:
+    """3D roads from the map polygons at `polygons`, over a file or a catalog.
+
+    The one road job of ``lidarqa roads``, ``lidarqa heights`` with a polygon map and
+    the report's ``[roads]``: the selected points of the whole area are read through
+    the source (heights in metres) and the roads reconstructed in one piece
+    (:func:`~lidarqa.accuracy.roads.reconstruct_roads`). The map's CRS (``crs``, or the
+    source's given CRS, when it declares none) must agree with the cloud's
+    (:func:`~lidarqa.io.crs.check_map_crs`). `reference` points (a PointSet: checked and
+    converted as by :func:`points_in_metres`; an array: metres) are tested on their
+    road levels (:func:`~lidarqa.accuracy.roads.compare_road_heights` with
+    `compare_options`).
+
+    Parameters
+    ----------
+    sources : Catalog, Source, path, folder, glob, .vpc or a list of those
+    polygons : path
+        Road polygons (.gpkg, .geojson).
+    reference : PointSet or array of shape (R, 3), optional
+    classes, source_id : sequence of int, optional
+        Laser points used (default ground and bridge deck, 2 and 17).
+    options : dict, optional
+        Keywords of :func:`~lidarqa.accuracy.roads.reconstruct_roads`.
+    compare_options : dict, optional
+        ``sigma_ref``, ``alpha``, ``estimate_offset``.
+    **common
+        ``crs``, ``skip_bad`` (the roads are one region: no chunk or engine options).
+
+    Returns
+    -------
+    CatalogRun
+        ``value`` the :class:`~lidarqa.accuracy.roads.RoadReconstruction`; ``extra``
+        ``comparison`` (or None), ``reference_xyz`` (m), ``points`` (the laser points
+        used, m), ``n_polygons``, ``crs`` (of the outputs: the cloud's, else the map's).
+    """
+    from ..accuracy.roads import compare_road_heights, read_road_polygons, reconstruct_roads
+    from ..io.crs import check_map_crs, parse_crs
+
+    open_opts, chunk_opts, run_opts = _split(dict(common))
+    if chunk_opts["chunk_size"] is not None or chunk_opts["buffer"] is not None or run_opts.get(
+            "engine") is not None:
+        raise OptionError("roads are reconstructed in one piece: no --chunk-size, --buffer or "
+                          "engine")
+    catalog = open_sources(sources, classes=classes or None, source_id=source_id or None,
+                           **open_opts)
+    cloud = catalog.read(require_points=False)
+    polys, ids, map_crs = read_road_polygons(polygons)
+    if map_crs is None:  # the CRS of inputs that declare none
+        given = parse_crs(open_opts["crs"])
+        map_crs = given if given is not None else catalog.given_crs
+    check_map_crs(catalog.native_crs, map_crs, polys, polygons)
+    recon: dict[str, Any] = dict(options or {})
+    rec = reconstruct_roads(cloud.xyz, polys, ids=ids, **recon)
+    comp, ref_xyz = None, None
+    if reference is not None:
+        ref_xyz = (points_in_metres(reference, catalog, "reference").xyz
+                   if isinstance(reference, PointSet)
+                   else np.asarray(reference, dtype=np.float64).reshape(-1, 3))
+        compare: dict[str, Any] = dict(compare_options or {})
+        comp = compare_road_heights(rec, ref_xyz, **compare)
+    return CatalogRun(rec, catalog, (), (),
+                      {"comparison": comp, "reference_xyz": ref_xyz, "points": cloud.xyz,
+                       "n_polygons": len(polys), "crs": catalog.crs or map_crs})
 
 
 def heights_buffer(map_xy: ArrayLike, options: Mapping[str, object] | None = None) -> float:

@@ -441,7 +441,7 @@ def _as_list(paths: PathsInput) -> list[str]:
 
 
 def open_source(
-    paths: PathsInput | Catalog | Source,
+    paths: PathsInput | Catalog | Source | PointCloud,
     *,
     crs: CRSInput = None,
     classes: IntsInput = None,
@@ -457,7 +457,9 @@ def open_source(
 
     Parameters
     ----------
-    paths : path, glob pattern, folder, .vpc, a list of those, or a Catalog/Source
+    paths : path, glob pattern, folder, .vpc, a list of those, a Catalog/Source, or a PointCloud
+        A :class:`~lidarqa.io.PointCloud` already in memory is one region (e.g. the
+        report's cached cloud), read with the same selection and units as a file.
     crs : optional
         CRS of inputs that declare none (``--crs``: EPSG code, WKT, pyproj CRS).
         Inputs that declare another CRS are refused (:class:`CRSMismatchError`).
@@ -479,6 +481,7 @@ def open_source(
     >>> cloud = src.read()                                                # doctest: +SKIP
     """
     from ..io.crs import parse_crs, resolve_crs, z_to_metres_factor
+    from ..io.pointcloud import PointCloud
     from .catalog import Catalog, open_catalog
 
     sel = Selection(_ints(classes, "classes"), _ints(source_id, "source_id"))
@@ -488,6 +491,8 @@ def open_source(
     given = parse_crs(crs)
     if isinstance(paths, Catalog):
         catalog, names, cloud = paths, tuple[str, ...](), None
+    elif isinstance(paths, PointCloud):
+        catalog, names, cloud = None, tuple[str, ...](), paths
     else:
         names = tuple(_as_list(paths))
         if not names:

@@ -194,15 +194,13 @@ def run_checkpoints(ctx: RunContext, item: AnalysisItem) -> SectionResult:
         # one job for a file (the report's cloud, one in-memory region) and a catalog (chunk
         # by chunk, only the chunks holding check points are read)
         from ...tiling.jobs_api import catalog_vertical_check
-        from ...tiling.source import Source, open_source
 
         on_catalog = is_catalog_input(str(spec.path))
-        cloud = None if on_catalog else ctx.cloud(opts["measured"])
-        source = (open_source(str(spec.path), z_to_metres=False) if cloud is None
-                  else Source(catalog=None, cloud=cloud))
+        source = ctx.source(opts["measured"])  # as the CLI: its CRS, heights in metres
+        notes.extend(mod.metric_units(source.native_crs, check.crs)[3])
         params = dict(item.params)
         classes = params.pop("classes", (2,))
-        no_classes = cloud is not None and cloud.classification is None  # all points: TIN
+        no_classes = source.cloud is not None and source.cloud.classification is None
         with ctx.step(f"Vertical check of {measured_label}"):
             job = catalog_vertical_check(
                 source, check, classes=None if no_classes else tuple(np.atleast_1d(classes)),
@@ -224,8 +222,12 @@ def run_checkpoints(ctx: RunContext, item: AnalysisItem) -> SectionResult:
         )
     else:
         measured = ctx.points(opts["measured"])
+        # the unit rule of `lidarqa checkpoints`: both in metres, a conversion noted
+        _, fh, fv, converted = mod.metric_units(measured.crs, check.crs)
+        notes.extend(converted)
         with ctx.step("Comparing check points"):
-            rep = mod.assess_checkpoints(measured, check, **item.params)
+            rep = mod.assess_checkpoints(mod.scale_points(measured, fh, fv),
+                                         mod.scale_points(check, fh, fv), **item.params)
         residuals = rep.residuals
         xyz = rep.check_xyz
         paragraphs.append(

@@ -128,23 +128,22 @@ def run_heights(ctx: RunContext, item: AnalysisItem) -> SectionResult:
     is read chunk by chunk, each map and reference point owned by one chunk.
     """
     from ...tiling.jobs_api import catalog_heights
-    from ...tiling.source import Source, is_catalog_input, open_source
+    from ...tiling.source import open_source
     from ..catalog_overview import with_overview
 
     mod = import_module("lidarqa.accuracy.heights", "heights")
     opts = item.options
     label = selection_label(opts["cloud"], opts["classes"], opts["source_ids"])
     r, m = opts["reference"], opts["map"]
-    path = str(ctx.config.inputs[opts["cloud"]].path)
-    on_catalog = isinstance(r, str) and isinstance(m, str) and is_catalog_input(path)
+    on_catalog = isinstance(r, str) and isinstance(m, str) and ctx.is_catalog(opts["cloud"])
     laser: Any = None  # the laser points of one in-memory region (None on a catalog)
+    # the cloud as the CLI reads it: its CRS, heights in metres, the selection
+    source: Any = ctx.source(opts["cloud"], opts["classes"], opts["source_ids"])
     if on_catalog:
-        source: Any = open_source(path, z_to_metres=False, classes=opts["classes"],
-                                  source_id=opts["source_ids"])
         label += (" (a catalog: each map point is fitted, and each reference point compared, "
                   "in the chunk whose core holds it)")
     else:
-        sel = ctx.select(opts["cloud"], opts["classes"], opts["source_ids"])
+        sel = source.read(require_points=False)
         keep = np.arange(len(sel))
         if not isinstance(r, str):  # reference points held apart from the laser points
             rng = np.random.default_rng(r["seed"])
@@ -156,25 +155,30 @@ def run_heights(ctx: RunContext, item: AnalysisItem) -> SectionResult:
             ref_xyz = sel.xyz[np.sort(ref_idx)]
         cloud = sel.subset(keep) if len(keep) < len(sel) else sel
         laser = cloud.xyz
-        source = Source(catalog=None, cloud=cloud)
-    if isinstance(r, str):
-        ref_xyz = ctx.points(r).xyz
+        source = open_source(cloud, crs=source.given_crs)  # read: heights already in metres
+    ref: Any = None
+    if isinstance(r, str):  # checked against the cloud's CRS, heights to metres by the job
+        ref = ctx.points(r)
         ref_label = r
     else:
         ref_label = (
             f"{len(ref_xyz):,} points held apart from {label} (fraction {r['fraction']}, "
             f"seed {r['seed']}); the planes use the other {len(laser):,}"
         )
+    map_xy: Any
     if isinstance(m, str):
-        mp = mod.read_map_points(ctx.config.inputs[m].path, spacing=opts["map_spacing"])
-        map_xy = mp.xyz[:, :2]
+        spec = ctx.config.inputs[m]
+        map_xy = mod.read_map_points(spec.path, spacing=opts["map_spacing"],
+                                     crs=spec.effective_crs or ctx.crs)
         map_label = f"{len(map_xy)} map points from {m}"
     else:
         map_xy = grid_map_points(laser, m["grid"], min_points=m["min_points"])
         map_label = f"{len(map_xy)} map points on a {m['grid']:g} m grid where laser points exist"
-    with ctx.step(f"Heights of {len(map_xy):,} map points, {len(ref_xyz):,} reference points"):
-        run = catalog_heights(source, map_xy, ref_xyz, options=dict(item.params),
-                              skip_failed=on_catalog)
+    with ctx.step(f"Heights of {len(map_xy):,} map points, "
+                  f"{len(ref if ref is not None else ref_xyz):,} reference points"):
+        run = catalog_heights(source, map_xy, ref if ref is not None else ref_xyz,
+                              options=dict(item.params), skip_failed=on_catalog)
+    ref_xyz = run.value.reference_xyz
     out = _heights_section(ctx, item, run.value, laser, ref_xyz,
                            f"Laser points: {label}. Map points: {map_label}. "
                            f"Reference: {ref_label}.")

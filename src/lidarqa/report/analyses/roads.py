@@ -66,18 +66,24 @@ def run_roads(ctx: Any, item: Any) -> SectionResult:
     """Reconstruct the 3D roads, write them, and w-test reference points on their levels."""
     from ...errors import MissingDependencyError
     from ...io.vector import PointSet
+    from ...tiling.jobs_api import catalog_roads
     from .. import plots
 
     mod = _import("lidarqa.accuracy.roads", "roads")
     opts = item.options
     notes: list[str] = []
-    sel = ctx.select(opts["cloud"], opts["classes"], opts["source_ids"])
     label = selection_label(opts["cloud"], opts["classes"], opts["source_ids"])
-    polys, ids, _crs = mod.read_road_polygons(ctx.config.inputs[opts["map"]].path)
-    with ctx.step(f"Reconstructing {len(polys):,} road polygons"):
-        rec = mod.reconstruct_roads(
-            sel.xyz, polys, ids=ids, spacing=opts["map_spacing"], **item.params
-        )
+    # the one road job of `lidarqa roads` and `lidarqa heights` with polygons: heights in
+    # metres, the map's CRS checked against the cloud's
+    spec = ctx.config.inputs[opts["map"]]
+    ref = None if opts["reference"] is None else ctx.points(opts["reference"])
+    with ctx.step("Reconstructing the road polygons"):
+        run = catalog_roads(ctx.source(opts["cloud"]), spec.path, reference=ref,
+                            classes=opts["classes"], source_id=opts["source_ids"],
+                            crs=spec.effective_crs or ctx.crs,
+                            options=dict(item.params, spacing=opts["map_spacing"]))
+    extra: dict[str, Any] = run.extra
+    rec, comp, laser, n_polys = run.value, extra["comparison"], extra["points"], extra["n_polygons"]
     res = rec.to_dict()
     mp = rec.map_points
     path = ctx.output_path(item, "roads3d.gpkg")
@@ -101,14 +107,11 @@ def run_roads(ctx: Any, item: Any) -> SectionResult:
         from ...io.vector import write_points
 
         write_points(pts, ctx.output_path(item, "map_points.csv"), overwrite=True)
-    comp = None
-    if opts["reference"] is not None:
-        ref_xyz = ctx.points(opts["reference"]).xyz
-        comp = mod.compare_road_heights(rec, ref_xyz)
+    if comp is not None:
         res["reference"] = comp.to_dict()
     lo, hi = mp.xy_laser.min(axis=0) - 20.0, mp.xy_laser.max(axis=0) + 20.0
-    near = np.all((sel.xyz[:, :2] >= lo) & (sel.xyz[:, :2] <= hi), axis=1)
-    background = sel.xyz[near, :2]
+    near = np.all((laser[:, :2] >= lo) & (laser[:, :2] <= hi), axis=1)
+    background = laser[near, :2]
     for flag in rec.flags:
         notes.append(
             {
@@ -193,5 +196,5 @@ def run_roads(ctx: Any, item: Any) -> SectionResult:
         figures=figures,
         tables=tables,
         notes=notes,
-        paragraphs=[f"Laser points: {label}. Map: {opts['map']} ({len(polys)} polygons)."],
+        paragraphs=[f"Laser points: {label}. Map: {opts['map']} ({n_polys} polygons)."],
     )

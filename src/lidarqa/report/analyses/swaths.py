@@ -92,9 +92,6 @@ LABELS = {
     "range_cell": Label("repeatability range cell (auto when empty)", "m"),
     "reference_strip": Label("strip held fixed in the network (auto when empty)"),
     "rotations": Label("also estimate small rotations per strip"),
-    "targets.rmsdz": Label("target: worst pair RMSDz at most", "m"),
-    "targets.repeatability": Label("target: repeatability at most", "m"),
-    "targets.e4": Label("target: E4 strip noise at most", "m"),
 }
 
 
