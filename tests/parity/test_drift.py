@@ -287,7 +287,8 @@ def test_checkpoints_in_feet_give_the_same_answer_through_the_cli_and_assess(tmp
     crs = parse_crs("EPSG:2263+6360")  # NY Long Island (US ft) + NAVD88 height (US ft)
     write_points(PointSet(ids, chk, crs=crs), tmp_path / "chk.gpkg")
     write_points(PointSet(ids, mea, crs=crs), tmp_path / "mea.gpkg")
-    c = cli_results(tmp_path, "checkpoints", tmp_path / "mea.gpkg", tmp_path / "chk.gpkg")
+    c = cli_results(tmp_path, "checkpoints", tmp_path / "mea.gpkg", tmp_path / "chk.gpkg",
+                    "-o", tmp_path / "res.csv")
     doc = assess(tmp_path, f"""
 title = "checkpoints"
 [inputs.points]
@@ -303,6 +304,18 @@ check = "chk"
     assert c["rmse_z"] == pytest.approx(np.sqrt(np.mean(d[:, 2] ** 2)) * FT, rel=1e-6)
     for k in ("n_check", "rmse_x", "rmse_y", "rmse_z", "rmse_h", "rmse_3d", "mean_z"):
         assert r[k] == pytest.approx(c[k], abs=1e-6), (k, r[k], c[k])
+    # the residual files: check points at their own coordinates (feet, as their CRS says)
+    # and residuals in metres, from the CLI and from the report alike
+    from lidarqa.io.vector import read_points
+
+    cli_res = read_points(tmp_path / "res.csv")
+    rep_csv = sorted((tmp_path / "out0").rglob("*residuals*.csv"))
+    assert rep_csv, list((tmp_path / "out0").rglob("*"))
+    rep_res = read_points(rep_csv[0])
+    order = np.argsort(np.asarray(rep_res.ids, dtype=str))
+    cli_order = np.argsort(np.asarray(cli_res.ids, dtype=str))
+    np.testing.assert_allclose(rep_res.xyz[order], cli_res.xyz[cli_order], atol=1e-3)
+    np.testing.assert_allclose(cli_res.xyz[cli_order], chk[np.argsort(ids.astype(str))], atol=1e-3)
 
 
 @pytest.mark.parametrize("side", ["file", "folder"])

@@ -206,6 +206,7 @@ def run_checkpoints(ctx: RunContext, item: AnalysisItem) -> SectionResult:
                 source, check, classes=None if no_classes else tuple(np.atleast_1d(classes)),
                 source_id=opts["source_ids"], skip_failed=on_catalog, **params)
         rep = job.value
+        fh, fv = source.xy_factor, source.z_factor
         if on_catalog:
             run = job
             paragraphs.append(
@@ -235,7 +236,9 @@ def run_checkpoints(ctx: RunContext, item: AnalysisItem) -> SectionResult:
             "(transformed) measured − check."
         )
     res = rep.to_dict()
-    res_pts = rep.residual_points()
+    # as `lidarqa checkpoints -o`: the check points in their own (unconverted) coordinates,
+    # the residuals in metres
+    res_pts = mod.scale_points(rep.residual_points(), 1.0 / fh, 1.0 / fv)
     res_pts.crs = check.crs if check.crs is not None else ctx.crs  # outputs carry the CRS
     write_vector(ctx, item, res_pts, "residuals", opts["format"], notes)
     if opts["format"] != "csv":
