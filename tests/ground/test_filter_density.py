@@ -43,6 +43,12 @@ def _reference_thin(p: np.ndarray, cell: float):
     return order[first]
 
 
+def _rounded_cloud(rng: np.random.Generator, n: int, dup: bool) -> np.ndarray:
+    """n points on a 0.1 m lattice (ties in every coordinate), half repeated when `dup`."""
+    p = np.round(rng.uniform(-20, 20, (n, 3)), 1) + [600000.0, 6800000.0, 0.0]
+    return np.vstack([p, p[: n // 2]]) if dup else p
+
+
 @settings(max_examples=40, deadline=None)
 @given(
     n=st.integers(1, 400),
@@ -52,9 +58,7 @@ def _reference_thin(p: np.ndarray, cell: float):
 )
 def test_thin_lowest_matches_a_sort_and_ignores_order(n, cell, dup, seed):
     rng = np.random.default_rng(seed)
-    p = np.round(rng.uniform(-20, 20, (n, 3)), 1) + [600000.0, 6800000.0, 0.0]
-    if dup:
-        p = np.vstack([p, p[: n // 2]])
+    p = _rounded_cloud(rng, n, dup)
     win, inv, cells = thin_lowest(p, cell)
     ref = _reference_thin(p, cell)
     assert sorted(map(tuple, p[win])) == sorted(map(tuple, p[ref]))
@@ -78,9 +82,7 @@ def test_thin_median_matches_a_lexsort(n, cell, dup, seed):
     # the terrain model's median point per cell: (z, x, y, index) order, middle one;
     # 100 m cells put hundreds of points in one cell (the merge-sort branch)
     rng = np.random.default_rng(seed)
-    p = np.round(rng.uniform(-20, 20, (n, 3)), 1) + [600000.0, 6800000.0, 0.0]
-    if dup:
-        p = np.vstack([p, p[: n // 2]])
+    p = _rounded_cloud(rng, n, dup)
     idx = np.sort(rng.choice(len(p), max(1, len(p) * 3 // 4), replace=False))
     q = p[idx]
     key = np.floor(q[:, :2] / cell)

@@ -79,47 +79,6 @@ def ign(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     return {"folder": folder, "file": base / "merged.laz", "chk": chk, "far": far, "map": mp}
 
 
-@pytest.fixture(scope="module")
-def feet(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    """A synthetic scene with heights in US survey feet (EPSG:26915+6360), as a file and as four
-    tiles, its check points (z in feet) and the same scene in metres."""
-    import lidarqa
-    from lidarqa.io import PointCloud
-    from lidarqa.testing import make_scene, sample_checkpoints
-
-    scene = make_scene(seed=3, size=(80.0, 80.0), density=4.0, returns=True,
-                       origin=(500_000.0, 4_000_000.0, 100.0))
-    base = tmp_path_factory.mktemp("feet")
-    xyz = np.round(np.asarray(scene.points, dtype=np.float64), 3)
-    fields = {"classification": np.asarray(scene.classification, dtype=np.uint8),
-              **{k: np.asarray(v) for k, v in scene.fields.items()}}
-    ft = xyz.copy()
-    ft[:, 2] = np.round(ft[:, 2] / FT, 3)
-    crs_ft = "EPSG:26915+6360"
-    lidarqa.write(PointCloud(ft, dict(fields), crs=lidarqa.io.crs.parse_crs(crs_ft)),
-                  base / "whole_ft.laz")
-    lidarqa.write(PointCloud(xyz, dict(fields), crs=lidarqa.io.crs.parse_crs("EPSG:26915")),
-                  base / "whole_m.laz")
-    folder = base / "tiles_ft"
-    folder.mkdir()
-    gi = np.floor((xyz[:, 0] - 500_000.0) / 40.0)
-    gj = np.floor((xyz[:, 1] - 4_000_000.0) / 40.0)
-    for i in range(2):
-        for j in range(2):
-            sel = (gi == i) & (gj == j)
-            lidarqa.write(PointCloud(ft[sel], {k: v[sel] for k, v in fields.items()},
-                                     crs=lidarqa.io.crs.parse_crs(crs_ft)),
-                          folder / f"t_{i}_{j}.laz")
-    cp = sample_checkpoints(scene, 25, seed=5)
-    rows_ft = [f"{i},{x:.3f},{y:.3f},{z / FT:.4f}" for i, (x, y, z) in zip(cp.ids, cp.xyz,
-                                                                          strict=True)]
-    rows_m = [f"{i},{x:.3f},{y:.3f},{z:.4f}" for i, (x, y, z) in zip(cp.ids, cp.xyz, strict=True)]
-    (base / "chk_ft.csv").write_text("id,x,y,z\n" + "\n".join(rows_ft) + "\n")
-    (base / "chk_m.csv").write_text("id,x,y,z\n" + "\n".join(rows_m) + "\n")
-    return {"file": base / "whole_ft.laz", "folder": folder, "metres": base / "whole_m.laz",
-            "chk": base / "chk_ft.csv", "chk_m": base / "chk_m.csv"}
-
-
 # ------------------------------------------------------------------ info
 
 
