@@ -300,3 +300,40 @@ vertical = true
     for k in ("rmse_z", "mean_z", "std_z"):
         assert r[k] == pytest.approx(c[k], abs=1e-3), (k, r[k], c[k])
         assert c[k] == pytest.approx(m[k], abs=1e-3), k
+
+
+def _ground_labels(tmp: Path, src: Path, *opts: object) -> np.ndarray:
+    """Ground flags of `lidarqa ground SRC` (a file, or a folder: tiles in name order)."""
+    import lidarqa
+
+    out = tmp / f"g{len(list(tmp.glob('g*')))}"
+    target = out if src.is_dir() else out.with_suffix(".laz")
+    cli_results(tmp, "ground", src, "-o", target, *opts)
+    files = sorted(target.glob("*.laz")) if src.is_dir() else [target]
+    return np.concatenate([np.asarray(lidarqa.read(f).classification) == 2 for f in files])
+
+
+def test_ground_filters_a_cloud_in_feet_in_metres(feet, tmp_path):
+    """Regression: the filter ran its metric thresholds on heights in feet (and on x, y in
+    feet): slopes 3.28 times too steep, the density per square foot, another regime."""
+    import lidarqa
+    from lidarqa.io import PointCloud
+    from lidarqa.io.crs import parse_crs
+
+    m = _ground_labels(tmp_path, feet["metres"])
+    z_ft = _ground_labels(tmp_path, feet["file"])  # x, y in metres, z in US survey feet
+    assert np.mean(z_ft == m) >= 0.999
+    cloud = lidarqa.read(feet["metres"])  # every axis in feet (NY Long Island + NAVD88, ftUS)
+    all_ft = PointCloud(np.round(cloud.xyz / FT, 3), dict(cloud.fields),
+                        crs=parse_crs("EPSG:2263+6360"))
+    lidarqa.write(all_ft, tmp_path / "all_ft.laz")
+    assert np.mean(_ground_labels(tmp_path, tmp_path / "all_ft.laz") == m) >= 0.999
+    # a folder in feet, several chunks: the same labels as the file (tiles in name order)
+    tiles = _ground_labels(tmp_path, feet["folder"], "--workers", "1", "--chunk-size", "40")
+    whole = lidarqa.read(feet["file"]).xyz
+    order = []
+    for f in sorted(feet["folder"].glob("*.laz")):
+        t = lidarqa.read(f).xyz
+        idx = {tuple(p): i for i, p in enumerate(np.round(whole, 3).tolist())}
+        order.extend(idx[tuple(p)] for p in np.round(t, 3).tolist())
+    assert np.mean(tiles == z_ft[np.asarray(order)]) >= 0.999

@@ -226,14 +226,18 @@ def ground(
         for msg in cres.warnings:
             click.echo(f"Warning: {msg}", err=True)
         echo(f"{len(catalog.tiles)} tile(s) -> {output}  ({cres.vpc})")
+        from ..io.crs import horizontal_unit, metre_factors
+
+        # chunks are laid in the tiles' own units
+        unit = "m" if metre_factors(catalog.crs)[0] == 1.0 else horizontal_unit(catalog.crs)[0]
         echo(f"  method          {method}")
         auto = cres.parameters.get("auto")
         if auto:
             echo(f"  parameters      auto: {auto['regime']} (measured once on a sample of "
                  "whole tiles)")
         echo(
-            f"  chunks          {cres.n_chunks} of {cres.chunk_size:g} m, "
-            f"buffer {cres.buffer:g} m"
+            f"  chunks          {cres.n_chunks} of {cres.chunk_size:g} {unit}, "
+            f"buffer {cres.buffer:g} {unit}"
             + (f" ({cres.n_chunks_resumed} resumed)" if cres.n_chunks_resumed else "")
         )
         echo(f"  points          {res['n_points']:,}")
@@ -307,6 +311,8 @@ def ground(
         f"  points          {res['n_points']:,} ({res['n_candidates']:,} candidates, "
         f"returns: {res['return_handling']})"
     )
+    for msg in result.warnings:
+        echo(f"  note            {msg}")
     echo_ground_counts(res, result.evaluation)
     echo_terrain(res.get("terrain"))
     finish(

@@ -328,6 +328,16 @@ def classify_ground(
     cand, handling, n_noise, msgs = ground_candidates(
         cloud, last_returns_only=last_returns_only, exclude_classes=exclude_classes
     )
+    # the filter's distances, slopes and densities are metric: a cloud in feet is
+    # filtered in metres (the labels are the same per point, the input is not modified)
+    from ..io.crs import crs_name, metre_factors
+
+    xyz = cloud.xyz
+    fh, fv = metre_factors(cloud.crs)
+    if fh != 1.0 or fv != 1.0:
+        xyz = xyz * np.array([fh, fh, fv])
+        msgs = [*msgs, f"filtered in metres: x, y scaled by {fh:.10g} and z by {fv:.10g} "
+                       f"(the units of {crs_name(cloud.crs)})"]
     given = dict(params)
     measures = None
     regime = None
@@ -339,7 +349,7 @@ def classify_ground(
             for k, v in cloud.fields.items()
             if k in ("return_number", "number_of_returns", "scan_angle", "scan_angle_rank")
         }
-        measures = measure_cloud(cloud.xyz[cand], fields=fields)
+        measures = measure_cloud(xyz[cand], fields=fields)
         chosen, sources, regime = auto_parameters(measures, method, sensor=sensor)
     elif preset is not None:
         chosen = dict(PRESETS[preset][method])
@@ -360,7 +370,7 @@ def classify_ground(
         reason = regime_reason(measures, regime, sensor=sensor)
     else:
         notes = {k: f"constant of the {preset} preset" for k, v in sources.items() if v == "preset"}
-    details = filt.run(cloud.xyz, candidates=cand, progress=progress)
+    details = filt.run(xyz, candidates=cand, progress=progress)
     ground = details.ground_mask
     evaluation = terrain = None
     if evaluate:
@@ -373,7 +383,7 @@ def classify_ground(
         if ignore_classes:
             mask = ~np.isin(ref, np.asarray(list(ignore_classes)))
         evaluation = filter_errors(ref == 2, ground, mask=mask)
-        terrain = terrain_scores(cloud.xyz, ground, ref == 2, mask=mask)
+        terrain = terrain_scores(xyz, ground, ref == 2, mask=mask)
     return GroundResult(
         ground_mask=ground,
         candidates=cand,

@@ -23,6 +23,7 @@ __all__ = [
     "require_metric_xy",
     "vertical_unit",
     "z_to_metres_factor",
+    "metre_factors",
     "heights_to_metres",
     "ensure_same_crs_parts",
     "check_map_crs",
@@ -209,6 +210,27 @@ def z_to_metres_factor(crs: Any) -> float:
     """Factor that turns z values into metres (1.0 when unknown or already metres)."""
     _, factor = vertical_unit(crs)
     return 1.0 if factor is None else factor
+
+
+def metre_factors(crs: Any) -> tuple[float, float]:
+    """Factors that turn x, y and z into metres: ``(horizontal, vertical)``.
+
+    1.0 for metres, for an unknown CRS and for degrees (a geographic CRS is not
+    scaled: an angle is no length); the vertical factor is :func:`z_to_metres_factor`.
+
+    Examples
+    --------
+    >>> metre_factors(parse_crs("EPSG:2263+6360"))  # NY Long Island (US ft) + NAVD88 (US ft)
+    (0.30480060960121924, 0.30480060960121924)
+    >>> metre_factors(parse_crs("EPSG:2154"))
+    (1.0, 1.0)
+    """
+    if crs is None:
+        return 1.0, 1.0
+    fh = 1.0
+    if not crs.is_geographic:
+        fh = float(horizontal_unit(crs)[1] or 1.0)
+    return fh, float(z_to_metres_factor(crs))
 
 
 def heights_to_metres(xyz: np.ndarray, crs: Any) -> np.ndarray:

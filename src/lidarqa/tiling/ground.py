@@ -577,15 +577,26 @@ def ground_catalog(
     catalog = sources if isinstance(sources, Catalog) else open_catalog(sources, skip_bad=skip_bad)
     full_params = dict(params)
     sample = None
-    auto = None
-    measures = None
-    if preset == "auto":
-        # measured once on a sample of whole tiles, then fixed for every chunk
-        sample = _catalog_sample(
+    # the filter works in metres (classify_ground scales each chunk by its CRS): the
+    # sample it is measured on too, and its seed cell and buffer are laid in the tiles' units
+    from ..io.crs import metre_factors
+
+    fh, fv = metre_factors(catalog.crs)
+    in_metres = fh == 1.0 and fv == 1.0
+
+    def metric_sample() -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        xyz, fields = _catalog_sample(
             catalog,
             last_returns_only=bool(last_returns_only),
             exclude_classes=tuple(exclude_classes or ()),
         )
+        return (xyz if in_metres else xyz * np.array([fh, fh, fv])), fields
+
+    auto = None
+    measures = None
+    if preset == "auto":
+        # measured once on a sample of whole tiles, then fixed for every chunk
+        sample = metric_sample()
         chosen, measures, regime = catalog_auto_parameters(
             catalog, method, sensor=sensor, sample=sample
         )
@@ -602,8 +613,10 @@ def ground_catalog(
         raise OptionError(f"invalid parameter for method {method!r}: {exc}") from None
     if buffer is None:
         canopy = measures is not None and measures.multi_return_share >= CANOPY_MULTI_RETURN
-        buffer = ground_buffer(catalog, cell_size=float(filt.cell_size), canopy=bool(canopy))
+        buffer = ground_buffer(catalog, cell_size=float(filt.cell_size) / fh, canopy=bool(canopy))
     if isinstance(filt, SegmentPTD):  # method segment-ptd
+        if sample is None and not in_metres:
+            sample = metric_sample()
         # one surface-growing radius for the whole catalog, as one in-memory run would
         # estimate it, instead of one per chunk (see catalog_grow_radius); the same for
         # the terrain pass's radius, estimated on its own cells
@@ -630,7 +643,7 @@ def ground_catalog(
         chunk_size=chunk_size,
         buffer=buffer,
         origin=origin,
-        snap=(bx, by, float(filt.cell_size)),
+        snap=(bx, by, float(filt.cell_size) / fh),
     )
     if not chunks:
         raise TilingError("the catalog holds no point")

@@ -480,7 +480,7 @@ def open_source(
     >>> src = lidarqa.open_source("tiles/", classes=[2], crs="EPSG:2154")  # doctest: +SKIP
     >>> cloud = src.read()                                                # doctest: +SKIP
     """
-    from ..io.crs import parse_crs, resolve_crs, z_to_metres_factor
+    from ..io.crs import metre_factors, parse_crs, resolve_crs, z_to_metres_factor
     from ..io.pointcloud import PointCloud
     from .catalog import Catalog, open_catalog
 
@@ -510,12 +510,8 @@ def open_source(
         native = given
     elif catalog is not None and given is not None:
         resolve_crs(native, given, ", ".join(names) or "the catalog")
-    xy_factor = 1.0
-    if native is not None:
-        from ..io.crs import horizontal_unit
-
-        # degrees are not scaled to metres (a job needing metres refuses a geographic CRS)
-        xy_factor = 1.0 if native.is_geographic else float(horizontal_unit(native)[1] or 1.0)
+    # degrees are not scaled to metres (a job needing metres refuses a geographic CRS)
+    xy_factor = metre_factors(native)[0]
     z_factor = z_to_metres_factor(native) if z_to_metres else 1.0
     return Source(catalog=catalog, selection=sel, z_factor=float(z_factor),
                   xy_factor=xy_factor, paths=names, cloud=cloud, given_crs=given)
