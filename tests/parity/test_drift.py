@@ -337,3 +337,12 @@ def test_ground_filters_a_cloud_in_feet_in_metres(feet, tmp_path):
         idx = {tuple(p): i for i, p in enumerate(np.round(whole, 3).tolist())}
         order.extend(idx[tuple(p)] for p in np.round(t, 3).tolist())
     assert np.mean(tiles == z_ft[np.asarray(order)]) >= 0.999
+
+
+def test_edges_of_a_cloud_in_feet_match_its_metres_copy(feet, tmp_path):
+    """Regression: with heights in feet, the default radii were measured on feet heights
+    (other planes) and the lengths summed on feet heights (921 m for 479 m of edges)."""
+    m = cli_results(tmp_path, "edges", feet["metres"], "-o", tmp_path / "em.csv", "--classes", 6)
+    f = cli_results(tmp_path, "edges", feet["file"], "-o", tmp_path / "ef.csv", "--classes", 6)
+    assert f["n_edges"] == m["n_edges"] > 5
+    assert f["total_length_m"] == pytest.approx(m["total_length_m"], abs=0.05)

@@ -67,7 +67,7 @@ def _run(kind: str, paths: tuple[str, ...], output: str, classes: Any, source_id
     """
     from ..errors import InvalidPointsError
     from ..io.crs import crs_name, require_metric_xy
-    from ..io.vector import write_points, write_segments
+    from ..io.vector import metric_lengths, write_points, write_segments
     from ..tiling.jobs_api import catalog_features
 
     cat = pop_catalog_options(opts)
@@ -115,8 +115,9 @@ def _run(kind: str, paths: tuple[str, ...], output: str, classes: Any, source_id
                 f"({results['segmented_fraction']:.1%} segmented), {s['n_adjacent_pairs']} "
                 "adjacent pairs")
     elif kind == "edges":
-        results.update({"total_length_m": float(f.lengths.sum()) if len(f) else 0.0,
-                        "length_m": _stats(f.lengths), "sigma_line_m": _stats(a["sigma_line"]),
+        lengths = metric_lengths(f)
+        results.update({"total_length_m": float(lengths.sum()),
+                        "length_m": _stats(lengths), "sigma_line_m": _stats(a["sigma_line"]),
                         "angle_deg": _stats(a["angle_deg"]), "skipped": left})
         said = (f"{len(f)} edges ({results['total_length_m']:.1f} m) from {s['n_planes']} "
                 f"planes; {sum(left.values())} adjacent pairs skipped")

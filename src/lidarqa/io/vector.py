@@ -33,6 +33,7 @@ from .text import DECIMAL_COMMA, dialect_hint
 
 __all__ = [
     "Segments",
+    "metric_lengths",
     "PointSet",
     "as_pointset",
     "read_segments",
@@ -101,6 +102,29 @@ class Segments:
             {k: np.asarray(v)[index] for k, v in self.attributes.items()},
             self.crs,
         )
+
+
+def metric_lengths(segments: Segments) -> np.ndarray:
+    """Length of each segment in metres, whatever the unit of its heights.
+
+    Edges are extracted in metres and their heights written back in the cloud's
+    vertical unit (e.g. US survey feet); the ``length`` attribute the extraction
+    measured is then the length in metres, while :attr:`Segments.lengths` measures
+    the stored coordinates. Without that attribute, :attr:`Segments.lengths`.
+
+    Parameters
+    ----------
+    segments : Segments
+
+    Returns
+    -------
+    ndarray of shape (n,)
+    """
+    if len(segments) == 0:
+        return np.zeros(0)
+    if "length" in segments.attributes:
+        return np.asarray(segments.attributes["length"], dtype=np.float64)
+    return segments.lengths
 
 
 @dataclass(eq=False)

@@ -151,7 +151,11 @@ def catalog_features(
     seg_keys = set(inspect.signature(segment_planes).parameters) - {"points", "progress"}
     given = dict(options or {})
     seg_opts = {**{k: v for k, v in given.items() if k in seg_keys}, **dict(segment_options or {})}
-    sample = catalog.sample().xyz
+    # the defaults are measured with heights in metres, as the chunks fit their planes
+    # (VectorTask; x, y in feet or degrees are refused by the commands)
+    from ..io.crs import z_to_metres_factor
+
+    sample = catalog.sample().xyz * np.array([1.0, 1.0, z_to_metres_factor(catalog.native_crs)])
     seg_opts, opts = fixed_auto_options(sample, kind=kind, segment_options=seg_opts,
                                         options={k: v for k, v in given.items()
                                                  if k not in seg_keys})

@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from ...io.vector import metric_lengths
 from .._context import (
     RunContext,
     SectionResult,
@@ -57,7 +58,7 @@ def run_edges(ctx: RunContext, item: AnalysisItem) -> SectionResult:
     for sid in strips:
         seg = ctx.edges(opts["cloud"], opts["classes"], sid, item.params)
         key = "all" if sid is None else str(sid)
-        lengths = seg.lengths if len(seg) else np.empty(0)
+        lengths = metric_lengths(seg)
         per[key] = {
             "n_edges": len(seg),
             "total_length": float(lengths.sum()),
