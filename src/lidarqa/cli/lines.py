@@ -240,6 +240,7 @@ def _side_segments(side: str, path: str, label: str, classes: Any, source_id: An
     import numpy as np
 
     from ..accuracy.lines_io import load_segments
+    from ..io.vector import heights_in_metres
     from ..tiling.source import is_catalog_input
 
     if is_catalog_input(path) or Path(path).suffix.lower() in (".las", ".laz"):
@@ -259,10 +260,11 @@ def _side_segments(side: str, path: str, label: str, classes: Any, source_id: An
         failed_exit(run)
         if len(run.value) == 0:
             raise NothingToMeasureError(f"{side} {label}: no edges found")
-        return run.value
+        # matched with heights in metres (the job gives them back in the cloud's unit)
+        return heights_in_metres(run.value)
     with steps(f"Reading {side} " + label) as progress:
-        return load_segments(path, classes=classes, source_id=source_id, crs=given,
-                             progress=progress)
+        return heights_in_metres(load_segments(path, classes=classes, source_id=source_id,
+                                               crs=given, progress=progress))
 
 
 def _selection(classes: list[int] | None, source_id: list[int] | None) -> str:

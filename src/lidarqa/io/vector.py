@@ -34,6 +34,7 @@ from .text import DECIMAL_COMMA, dialect_hint
 __all__ = [
     "Segments",
     "metric_lengths",
+    "heights_in_metres",
     "PointSet",
     "as_pointset",
     "read_segments",
@@ -102,6 +103,33 @@ class Segments:
             {k: np.asarray(v)[index] for k, v in self.attributes.items()},
             self.crs,
         )
+
+
+def heights_in_metres(segments: Segments) -> Segments:
+    """`segments` with heights in metres, from the vertical unit of their CRS (a copy).
+
+    Line matching measures distances in metres: edges given back in a cloud's own
+    vertical unit (US survey feet, say) or a segment file in feet are compared in
+    metres. The CRS is kept (x, y are not scaled); metres are returned as they are.
+
+    Parameters
+    ----------
+    segments : Segments
+
+    Returns
+    -------
+    Segments
+    """
+    from .crs import z_to_metres_factor
+
+    f = z_to_metres_factor(segments.crs)
+    if f == 1.0:
+        return segments
+    start = np.array(segments.start, dtype=np.float64, copy=True)
+    end = np.array(segments.end, dtype=np.float64, copy=True)
+    start[:, 2] *= f
+    end[:, 2] *= f
+    return Segments(segments.ids, start, end, dict(segments.attributes), crs=segments.crs)
 
 
 def metric_lengths(segments: Segments) -> np.ndarray:

@@ -448,7 +448,11 @@ def catalog_repeatability(
     open_opts, chunk_opts, run_opts = _split(dict(common))
     catalog = open_sources(sources, classes=classes or None, source_id=source_id or None,
                            z_to_metres=False, **open_opts)
-    samples = strip_samples(catalog)
+    # heights in metres, as the chunks find their edges (StripEdgesTask)
+    from ..io.crs import z_to_metres_factor
+
+    fv = z_to_metres_factor(catalog.native_crs)
+    samples = {s: xyz * np.array([1.0, 1.0, fv]) for s, xyz in strip_samples(catalog).items()}
     fixed = strip_options(samples, segment_options=segment_options, edge_options=edge_options)
     margin = None
     if chunk_opts["buffer"] is None and (catalog.is_catalog or chunk_opts["chunk_size"]):

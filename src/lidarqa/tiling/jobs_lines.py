@@ -161,8 +161,12 @@ class StripEdgesTask:
             strips = strips[np.isin(strips, self.source_ids)]
         out: dict[int, Segments] = {}
         core = chunk_data.chunk
+        # edges are found and matched with heights in metres (a strip in feet too)
+        from ..io.crs import z_to_metres_factor
+
+        all_xyz = cloud.xyz * np.array([1.0, 1.0, z_to_metres_factor(cloud.crs)])
         for s in strips.tolist():
-            xyz = cloud.xyz[sid == s]
+            xyz = all_xyz[sid == s]
             if len(xyz) < self.min_points:
                 continue
             fixed = self.strips.get(int(s))

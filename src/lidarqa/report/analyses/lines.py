@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 
 from ...errors import ConfigError
+from ...io.vector import heights_in_metres
 from .._context import (
     RunContext,
     SectionResult,
@@ -36,10 +37,12 @@ def _lines_params(options: dict) -> dict[str, Any]:
 
 
 def _segment_source(ctx: RunContext, source: dict, edge_options: dict) -> tuple[Any, str]:
+    # matched with heights in metres, as `lidarqa lines` does
     if "segments" in source:
-        return ctx.segments(source["segments"]), source["segments"]
+        return heights_in_metres(ctx.segments(source["segments"])), source["segments"]
     seg = ctx.edges(source["cloud"], source.get("classes"), source.get("source_id"), edge_options)
-    return seg, selection_label(source["cloud"], source.get("classes"), source.get("source_id"))
+    return heights_in_metres(seg), selection_label(source["cloud"], source.get("classes"),
+                                                   source.get("source_id"))
 
 
 def _threshold_curve(th: Any, label: str) -> dict[str, Any]:
