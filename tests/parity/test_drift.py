@@ -386,3 +386,17 @@ model = {{ cloud = "c", classes = [6], source_id = [706] }}
     rf = cli_results(tmp_path, "repeatability", tmp_path / "ft.laz", "--by-source-id",
                      "--classes", 6)
     assert rf["pairs"][0]["lhd"] == pytest.approx(rm["pairs"][0]["lhd"], abs=0.01)
+
+
+def test_info_density_of_a_cloud_in_feet_is_per_square_metre(feet, tmp_path):
+    """Regression: x, y in feet gave the density per square foot, labelled pts/m²."""
+    import lidarqa
+    from lidarqa.io import PointCloud
+    from lidarqa.io.crs import parse_crs
+
+    cloud = lidarqa.read(feet["metres"])
+    lidarqa.write(PointCloud(np.round(cloud.xyz / FT, 3), dict(cloud.fields),
+                             crs=parse_crs("EPSG:2263+6360")), tmp_path / "all_ft.laz")
+    m = cli_results(tmp_path, "info", feet["metres"])
+    f = cli_results(tmp_path, "info", tmp_path / "all_ft.laz")
+    assert f["density_per_m2"] == pytest.approx(m["density_per_m2"], rel=0.05)

@@ -264,3 +264,29 @@ def test_bad_input_is_one_clear_line(tmp_path, delivery, case):
     lines = [ln for ln in r.output.splitlines() if ln.strip()]
     assert len(lines) == 1 and lines[0].startswith("Error:"), r.output
     assert not (tmp_path / "o" / "qc.json").exists()
+
+
+def test_a_delivery_in_feet_gets_the_verdicts_of_its_metres_copy(tmp_path):
+    # regression: the grids were laid in feet with the metric spec: ANPD per square foot
+    # (0.9 for 9.9 pts/m²) and every gap a void. Densities and void areas are per m² now,
+    # the void polygons stay in the tiles' units.
+    import lidarqa
+    from lidarqa.io import PointCloud
+    from lidarqa.io.crs import parse_crs
+
+    ft = 1200.0 / 3937.0
+    d = make_delivery(tmp_path / "m", nx=2, ny=1, density=4.0, defects=("void",), seed=3)
+    src = d.defects["void"]
+    (tmp_path / "m1").mkdir()
+    (tmp_path / "m1" / src.name).symlink_to(src)
+    cloud = lidarqa.read(src)
+    (tmp_path / "ft").mkdir()
+    lidarqa.write(PointCloud(np.round(cloud.xyz / ft, 3), dict(cloud.fields),
+                             crs=parse_crs("EPSG:2263+6360")), tmp_path / "ft" / src.name)
+    m = run_qc(tmp_path / "m1", "usgs-ql2", out=tmp_path / "qm").tiles[0]
+    f = run_qc(tmp_path / "ft", "usgs-ql2", out=tmp_path / "qf").tiles[0]
+    for check in ("density", "spatial_distribution", "voids"):
+        assert f.checks[check].status == m.checks[check].status, check
+    assert f.checks["density"].value == pytest.approx(m.checks["density"].value, rel=0.02)
+    assert f.checks["voids"].value == pytest.approx(m.checks["voids"].value, rel=0.05)
+    assert m.checks["voids"].value == pytest.approx(d.void_area, rel=0.20)

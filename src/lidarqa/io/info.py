@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from .crs import crs_epsg, crs_name, vertical_unit
+from .crs import crs_epsg, crs_name, metre_factors, vertical_unit
 
 __all__ = ["CloudInfo", "describe", "describe_cloud", "describe_files"]
 
@@ -41,15 +41,17 @@ class CloudInfo:
 
 
 def _density_cell(mins: Sequence[float] | np.ndarray, maxs: Sequence[float] | np.ndarray,
-                  n: int) -> float:
-    """Cell size for the occupied-area estimate: twice the mean point spacing, >= 1 m.
+                  n: int, crs: Any = None) -> float:
+    """Cell size for the occupied-area estimate: twice the mean point spacing, 1-50 m.
 
-    Rounded to two significant digits and laid on a grid anchored at 0, 0, so one
-    file and the folder of its tiles (the same bounds and count) count the same cells.
+    In the CRS's units (1 m is 3.28 US survey feet). Rounded to two significant digits
+    and laid on a grid anchored at 0, 0, so one file and the folder of its tiles (the
+    same bounds and count) count the same cells.
     """
+    unit = metre_factors(crs)[0]  # metres per unit
     area = float(max(maxs[0] - mins[0], 1e-9) * max(maxs[1] - mins[1], 1e-9))
     spacing = np.sqrt(area / max(n, 1))
-    return float(f"{np.clip(2.0 * spacing, 1.0, 50.0):.2g}")
+    return float(f"{np.clip(2.0 * spacing, 1.0 / unit, 50.0 / unit):.2g}")
 
 
 class _Accumulator:
@@ -119,7 +121,8 @@ def _finish(acc: _Accumulator, crs: Any, dims: list[str], header: dict) -> Cloud
             )
         )
     n_cells = np.unique(np.concatenate(acc.cells)).size if acc.cells else 0
-    area = float(n_cells) * acc.cell**2
+    # the cells are laid in the CRS's units: their area in m² (x, y in feet, say)
+    area = float(n_cells) * (acc.cell * metre_factors(crs)[0]) ** 2
     returns: dict[str, Any] = {"present": acc.rn_present}
     if acc.rn_present:
         returns.update(
@@ -147,12 +150,12 @@ def _finish(acc: _Accumulator, crs: Any, dims: list[str], header: dict) -> Cloud
 def describe_cloud(cloud: Any) -> CloudInfo:
     """Describe an in-memory :class:`~lidarqa.io.PointCloud`.
 
-    ``density_per_m2`` is the number of points per occupied area, counted in
-    cells of twice the mean point spacing (at least 1 m), which is robust to
-    irregular footprints, unlike points / bounding box.
+    ``density_per_m2`` is the number of points per occupied area in m² (x, y in feet
+    included), counted in cells of twice the mean point spacing (at least 1 m), which
+    is robust to irregular footprints, unlike points / bounding box.
     """
     xyz = cloud.xyz
-    acc = _Accumulator(_density_cell(xyz.min(axis=0), xyz.max(axis=0), len(xyz))
+    acc = _Accumulator(_density_cell(xyz.min(axis=0), xyz.max(axis=0), len(xyz), cloud.crs)
                        if len(xyz) else 1.0)
     acc.add(cloud)
     return _finish(acc, cloud.crs, ["X", "Y", "Z", *cloud.fields], {})
@@ -204,7 +207,8 @@ def describe_files(
                 header = las_header_summary(r)
     lo = np.min([h[1][:3] for h in heads], axis=0) if heads else np.zeros(3)
     hi = np.max([h[1][3:] for h in heads], axis=0) if heads else np.zeros(3)
-    acc = _Accumulator(_density_cell(lo, hi, sum(h[0] for h in heads)))
+    acc = _Accumulator(_density_cell(lo, hi, sum(h[0] for h in heads),
+                                     crs if crs is not None else (heads[0][3] if heads else None)))
     first = heads[0] if heads else (0, (), [], None)
     if headers_only:
         acc.n = sum(int(h[0]) for h in heads)

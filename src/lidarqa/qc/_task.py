@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
+from ..io.crs import metre_factors
 from .conformance import (
     FAIL,
     PASS,
@@ -80,9 +81,13 @@ class TileTask:
             crs = r.crs
             pf = facts["point_format"]
             hb = (facts["mins"][0], facts["mins"][1], facts["maxs"][0], facts["maxs"][1])
-            cell = spec.distribution_cell_m
-            grids = DensityGrids(hb, cell=cell, void_cell=spec.void_side_m / VOID_CELLS,
-                                 coarse_factor=max(int(round(spec.density_cell / cell)), 1))
+            # the grids are laid in the tile's own units (x, y in feet, say): the spec's
+            # lengths in those units, the densities and areas back in metres below
+            unit = metre_factors(crs)[0]
+            cell = spec.distribution_cell_m / unit
+            grids = DensityGrids(hb, cell=cell, void_cell=spec.void_side_m / unit / VOID_CELLS,
+                                 coarse_factor=max(int(round(spec.density_cell
+                                                             / spec.distribution_cell_m)), 1))
             keys = []
             for piece in r.chunks(self.read_step, fields=QC_FIELDS):
                 xyz, f = piece.xyz, piece.fields
@@ -100,7 +105,7 @@ class TileTask:
             checks["density"] = Check(FAIL, 0.0, spec.min_anpd, "the tile holds no point")
             return TileQC(tile.path, checks, 0, facts, stats, crs_name=_name(crs))
         data_bounds = (stats.mins[0], stats.mins[1], stats.maxs[0], stats.maxs[1])
-        dens = density_result(grids, data_bounds)
+        dens = density_result(grids, data_bounds, unit)
         vg = grids.void
         inside = vg.inner_mask(data_bounds)
         exclude = None
@@ -109,8 +114,10 @@ class TileTask:
 
             exclude = shapely.from_wkb(self.exclude_wkb)
         voids = find_voids(grids.occupied.reshape(vg.ny, vg.nx), x0=vg.x0, y0=vg.y0,
-                           cell=vg.cell, min_side=spec.void_side_m, inside=inside,
+                           cell=vg.cell, min_side=spec.void_side_m / unit, inside=inside,
                            water=grids.water_void.reshape(vg.ny, vg.nx), exclude=exclude)
+        if unit != 1.0:  # polygons stay in the tile's units, their areas in m²
+            voids = replace(voids, areas=tuple(a * unit * unit for a in voids.areas))
         checks.update(_density_checks(dens, voids, spec, has_returns, grids.outside))
         return TileQC(tile.path, checks, stats.n, facts, stats, dens, voids, data_bounds,
                       _name(crs))

@@ -271,9 +271,13 @@ class DensityResult:
                 "n_multi_swath_cells": self.n_multi_swath_cells}
 
 
-def density_result(grids: DensityGrids, data_bounds: tuple[float, float, float, float]
-                   ) -> DensityResult:
-    """ANPD, spatial distribution and the density raster of an accumulated tile."""
+def density_result(grids: DensityGrids, data_bounds: tuple[float, float, float, float],
+                   unit: float = 1.0) -> DensityResult:
+    """ANPD, spatial distribution and the density raster of an accumulated tile.
+
+    The grids are laid in the tile's CRS units; `unit` is metres per unit (0.3048006 for
+    US survey feet), so densities are per m² whatever the CRS.
+    """
     fine = grids.fine
     dom = grids.single_swath()
     water = grids.water.reshape(fine.ny, fine.nx)
@@ -291,11 +295,12 @@ def density_result(grids: DensityGrids, data_bounds: tuple[float, float, float, 
     inner_c = grids.coarse.inner_mask(data_bounds)
     wet_c = c_water * 2 > c_first
     use = inner_c & (c_dom > 0) & ~wet_c
-    area = grids.coarse.cell ** 2
+    area = (grids.coarse.cell * unit) ** 2
     if use.any():
         anpd = float(c_dom[use].sum() / (use.sum() * area))
     else:  # a tile smaller than a density cell: its points over its extent
         w = max(data_bounds[2] - data_bounds[0], 0.0) * max(data_bounds[3] - data_bounds[1], 0.0)
+        w *= unit * unit
         anpd = float(dom.sum() / w) if w > 0 else math.nan
     inner_f = fine.inner_mask(data_bounds)
     wet_f = water > 0
