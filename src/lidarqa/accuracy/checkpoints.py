@@ -482,19 +482,19 @@ def metric_units(measured_crs: Any, check_crs: Any) -> tuple[Any, float, float, 
         The two CRSs differ, or the shared one is geographic (degrees).
     """
     from ..errors import CRSMismatchError
-    from ..io.crs import ensure_same_crs, horizontal_unit, vertical_unit, z_to_metres_factor
+    from ..io.crs import ensure_same_crs, horizontal_unit, metre_factors, vertical_unit
 
     ensure_same_crs(measured_crs, check_crs, what=("MEASURED", "CHECK"))
     crs = measured_crs if measured_crs is not None else check_crs
     if crs is None:
         return None, 1.0, 1.0, []
-    h_name, h_factor = horizontal_unit(crs)
+    h_name, _ = horizontal_unit(crs)
     if h_name is not None and (h_name.lower().startswith("deg") or crs.is_geographic):
         raise CRSMismatchError(
             f"{'MEASURED' if measured_crs is not None else 'CHECK'} is in a geographic CRS "
             f"({crs.name}, degrees): reproject it to a projected CRS in metres first")
     v_name, _ = vertical_unit(crs)
-    fh, fv = float(h_factor or 1.0), z_to_metres_factor(crs)
+    fh, fv = metre_factors(crs)
     notes = []
     if fv != 1.0 or fh != 1.0:
         notes.append(f"coordinates converted to metres (horizontal unit: {h_name or 'metre'}, "

@@ -153,9 +153,9 @@ def catalog_features(
     seg_opts = {**{k: v for k, v in given.items() if k in seg_keys}, **dict(segment_options or {})}
     # the defaults are measured with heights in metres, as the chunks fit their planes
     # (VectorTask; x, y in feet or degrees are refused by the commands)
-    from ..io.crs import z_to_metres_factor
+    from ..io.crs import heights_to_metres
 
-    sample = catalog.sample().xyz * np.array([1.0, 1.0, z_to_metres_factor(catalog.native_crs)])
+    sample = heights_to_metres(catalog.sample().xyz, catalog.native_crs)
     seg_opts, opts = fixed_auto_options(sample, kind=kind, segment_options=seg_opts,
                                         options={k: v for k, v in given.items()
                                                  if k not in seg_keys})
@@ -449,10 +449,10 @@ def catalog_repeatability(
     catalog = open_sources(sources, classes=classes or None, source_id=source_id or None,
                            z_to_metres=False, **open_opts)
     # heights in metres, as the chunks find their edges (StripEdgesTask)
-    from ..io.crs import z_to_metres_factor
+    from ..io.crs import heights_to_metres
 
-    fv = z_to_metres_factor(catalog.native_crs)
-    samples = {s: xyz * np.array([1.0, 1.0, fv]) for s, xyz in strip_samples(catalog).items()}
+    samples = {s: heights_to_metres(xyz, catalog.native_crs)
+               for s, xyz in strip_samples(catalog).items()}
     fixed = strip_options(samples, segment_options=segment_options, edge_options=edge_options)
     margin = None
     if chunk_opts["buffer"] is None and (catalog.is_catalog or chunk_opts["chunk_size"]):

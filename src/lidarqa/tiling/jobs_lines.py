@@ -162,9 +162,9 @@ class StripEdgesTask:
         out: dict[int, Segments] = {}
         core = chunk_data.chunk
         # edges are found and matched with heights in metres (a strip in feet too)
-        from ..io.crs import z_to_metres_factor
+        from ..io.crs import heights_to_metres
 
-        all_xyz = cloud.xyz * np.array([1.0, 1.0, z_to_metres_factor(cloud.crs)])
+        all_xyz = heights_to_metres(cloud.xyz, cloud.crs)
         for s in strips.tolist():
             xyz = all_xyz[sid == s]
             if len(xyz) < self.min_points:
