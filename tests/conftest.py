@@ -42,12 +42,14 @@ def demo_tile() -> Path:
 SHARED_SESSION_FIXTURES = ("demo_run", "small_runs")
 
 
+@pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """Group the tests for pytest-xdist (``--dist loadgroup`` in pyproject.toml).
 
     Each test module runs on one worker, so its module fixtures are built once (as with
     ``--dist loadscope``); the tests sharing an expensive session fixture run on one worker
-    too. A test with its own ``xdist_group`` mark keeps it.
+    too. A test with its own ``xdist_group`` mark keeps it. ``tryfirst``: pytest-xdist
+    reads the marks in its own hook of the same name, which would otherwise run first.
     """
     for item in items:
         if item.get_closest_marker("xdist_group"):
