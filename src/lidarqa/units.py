@@ -115,7 +115,7 @@ KEY_UNITS: dict[str, str] = {
         """n p q dof flags confusion ok no_ground_nearby sparse_tin
         outside_tin support_a support_b support_c min_points min_segment_size
         min_seed_points min_contacts min_tested min_facade_points connect_min_size k_feat
-        k_seed seed_support max_iter points_per_segment_median chunk_size workers
+        surface_support k_seed seed_support max_iter points_per_segment_median chunk_size workers
         accepted_per_iter added_per_iter max_points min_support sigma_classes
         kernels_compiled kernels_loaded failed retried skipped attempts""",
     ),

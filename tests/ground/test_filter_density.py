@@ -26,7 +26,7 @@ from lidarqa.ground import (
     measure_cloud,
 )
 from lidarqa.ground.auto import FILTER_MIN_EDGE
-from lidarqa.ground.segment_ptd import thin_lowest
+from lidarqa.ground.segment_ptd import SURFACE_SHARE, SURFACE_SLAB, surface_lowest, thin_lowest
 from lidarqa.testing import make_scene
 
 # the module (its name is shadowed by the function lidarqa.ground.segment_ptd)
@@ -236,6 +236,70 @@ def test_join_below_is_chosen_for_dense_ground_based_scans_only():
         assert params.get("join_below", False) is want
         if want:
             assert sources["join_below"] == "preset"
+
+
+def _street_over_echoes(seed: int):
+    """A dense street (200 pts/m², 2 % grade) with a wet band: one multipath echo 0.25-0.35 m
+    below the road in every 0.5 m cell of x 6-14 m, i.e. a lower layer the filter accepts."""
+    rng = np.random.default_rng(seed)
+    n = 200 * 20 * 20
+    xy = rng.uniform(0, 20, (n, 2))
+    z = 0.02 * xy[:, 0] + rng.normal(0, 0.01, n)
+    cx, cy = np.meshgrid(np.arange(6.25, 14, 0.5), np.arange(0.25, 20, 0.5))
+    e_xy = np.column_stack([cx.ravel(), cy.ravel()]) + rng.uniform(-0.2, 0.2, (cx.size, 2))
+    e_z = 0.02 * e_xy[:, 0] - rng.uniform(0.25, 0.35, cx.size)
+    p = np.vstack([np.column_stack([xy, z]), np.column_stack([e_xy, e_z])])
+    return p + [1000.0, 2000.0, 50.0], np.r_[np.zeros(n, bool), np.ones(cx.size, bool)]
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_surface_support_keeps_the_road_above_a_layer_of_echoes(seed):
+    p, echo = _street_over_echoes(seed)
+    band = (p[:, 0] > 1006.5) & (p[:, 0] < 1013.5) & ~echo
+    off = SegmentPTD(filter_density=4.0, surface_support=0).run(p).ground_mask
+    on = SegmentPTD(filter_density=4.0).run(p).ground_mask
+    # with each cell's lowest return, the echoes are the terrain and the road above is lost
+    assert off[echo].all() and off[band].mean() < 0.01
+    # a return alone under a dense surface is not the cell's terrain evidence
+    assert on[~echo].mean() >= 0.999 and not on[echo].any()
+    assert classify_ground(p).ground_mask[~echo].mean() >= 0.999  # the default run
+
+
+def _surface_lowest_brute(p, inv, n_cells, support):
+    out = np.empty(n_cells, dtype=np.int64)
+    for g in range(n_cells):
+        rows = np.flatnonzero(inv == g)
+        rows = rows[np.lexsort((rows, p[rows, 1], p[rows, 0], p[rows, 2]))]
+        need = max(support + 1, math.ceil(SURFACE_SHARE * rows.size))
+        out[g] = rows[0]
+        for r in rows:
+            z = p[rows, 2]
+            if np.count_nonzero((z >= p[r, 2]) & (z <= p[r, 2] + SURFACE_SLAB)) >= need:
+                out[g] = r
+                break
+    return out
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    n=st.integers(1, 200),
+    support=st.integers(0, 12),
+    step=st.sampled_from([0.01, 0.02, 0.05]),
+    seed=st.integers(0, 2**16),
+)
+def test_surface_lowest_equals_a_brute_force_and_ignores_the_input_order(n, support, step, seed):
+    # heights on a grid of `step` (ties and points exactly one slab apart), a few cells
+    rng = np.random.default_rng(seed)
+    p = np.column_stack(
+        [rng.uniform(0, 1.5, (n, 2)), np.round(rng.exponential(0.1, n) / step) * step]
+    )
+    _, inv, cells = thin_lowest(p, 0.5)
+    got = surface_lowest(p, inv, cells.shape[0], support)
+    np.testing.assert_array_equal(got, _surface_lowest_brute(p, inv, cells.shape[0], support))
+    perm = rng.permutation(n)
+    _, inv2, cells2 = thin_lowest(p[perm], 0.5)
+    np.testing.assert_array_equal(cells2, cells)
+    np.testing.assert_array_equal(perm[surface_lowest(p[perm], inv2, cells.shape[0], support)], got)
 
 
 @settings(max_examples=25, deadline=None)

@@ -40,6 +40,7 @@ __all__ = [
     "segment_ptd",
     "default_grow_radius",
     "thin_lowest",
+    "surface_lowest",
 ]
 
 #: largest `filter_density` (points/m²): a 1 mm cell
@@ -233,6 +234,16 @@ class SegmentPTD(TINParameters):
         above a return from below the ground joins. For ground-based scans, where a
         return below the ground is a multipath echo (a wet road, glass); from the
         air the lowest return is the best ground evidence, and this stays off.
+    surface_support : int, default 8
+        With `filter_density`: the point filtered in each cell is its lowest candidate
+        that starts a surface, i.e. with at least `surface_support` other candidates of
+        its cell, and a quarter of the cell's candidates in all, in the 5 cm above it;
+        a cell without one keeps its lowest candidate. A return alone under a dense
+        surface (a multipath echo under a road, a stray return under a roof) is then
+        not the cell's terrain evidence. Only dense cells hold such a surface (at
+        4 points/m², 9 returns within 5 cm in a 0.5 m cell: mobile and terrestrial
+        scans, dense airborne roofs); the terrain pass (`terrain_density`) keeps the
+        lowest candidate. 0 = always the lowest candidate.
     terrain_density : float, default 0.0
         Terrain first (points/m²; 0 = off; only with `filter_density`): the filter
         first runs, thinned the same way, at this lower density, where a cell is
@@ -324,6 +335,7 @@ class SegmentPTD(TINParameters):
     filter_density: float = 0.0
     join_distance: float = 0.15
     join_below: bool = False
+    surface_support: int = 8
     terrain_density: float = 0.0
     terrain_distance: float = 0.3
     terrain_grow_radius: float | None = None
@@ -366,10 +378,10 @@ class SegmentPTD(TINParameters):
             check_positive(self.terrain_grow_radius, "terrain_grow_radius")
         check_positive(self.facade_distance, "facade_distance", allow_zero=True)
         check_range(self.roof_ratio, "roof_ratio", 0.0, 1.0)
-        if int(self.connect_min_size) != self.connect_min_size or self.connect_min_size < 0:
-            raise OptionError(
-                f"connect_min_size must be an integer >= 0, got {self.connect_min_size!r}"
-            )
+        for name in ("connect_min_size", "surface_support"):
+            v = getattr(self, name)
+            if int(v) != v or v < 0:
+                raise OptionError(f"{name} must be an integer >= 0, got {v!r}")
         if self.grow_radius is not None:
             check_positive(self.grow_radius, "grow_radius")
         for name in ("max_iter", "min_tested", "k_feat", "k_seed", "min_segment_size"):
@@ -485,14 +497,18 @@ class SegmentPTD(TINParameters):
             gr = self.terrain_grow_radius
             if gr is None and self.grow_radius is not None:
                 gr = self.grow_radius * math.sqrt(self.filter_density / self.terrain_density)
+            # the terrain pass keeps each cell's lowest candidate: its terrain model is the
+            # median point per cell (_on_terrain), which a low return does not pull down
             coarse = replace(
                 self, filter_density=self.terrain_density, terrain_density=0.0, grow_radius=gr,
-                terrain_grow_radius=None,
+                terrain_grow_radius=None, surface_support=0,
             )
             terrain = coarse.run(pts, candidates=cand, progress=stage(progress, 0.0, 0.3))
             fine = (0.3, 0.97)
         p = pts[ci]
         win, inv, cells = thin_lowest(p, 1.0 / math.sqrt(self.filter_density))
+        if self.surface_support > 0:
+            win = surface_lowest(p, inv, cells.shape[0], int(self.surface_support))
         wp = np.ascontiguousarray(p[win])
         res = inner.run(wp, progress=stage(progress, *fine))
         wg = np.ascontiguousarray(res.ground_mask)
@@ -869,11 +885,22 @@ def _before(p, u, v):  # pragma: no cover - numba
 
 @njit(cache=True)
 def _median_per_group(inv, p, n_groups):  # pragma: no cover - numba
-    """Per group of `inv`, the row of `p` at position (m - 1) // 2 in (z, x, y, row) order.
+    """Per group of `inv`, the row of `p` at position (m - 1) // 2 in (z, x, y, row) order."""
+    start, rows = _group_sort(inv, p, n_groups)
+    out = np.empty(n_groups, dtype=np.int64)
+    for g in range(n_groups):
+        out[g] = rows[start[g] + (start[g + 1] - start[g] - 1) // 2]
+    return out
+
+
+@njit(cache=True)
+def _group_sort(inv, p, n_groups):  # pragma: no cover - numba
+    """Rows of `p` by group of `inv`, each group in (z, x, y, row) order: ``(start, rows)``.
 
     The order of ``np.lexsort((y, x, z, inv))`` without sorting every point: a
     counting sort by group, then each group sorted on its own (insertion sort for
-    the few points of a thinning cell, merge sort beyond 32).
+    the few points of a thinning cell, merge sort beyond 32). Group g is
+    ``rows[start[g]:start[g + 1]]``.
     """
     n = inv.size
     start = np.zeros(n_groups + 1, dtype=np.int64)
@@ -888,7 +915,6 @@ def _median_per_group(inv, p, n_groups):  # pragma: no cover - numba
     for i in range(n):
         rows[fill[inv[i]]] = i
         fill[inv[i]] += 1
-    out = np.empty(n_groups, dtype=np.int64)
     tmp = np.empty(big, dtype=np.int64)
     for g in range(n_groups):
         s, m = start[g], start[g + 1] - start[g]
@@ -926,7 +952,56 @@ def _median_per_group(inv, p, n_groups):  # pragma: no cover - numba
                         k += 1
                 r[:m] = tmp[:m]
                 w *= 2
-        out[g] = r[(m - 1) // 2]
+    return start, rows
+
+
+#: Height (m) of the slab above a return in which `surface_support` counts the returns that make
+#: it the start of a surface, and the least share of its cell's returns that slab must hold.
+SURFACE_SLAB = 0.05
+SURFACE_SHARE = 0.25
+
+
+def surface_lowest(p: np.ndarray, inv: np.ndarray, n_cells: int, support: int) -> np.ndarray:
+    """Per cell of `inv`, its lowest point that starts a surface (row of `p`).
+
+    A point starts a surface when at least `support` other points of its cell, and a
+    quarter of the cell's points in all (:data:`SURFACE_SHARE`), lie in the
+    :data:`SURFACE_SLAB` (5 cm) above it. A cell without one gives its lowest point.
+    Points in (z, x, y, row) order, so the result does not depend on the input order.
+    """
+    start, rows = _group_sort(
+        np.ascontiguousarray(inv, dtype=np.int64),
+        np.ascontiguousarray(p, dtype=np.float64),
+        int(n_cells),
+    )
+    return _surface_lowest_kernel(
+        start,
+        rows,
+        np.ascontiguousarray(p[:, 2], dtype=np.float64),
+        int(support),
+        SURFACE_SLAB,
+        SURFACE_SHARE,
+    )
+
+
+@njit(cache=True)
+def _surface_lowest_kernel(start, rows, z, support, slab, share):  # pragma: no cover - numba
+    n_cells = start.size - 1
+    out = np.empty(n_cells, np.int64)
+    for g in range(n_cells):
+        s, e = start[g], start[g + 1]
+        out[g] = rows[s]
+        need = max(support + 1, int(math.ceil(share * (e - s))))
+        j = s
+        for i in range(s, e - need + 1):
+            top = z[rows[i]] + slab
+            if j < i:
+                j = i
+            while j < e and z[rows[j]] <= top:
+                j += 1
+            if j - i >= need:  # itself and the points up to `slab` above it
+                out[g] = rows[i]
+                break
     return out
 
 

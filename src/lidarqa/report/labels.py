@@ -135,6 +135,9 @@ LABELS: dict[str, Label] = {
     "filter_density": _l("dense cloud filtered on its lowest points, at (0 = all)", "pts/m²"),
     "join_distance": _l("other points of a ground cell join within", M),
     "join_below": _l("a cell whose lowest point lies below the ground joins its neighbours' plane"),
+    "surface_support": _l(
+        "a cell is filtered on its lowest return with this many others 5 cm above (0 = lowest)"
+    ),
     "terrain_density": _l("terrain first: filtered on its lowest points, at (0 = off)", "pts/m²"),
     "terrain_distance": _l("ground kept up to this height above the terrain", M),
     "facade_distance": _l("façade points join the final ground within (0 = never)", M),
