@@ -293,13 +293,13 @@ def test_surface_lowest_equals_a_brute_force_and_ignores_the_input_order(n, supp
     p = np.column_stack(
         [rng.uniform(0, 1.5, (n, 2)), np.round(rng.exponential(0.1, n) / step) * step]
     )
-    _, inv, cells = thin_lowest(p, 0.5)
-    got = surface_lowest(p, inv, cells.shape[0], support)
+    win, inv, cells = thin_lowest(p, 0.5)
+    got = surface_lowest(p, inv, win, support)
     np.testing.assert_array_equal(got, _surface_lowest_brute(p, inv, cells.shape[0], support))
     perm = rng.permutation(n)
-    _, inv2, cells2 = thin_lowest(p[perm], 0.5)
+    win2, inv2, cells2 = thin_lowest(p[perm], 0.5)
     np.testing.assert_array_equal(cells2, cells)
-    np.testing.assert_array_equal(perm[surface_lowest(p[perm], inv2, cells.shape[0], support)], got)
+    np.testing.assert_array_equal(perm[surface_lowest(p[perm], inv2, win2, support)], got)
 
 
 @settings(max_examples=25, deadline=None)

@@ -508,7 +508,7 @@ class SegmentPTD(TINParameters):
         p = pts[ci]
         win, inv, cells = thin_lowest(p, 1.0 / math.sqrt(self.filter_density))
         if self.surface_support > 0:
-            win = surface_lowest(p, inv, cells.shape[0], int(self.surface_support))
+            win = surface_lowest(p, inv, win, int(self.surface_support))
         wp = np.ascontiguousarray(p[win])
         res = inner.run(wp, progress=stage(progress, *fine))
         wg = np.ascontiguousarray(res.ground_mask)
@@ -886,7 +886,7 @@ def _before(p, u, v):  # pragma: no cover - numba
 @njit(cache=True)
 def _median_per_group(inv, p, n_groups):  # pragma: no cover - numba
     """Per group of `inv`, the row of `p` at position (m - 1) // 2 in (z, x, y, row) order."""
-    start, rows = _group_sort(inv, p, n_groups)
+    start, rows = _group_sort(inv, p, n_groups, 0)
     out = np.empty(n_groups, dtype=np.int64)
     for g in range(n_groups):
         out[g] = rows[start[g] + (start[g + 1] - start[g] - 1) // 2]
@@ -894,13 +894,13 @@ def _median_per_group(inv, p, n_groups):  # pragma: no cover - numba
 
 
 @njit(cache=True)
-def _group_sort(inv, p, n_groups):  # pragma: no cover - numba
-    """Rows of `p` by group of `inv`, each group in (z, x, y, row) order: ``(start, rows)``.
+def _group_sort(inv, p, n_groups, min_size):  # pragma: no cover - numba
+    """Rows of `p` by group of `inv`, in (z, x, y, row) order within a group: ``(start, rows)``.
 
-    The order of ``np.lexsort((y, x, z, inv))`` without sorting every point: a
-    counting sort by group, then each group sorted on its own (insertion sort for
-    the few points of a thinning cell, merge sort beyond 32). Group g is
-    ``rows[start[g]:start[g + 1]]``.
+    Groups of fewer than `min_size` rows stay in input order (not sorted). The order of
+    ``np.lexsort((y, x, z, inv))`` without sorting every point: a counting sort by group,
+    then each group sorted on its own (insertion sort for the few points of a thinning
+    cell, merge sort beyond 32). Group g is ``rows[start[g]:start[g + 1]]``.
     """
     n = inv.size
     start = np.zeros(n_groups + 1, dtype=np.int64)
@@ -918,6 +918,8 @@ def _group_sort(inv, p, n_groups):  # pragma: no cover - numba
     tmp = np.empty(big, dtype=np.int64)
     for g in range(n_groups):
         s, m = start[g], start[g + 1] - start[g]
+        if m < min_size:
+            continue
         r = rows[s : s + m]
         if m <= 32:
             for a in range(1, m):
@@ -961,36 +963,30 @@ SURFACE_SLAB = 0.05
 SURFACE_SHARE = 0.25
 
 
-def surface_lowest(p: np.ndarray, inv: np.ndarray, n_cells: int, support: int) -> np.ndarray:
+def surface_lowest(p: np.ndarray, inv: np.ndarray, lowest: np.ndarray, support: int) -> np.ndarray:
     """Per cell of `inv`, its lowest point that starts a surface (row of `p`).
 
     A point starts a surface when at least `support` other points of its cell, and a
     quarter of the cell's points in all (:data:`SURFACE_SHARE`), lie in the
-    :data:`SURFACE_SLAB` (5 cm) above it. A cell without one gives its lowest point.
-    Points in (z, x, y, row) order, so the result does not depend on the input order.
+    :data:`SURFACE_SLAB` (5 cm) above it. A cell without one gives its lowest point,
+    `lowest` (:func:`thin_lowest`'s winners). Points in (z, x, y, row) order, so the
+    result does not depend on the input order.
     """
+    lowest = np.ascontiguousarray(lowest, dtype=np.int64)
+    # only a cell of more than `support` points can hold a surface: the others are not sorted
     start, rows = _group_sort(
-        np.ascontiguousarray(inv, dtype=np.int64),
-        np.ascontiguousarray(p, dtype=np.float64),
-        int(n_cells),
+        np.ascontiguousarray(inv, dtype=np.int64), np.ascontiguousarray(p, dtype=np.float64),
+        lowest.size, int(support) + 1,
     )
-    return _surface_lowest_kernel(
-        start,
-        rows,
-        np.ascontiguousarray(p[:, 2], dtype=np.float64),
-        int(support),
-        SURFACE_SLAB,
-        SURFACE_SHARE,
-    )
+    z = np.ascontiguousarray(p[:, 2], dtype=np.float64)
+    return _surface_lowest_kernel(start, rows, z, lowest, int(support), SURFACE_SLAB, SURFACE_SHARE)
 
 
 @njit(cache=True)
-def _surface_lowest_kernel(start, rows, z, support, slab, share):  # pragma: no cover - numba
-    n_cells = start.size - 1
-    out = np.empty(n_cells, np.int64)
-    for g in range(n_cells):
+def _surface_lowest_kernel(start, rows, z, lowest, support, slab, share):  # pragma: no cover
+    out = lowest.copy()
+    for g in range(lowest.size):
         s, e = start[g], start[g + 1]
-        out[g] = rows[s]
         need = max(support + 1, int(math.ceil(share * (e - s))))
         j = s
         for i in range(s, e - need + 1):
