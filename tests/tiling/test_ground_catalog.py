@@ -202,3 +202,36 @@ def test_bad_engine_options_leave_nothing_at_the_output(scene_tiles, tmp_path, b
     with pytest.raises(LidarQAError):
         ground_catalog(paths, out, **bad)
     assert not out.exists()
+
+
+def test_dense_street_over_echoes_tiled_equals_untiled(tmp_path):
+    # a ground-based scan (200 pts/m²) whose wet band leaves one multipath echo under every
+    # 0.5 m cell: the surface rule (each cell filtered on its lowest return that starts a
+    # surface) must give the same labels in chunks as in one run, and keep the road
+    from lidarqa.ground import classify_ground
+
+    rng = np.random.default_rng(3)
+    n = 200 * 24 * 24
+    xy = rng.uniform(0, 24, (n, 2))
+    z = 0.02 * xy[:, 0] + rng.normal(0, 0.01, n)
+    cx, cy = np.meshgrid(np.arange(8.25, 16, 0.5), np.arange(0.25, 24, 0.5))
+    e_xy = np.column_stack([cx.ravel(), cy.ravel()]) + rng.uniform(-0.2, 0.2, (cx.size, 2))
+    e_z = 0.02 * e_xy[:, 0] - rng.uniform(0.25, 0.35, cx.size)
+    xyz = np.vstack([np.column_stack([xy, z]), np.column_stack([e_xy, e_z])])
+    xyz = np.round(xyz + [700000.0, 5400000.0, 30.0], 3)
+    echo = np.r_[np.zeros(n, bool), np.ones(cx.size, bool)]
+    cls = np.where(echo, 1, 2).astype(np.uint8)  # the echoes are not the road
+    tile = ((xyz[:, :2] - [700000.0, 5400000.0]) // 12).astype(int)
+    paths = []
+    for i, j in ((0, 0), (0, 1), (1, 0), (1, 1)):
+        m = (tile[:, 0] == i) & (tile[:, 1] == j)
+        paths.append(tmp_path / f"tile_{i}{j}.laz")
+        lidarqa.write(lidarqa.io.PointCloud(xyz[m], {"classification": cls[m]}), paths[-1])
+    res = ground_catalog(paths, tmp_path / "out", chunk_size=12.0, workers=1)
+    assert res.n_chunks >= 4
+    whole = _merged(paths)
+    tiled = _merged(res.outputs).fields["classification"] == 2
+    untiled = classify_ground(whole).ground_mask
+    assert np.mean(tiled == untiled) >= 0.999
+    road = whole.fields["classification"] == 2
+    assert tiled[road].mean() >= 0.999 and not tiled[~road].any()
