@@ -109,9 +109,10 @@ def _grid_catalog(tile: float, density: float, n: int = 3) -> Catalog:
 @pytest.mark.parametrize(
     "tile,density,expected,n",
     [
-        (1000.0, 25.0, 250.0, 3),  # 1000 / 4: aligned with the tiles, 1 % more work than 254 m
-        (305.0, 25.0, 250.0, 3),  # 305 / 2 would be 46 % more work: not snapped, 10 m steps
-        (50.0, 25.0, 250.0, 6),  # 5 tiles of 50 m
+        (1000.0, 25.0, 1000.0 / 3, 3),  # aligned with the tiles, 5 % more work than 370 m
+        (216.0, 25.0, 360.0, 4),  # 216 m would be 36 % more work: not snapped, 10 m steps
+        (305.0, 25.0, 305.0, 3),  # one tile per chunk: 11 % more work than 370 m
+        (50.0, 25.0, 350.0, 9),  # 7 tiles of 50 m
         (1000.0, 2.0, 1000.0, 3),  # sparse: one tile per chunk (2 tiles would be over the target)
     ],
 )
@@ -186,7 +187,8 @@ def test_dense_catalog_chunks_are_a_few_buffers_wide():
     from lidarqa.tiling.chunks import MIN_BUFFERS, TARGET_POINTS, _work
 
     cat = _grid_catalog(100.0, 306.0, n=4)
-    assert (TARGET_POINTS / cat.density) ** 0.5 - 2 * 60.0 < 20.0  # the old rule's 20 m
+    # the point target alone would give a chunk narrower than two buffers (20 m once)
+    assert (TARGET_POINTS / cat.density) ** 0.5 - 2 * 60.0 < MIN_BUFFERS * 60.0
     size = default_chunk_size(cat, buffer=60.0)
     assert size == pytest.approx(MIN_BUFFERS * 60.0)
     assert _work(size, 60.0) <= 4.0 + 1e-9  # was 49 with 20 m chunks

@@ -73,9 +73,11 @@ __all__ = [
 
 #: Default buffer around each chunk, m (the ground filter's default seed cell).
 DEFAULT_BUFFER = 60.0
-#: Points aimed at in one buffered chunk: about 1.6 GB of peak memory per worker for ground
-#: filtering (measured: 973 MB with 1.84 M points, 0.25 GB of it the interpreter and libraries).
-TARGET_POINTS = 3_500_000
+#: Points aimed at in one buffered chunk: about 1.2 GB of peak memory per worker for ground
+#: filtering (measured on a synthetic 25 pts/m² block: 1.21 GB with 5.95 M points in the
+#: buffered chunk, 0.94 GB with 2.8 M). Fewer, larger chunks read less buffer per point kept:
+#: 1.75 instead of 2.42 points there, 35 % less CPU for the whole block.
+TARGET_POINTS = 6_000_000
 #: Snap the chunk side to the tiling only when that costs at most this much more work: a
 #: buffered chunk reads and filters ((side + 2 buffer) / side)**2 points per core point.
 SNAP_TOLERANCE = 1.15
