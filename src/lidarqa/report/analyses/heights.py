@@ -281,34 +281,9 @@ def _heights_section(ctx: RunContext, item: AnalysisItem, rep: Any, laser: Any, 
             )
         )
     c, w, mpd = res["comparison"], res["w"], res["map_points"]
-    tables = [
-        Table(
-            "Map points",
-            ["quantity", "value"],
-            [
-                ["map points", mpd["n"]],
-                ["not fitted", mpd["n_failed"]],
-                ["mean predicted σ (m)", mpd["sigma_mean"]],
-                ["95th percentile σ (m)", mpd["sigma_p95"]],
-                *[[f"σ class {k}", v] for k, v in res["sigma_classes"].items()],
-            ],
-        ),
-        Table(
-            "Comparison with the reference",
-            ["quantity", "value", "key in report.json"],
-            labelled_rows(
-                {k: v for k, v in c.items() if not isinstance(v, list | dict)},
-                prefix="comparison",
-            ),
-            code_columns=(2,),
-        ),
-        Table(
-            "w-tests",
-            ["quantity", "value", "key in report.json"],
-            labelled_rows(dict(w), prefix="w"),
-            code_columns=(2,),
-        ),
-    ]
+    tables = heights_tables(mpd, c, w, n_reference=res["n_reference"],
+                            n_outside=res["n_reference_outside"],
+                            sigma_classes=res["sigma_classes"])
     wv = np.asarray(rep.w_values, dtype=float)
     order = np.argsort(-np.nan_to_num(np.abs(wv), nan=-1.0), kind="stable")[:10]
     order = order[np.isfinite(wv[order])]
@@ -343,3 +318,64 @@ def _heights_section(ctx: RunContext, item: AnalysisItem, rep: Any, laser: Any, 
         notes=notes,
         paragraphs=paragraphs,
     )
+
+
+def heights_tables(map_points: dict[str, Any] | None, comparison: dict[str, Any] | None,
+                   w: dict[str, Any] | None, *, n_reference: int | None = None,
+                   n_outside: int | None = None,
+                   sigma_classes: dict[str, int] | None = None) -> list[Table]:
+    """The figures of a height test: the report section's tables and ``lidarqa heights``' summary.
+
+    Parameters
+    ----------
+    map_points : dict or None
+        ``n``, ``n_failed``, ``sigma_mean`` and ``sigma_p95`` of the map points (m; None: no
+        map-point table).
+    comparison, w : dict or None
+        ``HeightReport.to_dict()["comparison"]`` and ``["w"]`` (None: no reference points).
+    n_reference, n_outside : int, optional
+        Reference points given, and those outside the TIN of the fitted map points.
+    sigma_classes : dict, optional
+        Map points per σ class (label -> count).
+
+    Returns
+    -------
+    list of Table
+        Map points; with `comparison`, the comparison with the reference and the w-tests.
+    """
+    tables = [] if map_points is None else [
+        Table(
+            "Map points",
+            ["quantity", "value"],
+            [
+                ["map points", map_points["n"]],
+                ["not fitted", map_points["n_failed"]],
+                ["mean predicted σ (m)", map_points["sigma_mean"]],
+                ["95th percentile σ (m)", map_points["sigma_p95"]],
+                *[[f"σ class {k}", v] for k, v in (sigma_classes or {}).items()],
+            ],
+        ),
+    ]
+    if comparison is None or w is None:
+        return tables
+    given = [["reference points", n_reference, "n_reference"]] if n_reference is not None else []
+    if n_outside is not None:
+        given.append(["outside the TIN of the map points", n_outside, "n_reference_outside"])
+    tables += [
+        Table(
+            "Comparison with the reference",
+            ["quantity", "value", "key in report.json"],
+            given + labelled_rows(
+                {k: v for k, v in comparison.items() if not isinstance(v, list | dict)},
+                prefix="comparison",
+            ),
+            code_columns=(2,),
+        ),
+        Table(
+            "w-tests",
+            ["quantity", "value", "key in report.json"],
+            labelled_rows(dict(w), prefix="w"),
+            code_columns=(2,),
+        ),
+    ]
+    return tables
