@@ -282,7 +282,7 @@ def table_text(t: Table) -> str:
     """A table as plain text for the terminal: the report's rows, labels and formatting.
 
     The columns of report.json keys (``code_columns``) are left out; a two-column
-    ``quantity``/``value`` table is printed without its header.
+    label/``value`` table is printed without its header.
 
     Parameters
     ----------
@@ -297,7 +297,7 @@ def table_text(t: Table) -> str:
     numeric_col, id_col = _columns(t)
     keep = [j for j in range(len(t.columns)) if j not in t.code_columns]
     rows = [[_cell(t, r[j], id_col[j]) if j < len(r) else "" for j in keep] for r in t.rows]
-    plain = [t.columns[j] for j in keep] == ["quantity", "value"]
+    plain = len(keep) == 2 and t.columns[keep[1]] == "value"  # label / value: no header
     head = [] if plain else [[str(t.columns[j]) for j in keep]]
     width = [max(len(r[k]) for r in head + rows) for k in range(len(keep))] if rows else []
     out = [t.title] if t.title else []
