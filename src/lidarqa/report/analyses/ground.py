@@ -278,7 +278,7 @@ def _run_on_catalog(ctx: RunContext, item: AnalysisItem) -> SectionResult:
     if e is not None:
         d.update(type_i_pct=e.type_i_pct, type_ii_pct=e.type_ii_pct, total_pct=e.total_pct,
                  ignore_classes=ignore)
-    tables, headline = isprs_tables(e, ignore)
+    tables, headline = isprs_tables(e, ignore, "counts summed over chunks")
     headline = (headline or f"{res.n_ground:,} of {res.n_points:,} points classified as "
                 "ground") + " (catalog)"
     tables.append(Table("Filter run", ["quantity", "value"],
