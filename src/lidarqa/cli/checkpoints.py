@@ -308,9 +308,6 @@ def checkpoints(
 def _summary(r: dict, vertical: bool) -> None:
     from ..report.analyses.checkpoints import checkpoint_tables
 
-    t = r["transform"]
-    echo(f"check points {r['n_check']}" + (f", control points {r['n_control']}, transform "
-                                           f"{t['name']}" if r["n_control"] else ""))
     echo_tables(*checkpoint_tables(r, vertical))
     for w in r["warnings"]:
         echo(f"warning: {w}")

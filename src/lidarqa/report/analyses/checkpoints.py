@@ -327,6 +327,7 @@ def checkpoint_tables(res: dict[str, Any], vertical: bool) -> list[Table]:
             "Residual statistics (m)",
             ["axis", "mean", "std", "RMSE", "max |residual|"],
             stat_rows,
+            decimals=4,  # metres to a tenth of a millimetre
             note=f"{res['n_check']} check points"
             + (f", {res['n_control']} control points" if res.get("n_control") else ""),
         ),
