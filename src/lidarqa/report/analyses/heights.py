@@ -207,21 +207,8 @@ def _heights_section(ctx: RunContext, item: AnalysisItem, rep: Any, laser: Any, 
     notes: list[str] = []
     paragraphs = [what]
     # Outputs.
-    mp_set = PointSet(
-        ids=np.arange(len(mpts)),
-        xyz=np.column_stack([mpts.xy, mpts.height]),
-        crs=ctx.crs,
-        attributes={
-            "sigma": mpts.sigma,
-            "sigma_plane": mpts.sigma_plane,
-            "sigma_block": mpts.sigma_block,
-            "sigma_model": mpts.sigma_model,
-            "n_points": mpts.n_points,
-            "radius": mpts.radius,
-            "failed": mpts.failed,
-            "reason": np.asarray(mpts.reason, dtype=object),
-        },
-    )
+    mp_set = map_point_set(mpts, mpts.xy, ctx.crs,
+                           (*SIGMAS, "n_points", "radius", "failed", "reason"))
     mp_ok = mp_set.subset(~mpts.failed) if mpts.failed.any() else mp_set
     write_vector(ctx, item, mp_ok, "map_points", opts["format"], notes)
     ref_set = PointSet(
@@ -318,6 +305,19 @@ def _heights_section(ctx: RunContext, item: AnalysisItem, rep: Any, laser: Any, 
         notes=notes,
         paragraphs=paragraphs,
     )
+
+
+#: the predicted σ of a map point and its three terms (m)
+SIGMAS = ("sigma", "sigma_plane", "sigma_block", "sigma_model")
+
+
+def map_point_set(mp: Any, xy: Any, crs: Any, fields: tuple[str, ...]) -> Any:
+    """Map points (at `xy`, their fitted height) with the `fields` of `mp` as attributes."""
+    from ...io.vector import PointSet
+
+    return PointSet(ids=np.arange(len(mp)), xyz=np.column_stack([xy, mp.height]), crs=crs,
+                    attributes={k: np.asarray(getattr(mp, k), dtype=object if k == "reason"
+                                              else None) for k in fields})
 
 
 def heights_tables(map_points: dict[str, Any] | None, comparison: dict[str, Any] | None,

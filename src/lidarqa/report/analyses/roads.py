@@ -65,7 +65,6 @@ LABELS = {
 def run_roads(ctx: Any, item: Any) -> SectionResult:
     """Reconstruct the 3D roads, write them, and w-test reference points on their levels."""
     from ...errors import MissingDependencyError
-    from ...io.vector import PointSet
     from ...tiling.jobs_api import catalog_roads
     from .. import plots
 
@@ -92,18 +91,9 @@ def run_roads(ctx: Any, item: Any) -> SectionResult:
     except MissingDependencyError as exc:  # no 'vector' extra: keep the map points as CSV
         ctx.outputs[item.id].pop()
         notes.append(f"roads3d.gpkg not written ({exc}); map points as CSV instead")
-        pts = PointSet(
-            ids=np.arange(len(mp)),
-            xyz=np.column_stack([mp.xy, mp.height]),
-            crs=ctx.crs,
-            attributes={
-                "road": mp.road,
-                "sigma": mp.sigma,
-                "sigma_plane": mp.sigma_plane,
-                "sigma_block": mp.sigma_block,
-                "sigma_model": mp.sigma_model,
-            },
-        )
+        from .heights import SIGMAS, map_point_set
+
+        pts = map_point_set(mp, mp.xy, ctx.crs, ("road", *SIGMAS))
         from ...io.vector import write_points
 
         write_points(pts, ctx.output_path(item, "map_points.csv"), overwrite=True)
