@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import click
 
@@ -236,13 +236,8 @@ def ground(
         if auto:
             echo(f"  parameters      auto: {auto['regime']} (measured once on a sample of "
                  "whole tiles)")
-        echo(
-            f"  chunks          {cres.n_chunks} of {cres.chunk_size:g} {unit}, "
-            f"buffer {cres.buffer:g} {unit}"
-            + (f" ({cres.n_chunks_resumed} resumed)" if cres.n_chunks_resumed else "")
-        )
-        echo(f"  points          {res['n_points']:,}")
-        echo_ground_counts(res, cres.evaluation, "counts summed over chunks", ignore_classes)
+        echo_ground_counts(res, cres.evaluation, "counts summed over chunks", ignore_classes,
+                           cres, unit)
         if catalog.bad:
             echo(f"  skipped         {len(catalog.bad)} bad input(s)")
         finish(
@@ -308,10 +303,6 @@ def ground(
             "  parameters      "
             + ", ".join(f"{k}={v} ({result.parameter_sources[k]})" for k, v in shown.items())
         )
-    echo(
-        f"  points          {res['n_points']:,} ({res['n_candidates']:,} candidates, "
-        f"returns: {res['return_handling']})"
-    )
     for msg in result.warnings:
         echo(f"  note            {msg}")
     echo_ground_counts(res, result.evaluation, ignore=ignore_classes)
@@ -334,14 +325,13 @@ def ground(
 
 
 def echo_ground_counts(res: dict, evaluation: FilterErrors | None, how: str = "",
-                       ignore: list[int] | None = None) -> None:
-    """The ground count and, with --evaluate, the ISPRS filter errors (one file or a catalog)."""
-    from ..report.analyses.ground import isprs_tables
+                       ignore: list[int] | None = None, chunked: Any = None,
+                       unit: str = "m") -> None:
+    """The filter run's counts and, with --evaluate, the ISPRS filter errors (file or catalog)."""
+    from ..report.analyses.ground import filter_run_table, isprs_tables
 
-    frac = res["ground_fraction"]
-    share = f" ({100 * frac:.1f} %)" if frac is not None else ""
-    echo(f"  ground          {res['n_ground']:,}{share}")
-    echo_tables(*isprs_tables(evaluation, list(ignore or []), how)[0])
+    echo_tables(filter_run_table(res, chunked, unit),
+                *isprs_tables(evaluation, list(ignore or []), how)[0])
 
 
 def echo_terrain(t: dict | None) -> None:

@@ -160,18 +160,7 @@ def run_ground(ctx: RunContext, item: AnalysisItem) -> SectionResult:
                 f"non-ground points within {terrain['near_limit_m']:g} m of the reference ground "
                 "surface per reference ground point)"
             )
-    tables.append(
-        Table(
-            "Filter run",
-            ["quantity", "value"],
-            [
-                ["candidate points", res.get("n_candidates")],
-                ["ground points", res.get("n_ground")],
-                ["return handling", res.get("return_handling")],
-                ["noise points excluded", res.get("n_excluded_noise")],
-            ],
-        )
-    )
+    tables.append(filter_run_table(res))
     return SectionResult(
         results=res,
         headline=headline,
@@ -184,6 +173,20 @@ def run_ground(ctx: RunContext, item: AnalysisItem) -> SectionResult:
             "geometry (and return numbers) only; the file's classes are used only to score it."
         ],
     )
+
+
+def filter_run_table(res: dict[str, Any], chunked: Any = None, unit: str = "m") -> Table:
+    """Points, candidates, ground (and a catalog's chunks, in `unit`): report and CLI."""
+    frac = res.get("ground_fraction")
+    rows = [["points", res["n_points"]], ["candidate points", res.get("n_candidates")],
+            ["ground points", res["n_ground"]],
+            ["ground share (%)", None if frac is None else 100 * frac],
+            ["return handling", res.get("return_handling")],
+            ["noise points excluded", res.get("n_excluded_noise")]]
+    if chunked is not None:
+        rows += [["chunks", chunked.n_chunks], ["chunks resumed", chunked.n_chunks_resumed or None],
+                 [f"chunk size ({unit})", chunked.chunk_size], [f"buffer ({unit})", chunked.buffer]]
+    return Table("Filter run", ["quantity", "value"], [r for r in rows if r[1] is not None])
 
 
 def terrain_table(terrain: dict[str, Any]) -> Table:
@@ -281,10 +284,7 @@ def _run_on_catalog(ctx: RunContext, item: AnalysisItem) -> SectionResult:
     tables, headline = isprs_tables(e, ignore, "counts summed over chunks")
     headline = (headline or f"{res.n_ground:,} of {res.n_points:,} points classified as "
                 "ground") + " (catalog)"
-    tables.append(Table("Filter run", ["quantity", "value"],
-                        [["points", res.n_points], ["ground points", res.n_ground],
-                         ["chunks", res.n_chunks], ["chunk size (m)", res.chunk_size],
-                         ["buffer (m)", res.buffer]]))
+    tables.append(filter_run_table(d, res))
     out = SectionResult(
         results=d, headline=headline, tables=tables, notes=notes,
         parameters={"filter": dict(res.parameters)},
