@@ -237,7 +237,7 @@ def ground(
             echo(f"  parameters      auto: {auto['regime']} (measured once on a sample of "
                  "whole tiles)")
         echo_ground_counts(res, cres.evaluation, "counts summed over chunks", ignore_classes,
-                           cres, unit)
+                           cres, unit or "CRS units")
         if catalog.bad:
             echo(f"  skipped         {len(catalog.bad)} bad input(s)")
         finish(
