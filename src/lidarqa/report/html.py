@@ -299,7 +299,7 @@ def table_text(t: Table) -> str:
     rows = [[_cell(t, r[j], id_col[j]) if j < len(r) else "" for j in keep] for r in t.rows]
     plain = len(keep) == 2 and t.columns[keep[1]] == "value"  # label / value: no header
     head = [] if plain else [[str(t.columns[j]) for j in keep]]
-    width = [max(len(r[k]) for r in head + rows) for k in range(len(keep))] if rows else []
+    width = [max((len(r[k]) for r in head + rows), default=0) for k in range(len(keep))]
     out = [t.title] if t.title else []
     num = [k > 0 and keep[k] < len(numeric_col) and numeric_col[keep[k]]
            for k in range(len(keep))]  # numeric columns right-aligned (the labels aside)
