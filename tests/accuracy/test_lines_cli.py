@@ -68,7 +68,7 @@ def test_lines_toy_json_matrix_pairs(toy):
         out,
     )
     assert res.exit_code == 0, res.output
-    assert "LHD (m) = 0.229" in res.output
+    assert "LHD 0.2286 m" in res.output  # the report's 4 significant digits
     doc = json.loads(out.read_text())
     assert doc["command"] == "lines"
     r = doc["results"]

@@ -102,7 +102,7 @@ def test_one_file_per_strip(strips, tmp_path):
     files = [d / f"strip{s}.laz" for s in scene.strip_ids]
     r = run("swaths", *files, "-o", tmp_path / "o", "-q", "--no-maps", "--cell-size", "1")
     assert r.exit_code == 0, r.output
-    assert "1-2" in r.output.replace(" ", "") and "2-3" in r.output.replace(" ", "")
+    assert "1–2" in r.output.replace(" ", "") and "2–3" in r.output.replace(" ", "")  # en dash
 
 
 @pytest.mark.parametrize(

@@ -68,7 +68,7 @@ def test_cli_says_when_the_reference_looks_thinned(tmp_path):
         cli, ["ground", str(src), "-o", str(tmp_path / "o.laz"), "--evaluate"]
     )
     assert res.exit_code == 0, res.output
-    assert "terrain model   RMSE" in res.output
+    assert "terrain model RMSE (filter − reference TIN) (m)" in res.output  # the report's label
     assert "the reference ground looks thinned" in res.output
     assert "judge by the terrain model" in res.output
 

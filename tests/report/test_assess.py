@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -287,4 +288,6 @@ transform = "helmert"
     t = run.results["helmert"]["transform"]
     assert [t["params"][k] for k in ("tx", "ty", "tz")] == pytest.approx(-MEASURED_SHIFT, abs=1e-6)
     html = (tmp_path / "out" / "report.html").read_text(encoding="utf-8")
-    assert "tx (m)" in html and "control-point centroid" in html
+    # as `lidarqa checkpoints` prints it: value ± σ with its unit
+    assert re.search(r"<td>tx</td><td>-?[\d.]+ ± [\d.]+ m</td>", html)
+    assert "control-point centroid" in html

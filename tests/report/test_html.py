@@ -7,7 +7,16 @@ import re
 import numpy as np
 import pytest
 
-from lidarqa.report.html import Figure, Report, Section, SummaryRow, Table, fmt, render_html
+from lidarqa.report.html import (
+    Figure,
+    Report,
+    Section,
+    SummaryRow,
+    Table,
+    fmt,
+    render_html,
+    table_text,
+)
 
 
 def _report(**kw) -> Report:
@@ -120,3 +129,22 @@ def test_id_columns_have_no_thousands_separators():
                inputs=[], versions={})
     )  # fmt: skip
     assert "20.900" in html2 and "0.032" in html2 and "0.03169" not in html2
+
+
+
+def test_table_text_prints_the_cells_of_the_html_table():
+    """The terminal summary of a command is the report's table: same cells, keys left out."""
+    rows = [["RMS (m)", 0.012345, "rms"], ["points", 12345, "n"], ["undefined (m)", np.nan, "u"]]
+    t = Table("Figures", ["quantity", "value", "key in report.json"], rows, code_columns=(2,),
+              note="a note")
+    lines = table_text(t).splitlines()
+    assert lines[0] == "Figures" and lines[-1] == "  (a note)"
+    assert not any("quantity" in ln or ln.endswith(("rms", " n", " u")) for ln in lines)
+    page = render_html(_report(sections=[Section(id="s", title="S", kind="k", headline="h",
+                                                 tables=[t])]))
+    for line, cell in zip(lines[1:4], ("0.01235", "12,345", "–"), strict=True):
+        assert line.endswith(cell) and f">{cell}<" in page  # html.fmt's cell, right-aligned
+    # identifiers keep no separators; fixed decimals apply; an empty table prints its header
+    strips = table_text(Table("S", ["strip", "dz (m)"], [[12345, 0.5]], decimals=3))
+    assert strips.splitlines()[2].split() == ["12345", "0.500"]
+    assert table_text(Table("E", ["a", "b"], [])).splitlines() == ["E", "  a  b"]

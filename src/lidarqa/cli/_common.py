@@ -334,6 +334,18 @@ def echo(text: str = "") -> None:
     click.echo(text)
 
 
+def echo_tables(*tables: Any) -> None:
+    """Print report tables (:class:`lidarqa.report.html.Table`) as the command's summary.
+
+    A command shows the figures its report section shows, built by the same function:
+    chosen, labelled and formatted once.
+    """
+    from ..report.html import table_text
+
+    for t in tables:
+        echo(table_text(t))
+
+
 def _no_progress(fraction: float) -> None:
     """The progress callback of a step that shows nothing."""
 

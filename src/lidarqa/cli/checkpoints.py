@@ -8,7 +8,6 @@ from typing import Any
 import click
 
 from ..accuracy.transforms import TRANSFORMS
-from ..units import param_unit
 from ._catalog import (
     catalog_options,
     finish_run,
@@ -23,7 +22,7 @@ from ._common import (
     common_options,
     crs_option,
     echo,
-    fmt_number,
+    echo_tables,
     input_crs,
     prepare_outputs,
     settings,
@@ -307,61 +306,8 @@ def checkpoints(
 
 
 def _summary(r: dict, vertical: bool) -> None:
-    echo(
-        f"check points    {r['n_check']}"
-        + (f"   control points {r['n_control']}" if r["n_control"] else "")
-    )
-    t = r["transform"]
-    if t["name"] != "none":
-        echo(f"transform       {t['name']}   sigma0 {fmt_number(t['sigma0'], 4)} m")
-        o = t.get("origin")
-        if o:
-            echo(
-                f"  about the control-point centroid x {o['x']:.3f}  y {o['y']:.3f}  "
-                f"z {o['z']:.3f} m"
-            )
-        order = ["tx", "ty", "tz"] + [k for k in t["params"] if k not in ("tx", "ty", "tz")]
-        for k in order:
-            if k not in t["params"] or k in ("c", "d", "e"):  # c, d at the origin; e = tz
-                continue
-            v, unit = t["params"][k], param_unit(k)
-            digits = 7 if k in ("scale", "a", "b") else 4
-            sig = t["sigmas"].get(k)
-            if k == "scale" and not sig:
-                echo(f"  {'scale':<14}{'1 (fixed)':>14}")
-                continue
-            line = f"  {k.removesuffix('_deg'):<14}{fmt_number(v, digits):>14} ± "
-            line += f"{fmt_number(sig, digits)} {unit}".rstrip()
-            if k == "scale" and v is not None and sig is not None:  # surveyors read ppm
-                line += f"   ({(v - 1.0) * 1e6:+.1f} ± {sig * 1e6:.1f} ppm)"
-            echo(line)
-    if not vertical:
-        echo("                x          y          z")
-        for name in ("mean", "std", "rmse", "max_abs"):
-            echo(f"  {name:<12}" + "".join(f"{fmt_number(r[f'{name}_{a}'], 4):>11}" for a in "xyz"))
-        echo(f"RMSE_H {fmt_number(r['rmse_h'], 4)} m   RMSE_3D {fmt_number(r['rmse_3d'], 4)} m")
-    else:
-        v = r["vertical"]
-        echo(
-            f"ground points   {v['n_ground']:,}   "
-            f"max edge {fmt_number(v['max_edge'], 2)} m   flags "
-            + ", ".join(f"{k}: {n}" for k, n in v["flags"].items() if n)
-        )
-        echo(
-            f"dz  mean {fmt_number(r['mean_z'], 4)}  std {fmt_number(r['std_z'], 4)}  "
-            f"RMSE {fmt_number(r['rmse_z'], 4)}  "
-            f"max|dz| {fmt_number(r['max_abs_z'], 4)} m"
-        )
-    a = r["asprs2023"]
-    echo(
-        f"ASPRS Ed. 2     RMSE_H {fmt_number(a['rmse_h'], 4)}  "
-        f"RMSE_V {fmt_number(a['rmse_v'], 4)}  "
-        f"RMSE_3D {fmt_number(a['rmse_3d'], 4)} m"
-    )
-    n = r["nssda"]
-    echo(
-        f"NSSDA 95 %      horizontal {fmt_number(n['accuracy_r'], 4)} m [{n['formula']}]   "
-        f"vertical {fmt_number(n['accuracy_z'], 4)} m [1.9600*RMSE_z]"
-    )
+    from ..report.analyses.checkpoints import checkpoint_tables
+
+    echo_tables(*checkpoint_tables(r, vertical))
     for w in r["warnings"]:
         echo(f"warning: {w}")

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import click
 
@@ -13,6 +13,7 @@ from ._common import (
     common_options,
     crs_option,
     echo,
+    echo_tables,
     finish,
     input_crs,
     prepare_outputs,
@@ -235,13 +236,8 @@ def ground(
         if auto:
             echo(f"  parameters      auto: {auto['regime']} (measured once on a sample of "
                  "whole tiles)")
-        echo(
-            f"  chunks          {cres.n_chunks} of {cres.chunk_size:g} {unit}, "
-            f"buffer {cres.buffer:g} {unit}"
-            + (f" ({cres.n_chunks_resumed} resumed)" if cres.n_chunks_resumed else "")
-        )
-        echo(f"  points          {res['n_points']:,}")
-        echo_ground_counts(res, cres.evaluation, " (counts summed over chunks)")
+        echo_ground_counts(res, cres.evaluation, "counts summed over chunks", ignore_classes,
+                           cres, unit or "CRS units")
         if catalog.bad:
             echo(f"  skipped         {len(catalog.bad)} bad input(s)")
         finish(
@@ -307,13 +303,9 @@ def ground(
             "  parameters      "
             + ", ".join(f"{k}={v} ({result.parameter_sources[k]})" for k, v in shown.items())
         )
-    echo(
-        f"  points          {res['n_points']:,} ({res['n_candidates']:,} candidates, "
-        f"returns: {res['return_handling']})"
-    )
     for msg in result.warnings:
         echo(f"  note            {msg}")
-    echo_ground_counts(res, result.evaluation)
+    echo_ground_counts(res, result.evaluation, ignore=ignore_classes)
     echo_terrain(res.get("terrain"))
     finish(
         "ground",
@@ -332,40 +324,22 @@ def ground(
     )
 
 
-def echo_ground_counts(res: dict, evaluation: FilterErrors | None, how: str = "") -> None:
-    """The ground count and, with --evaluate, the ISPRS filter errors (one file or a catalog)."""
-    frac = res["ground_fraction"]
-    share = f" ({100 * frac:.1f} %)" if frac is not None else ""
-    echo(f"  ground          {res['n_ground']:,}{share}")
-    if evaluation is not None:
-        e = evaluation
-        echo(f"  evaluated       {e.n:,} points{how}")
-        echo(
-            f"  type I          {100 * e.type_i:.2f} %   type II {100 * e.type_ii:.2f} %   "
-            f"total {100 * e.total:.2f} %   kappa {e.kappa:.3f}"
-        )
+def echo_ground_counts(res: dict, evaluation: FilterErrors | None, how: str = "",
+                       ignore: list[int] | None = None, chunked: Any = None,
+                       unit: str = "m") -> None:
+    """The filter run's counts and, with --evaluate, the ISPRS filter errors (file or catalog)."""
+    from ..report.analyses.ground import filter_run_table, isprs_tables
+
+    echo_tables(filter_run_table(res, chunked, unit),
+                *isprs_tables(evaluation, list(ignore or []), how)[0])
 
 
 def echo_terrain(t: dict | None) -> None:
     """With --evaluate: the terrain model against the reference's, and the thinned note."""
+    from ..report.analyses.ground import terrain_table
+
     if not t:
         return
-    if t["reason"]:
-        echo(f"  terrain model   not scored: {t['reason']}")
-    else:
-        echo(
-            f"  terrain model   RMSE {t['rmse_m']:.2f} m (bias {t['bias_m']:+.2f} m), "
-            f"cells off > {t['off_limit_m']:g} m {100 * t['cells_off']:.1f} % "
-            f"({t['n_cells']:,} cells of {t['cell_m']:g} m)"
-        )
-        echo(
-            f"                  objects taken {100 * t['objects_taken']:.1f} %, ground lost "
-            f"{100 * t['ground_lost']:.1f} % (> {t['above_limit_m']:g} m from the other terrain)"
-        )
-    r = t["reference_on_surface_ratio"]
-    if r is not None:
-        echo(
-            f"  reference       {r:.2f} non-ground points within {t['near_limit_m']:g} m of its "
-            "ground surface per ground point"
-            + (f": {t['note']}" if t["reference_thinned"] else "")
-        )
+    echo_tables(terrain_table(t))
+    if t["reference_thinned"]:
+        echo(f"note: {t['note']}")

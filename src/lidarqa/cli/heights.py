@@ -36,6 +36,7 @@ from ._common import (
     common_options,
     crs_option,
     echo,
+    echo_tables,
     finish,
     input_crs,
     prepare_outputs,
@@ -163,13 +164,6 @@ def laser_noise_options(func: Any) -> Any:
     ):
         func = opt(func)
     return func
-
-
-def _fmt(v: float, scale: float = 1.0, unit: str = "m") -> str:
-    """Metres to the millimetre (the unit policy: metres everywhere); % with one decimal."""
-    if v is None or not np.isfinite(v):
-        return "n/a"
-    return f"{v * scale:.1f} {unit}" if unit == "%" else f"{v * scale:.3f} {unit}"
 
 
 @click.command()
@@ -376,21 +370,10 @@ def heights(
                 (*_MAP_FIELDS, "radius", "distance", "failed", "reason"))
             write_points(rows, output, overwrite=settings().overwrite, layer="heights")
     res = report.to_dict()
-    m, c, w = res["map_points"], res["comparison"], res["w"]
-    echo(f"map points        {m['n']:,} ({m['n_failed']:,} not fitted)")
-    echo(f"  σ mean / p95    {_fmt(m['sigma_mean'])} / {_fmt(m['sigma_p95'])}")
-    outside = report.n_outside
-    echo(f"reference points  {len(ref):,} ({c['n']:,} compared, {outside:,} outside the TIN)")
-    echo(f"  Δh mean / std   {_fmt(c['mean'])} / {_fmt(c['std'])}")
-    echo(f"  RMS / max |Δh|  {_fmt(c['rms'])} / {_fmt(c['max_abs'])}")
-    echo(f"  σ_model (emp.)  {_fmt(c['sigma_model_empirical'])}")
-    echo(f"w-tests           k = {w['critical']:.4f}, {w['n_outliers']:,} outlier(s)")
+    from ..report.analyses.heights import heights_tables
 
-    def num(v: Any) -> str:
-        return "n/a" if v is None or not np.isfinite(v) else f"{v:.3f}"
-
-    echo(f"  std(w)          {num(w['std'])} (without outliers {num(w['std_without_outliers'])})")
-    echo(f"  |w| < 1 / < 2   {_fmt(w['frac_lt1'], 100, '%')} / {_fmt(w['frac_lt2'], 100, '%')}")
+    echo_tables(*heights_tables(res["map_points"], res["comparison"], res["w"],
+                                n_reference=len(ref), n_outside=report.n_outside))
     if report.flags:
         echo("flags             " + ", ".join(report.flags))
     params = dict(report.parameters)
@@ -461,20 +444,17 @@ def _heights_by_levels(
             write_points(rows, output, overwrite=settings().overwrite, layer="heights")
     res_roads = rec.to_dict()
     res = comp.to_dict()
-    c, w = res["comparison"], res["w"]
+    from ..report.analyses.heights import heights_tables
+
     dx, dy = res_roads["shift"]
     echo(
         f"road levels       {res_roads['n_roads']:,} road(s) from "
         f"{run.extra['n_polygons']:,} polygons; map shift dx {dx:+.3f} m, dy {dy:+.3f} m"
     )
-    echo(f"map points        {res_roads['n_map_points']:,} ({res_roads['n_failed']:,} not fitted)")
-    echo(f"  σ mean / p95    {_fmt(res_roads['sigma_mean'])} / {_fmt(res_roads['sigma_p95'])}")
-    echo(f"reference points  {len(ref):,} ({c['n']:,} compared on their level)")
-    echo(f"  Δh mean / std   {_fmt(c['mean'])} / {_fmt(c['std'])}")
-    echo(f"  RMS / max |Δh|  {_fmt(c['rms'])} / {_fmt(c['max_abs'])}")
-    echo(f"w-tests           k = {w['critical']:.4f}, {w['n_outliers']:,} outlier(s)")
-    std = w["std"]
-    echo(f"  std(w)          {'n/a' if not np.isfinite(std) else f'{std:.3f}'}")
+    echo_tables(*heights_tables(
+        {"n": res_roads["n_map_points"], "n_failed": res_roads["n_failed"],
+         "sigma_mean": res_roads["sigma_mean"], "sigma_p95": res_roads["sigma_p95"]},
+        res["comparison"], res["w"], n_reference=len(ref)))
     params = dict(rec.parameters)
     params.update(classes=classes, sigma_ref=sigma_ref, alpha=alpha, levels=True)
     finish(

@@ -11,6 +11,7 @@ from ._common import (
     common_options,
     crs_option,
     echo,
+    echo_tables,
     finish,
     input_crs,
     prepare_outputs,
@@ -46,6 +47,7 @@ def info(
     by tile as one cloud, with the catalog's tiles, gaps, overlaps and default chunks.
     """
     from ..io.info import describe, describe_files
+    from ..report.analyses.info import catalog_results
     from ._catalog import open_catalog_source, wants_catalog
 
     given = input_crs(crs)
@@ -65,7 +67,7 @@ def info(
             d = describe_files([t.path for t in cat.tiles], crs=source.native_crs,
                                ids_per_file=None if headers else per_tile,
                                headers_only=headers).to_dict()
-        d = {**d, **_catalog_results(cat), "strips_per_tile": per_tile,
+        d = {**d, **catalog_results(cat), "strips_per_tile": per_tile,
              "strips": {int(k): v for k, v in d["point_source_ids"].items()},
              # points per occupied area, as for one file (no longer points / tile area)
              "density_per_m2": d["density_per_m2"]}
@@ -75,91 +77,19 @@ def info(
            else {"crs": crs, "headers": headers}, results=d)
 
 
-def _catalog_results(cat: Any) -> dict[str, Any]:
-    """The catalog's own keys: tiles, header bounds, gaps, overlaps and default chunks."""
-    from ..tiling import make_chunks
-
-    d = cat.to_dict()
-    chunks = make_chunks(cat)
-    d["default_chunks"] = {
-        "n_chunks": len(chunks),
-        "chunk_size": chunks[0].size if chunks else None,
-        "buffer": float(chunks[0].buffered[2] - chunks[0].core[2]) if chunks else None,
-    }
-    return d
-
-
 def _echo_info(paths: tuple[str, ...], d: dict[str, Any], given: Any) -> None:
-    """The human summary of one file or a catalog (``d``: the results)."""
-    catalog = "n_tiles" in d
+    """The human summary of one file or a catalog (``d``: the results): the report's tables."""
+    from ..report.analyses.info import info_tables
+
     echo(", ".join(paths))
-    if catalog:
-        echo(f"  tiles           {d['n_tiles']:,}"
-             + (f" ({d['n_copc']} COPC)" if d["n_copc"] else ""))
-    echo(f"  points          {d['n_points']:,}")
-    if catalog and d["n_points"]:
-        b, zr = d["bounds"], d["zrange"]
-        b = {"min_x": b[0], "min_y": b[1], "max_x": b[2], "max_y": b[3], "min_z": zr[0],
-             "max_z": zr[1]}
-    else:
-        b = d["bounds"]
-    if d["n_points"]:
-        for a in "xyz":
-            echo(f"  {a}               {b['min_' + a]:.3f} .. {b['max_' + a]:.3f}")
-    echo(
-        f"  CRS             {d['crs_name'] or 'none'}"
-        + (f" (EPSG:{d['crs_epsg']})" if d["crs_epsg"] else "")
-        + (" (from --crs)" if given is not None and d["crs_name"] and not catalog else "")
-    )
+    echo_tables(*info_tables(d))
+    if given is not None and d["crs_name"] and "n_tiles" not in d:
+        echo("(CRS from --crs)")
     if not d["crs_name"]:
-        echo(
-            "                  (the input declares no CRS: pass --crs, e.g. --crs EPSG:2154, "
-            "to every command that reads it, so that its outputs carry one)"
-        )
-    if d["vertical_unit"]:
-        echo(f"  vertical unit   {d['vertical_unit']}")
-    if d["density_per_m2"]:
-        echo(f"  density         {d['density_per_m2']:.3g} pts/m² (points / occupied area)")
-    if catalog:
-        echo(f"  tile size       {d['tile_size']:g} m (median)")
-        echo("  point formats   " + ", ".join(str(f) for f in d["point_formats"]))
-    if not d.get("points_read", True):
-        echo("  classes, strips, density, returns: not read (--headers)")
-    else:
-        if d["classes"]:
-            echo("  classes         "
-                 + ", ".join(f"{k}: {v:,}" for k, v in d["classes"].items()))
-        echo("  strips          "
-             + (", ".join(f"{k}: {v:,}" for k, v in d["point_source_ids"].items()) or "none")
-             + " (point source ids: points)")
-        r = d["returns"]
-        echo(
-            "  returns         "
-            + (
-                "absent"
-                if not r["present"]
-                else (
-                    "valid"
-                    if r["valid"]
-                    else f"present, {r['n_zero_return_number']:,} zero / "
-                    f"{r['n_invalid']:,} invalid"
-                )
-            )
-        )
-    if not catalog:
-        return
-    echo(f"  gaps            {len(d['gaps'])} missing tile cell(s)")
-    echo(f"  overlaps        {len(d['overlaps'])} duplicate overlap(s)")
-    for o in d["overlaps"][:10]:
-        echo(f"    {o['tiles'][0]} / {o['tiles'][1]}: {100 * o['fraction']:.0f} %")
-    dc = d["default_chunks"]
-    if dc["n_chunks"]:
-        echo(
-            f"  chunks          {dc['n_chunks']} of {dc['chunk_size']:g} m (default), "
-            f"buffer {dc['buffer']:g} m"
-        )
-    if d["bad"]:
-        echo(f"  bad inputs      {len(d['bad'])}")
+        echo("(the input declares no CRS: pass --crs, e.g. --crs EPSG:2154, to every command "
+             "that reads it, so that its outputs carry one)")
+    for o in d.get("overlaps", [])[:10]:
+        echo(f"overlap {o['tiles'][0]} / {o['tiles'][1]}: {100 * o['fraction']:.0f} %")
 
 
 def _station(value: str | None) -> tuple[float, float, float]:

@@ -27,6 +27,7 @@ from ._common import (
     common_options,
     crs_option,
     echo,
+    echo_tables,
     finish,
     fmt_number,
     input_crs,
@@ -181,37 +182,12 @@ def lines(
     if pairs_out:
         with steps("Writing pairs"), atomic_path(pairs_out, overwrite=overwrite) as tmp:
             _write_pairs(r, tmp)
+    from ..report.analyses.lines import lines_table
+
     d = r.to_dict()
-    star_tm = "*" if d["olhd_tm"] is not None and d["olhd_tm"] == d["lhd"] else " "
-    star_mt = (
-        "*" if d["olhd_mt"] is not None and d["olhd_mt"] == d["lhd"] and star_tm == " " else " "
-    )
-
-    def how(auto: Any) -> str:
-        return {"peak": "auto", "fixed": "fixed"}.get(auto.reason, f"fallback: {auto.reason}")
-
     echo(f"test   {test_label}: p = {r.p} segments")
     echo(f"model  {model_label}: q = {r.q} segments")
-    echo(f"{'':22}{'test→model':>12}{'model→test':>14}")
-    echo(
-        f"{'threshold (m)':22}{fmt_number(r.threshold_tm, 3):>12}"
-        f"{fmt_number(r.threshold_mt, 3):>14}"
-        f"   ({how(r.auto_tm)} / {how(r.auto_mt)})"
-    )
-    echo(f"{'pairs':22}{r.n_pairs_tm:>12}{r.n_pairs_mt:>14}")
-    echo(
-        f"{'OLHD (m)':22}{fmt_number(r.olhd_tm, 3) + star_tm:>12}"
-        f"{fmt_number(r.olhd_mt, 3) + star_mt:>14}"
-    )
-    if r.ground_truth is not None:
-        g = r.ground_truth
-        for k in ("tp", "fp", "fn", "tn"):
-            echo(f"{k.upper():22}{g[k + '_tm']:>12}{g[k + '_mt']:>14}")
-        echo(
-            f"{'detection rate (%)':22}{100 * g['detection_rate_tm']:>12.4f}"
-            f"{100 * g['detection_rate_mt']:>14.4f}"
-        )
-    echo(f"LHD (m) = {fmt_number(r.lhd, 3)}  (* = the larger OLHD)")
+    echo_tables(lines_table(r))
     finish(
         "lines",
         inputs={"test": test, "model": model, "ground_truth": ground_truth},

@@ -5,7 +5,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import click
-import numpy as np
 
 from ..accuracy.heights import (
     CURVATURE,
@@ -17,6 +16,7 @@ from ._common import (
     common_options,
     crs_option,
     echo,
+    echo_tables,
     finish,
     input_crs,
     prepare_outputs,
@@ -35,10 +35,6 @@ def _parse_shift(value: str | None) -> tuple[float, float] | None:
     except ValueError:
         raise OptionError(f"--shift must be 'auto' or DX,DY in metres, got {value!r}") from None
     return dx, dy
-
-
-def _fmt_cm(v: float) -> str:
-    return "n/a" if v is None or not np.isfinite(v) else f"{v * 100:.1f} cm"
 
 
 @click.command()
@@ -153,22 +149,11 @@ def roads(
     with steps("Writing " + output):
         write_roads(rec, output, crs=run.extra["crs"], overwrite=settings().overwrite)
     res = rec.to_dict()
-    dx, dy = res["shift"]
-    how = "estimated" if res["shift_estimated"] else "given"
-    if "shift_not_significant" in rec.flags:
-        how = "no significant shift in the data: map kept"
-    echo(f"map shift         dx {dx:+.3f} m, dy {dy:+.3f} m ({how})")
-    echo(
-        f"polygons          {res['n_polygons']:,} in {res['n_roads']:,} road(s); "
-        f"{res['polygons_grown']:,} grown from a neighbour, "
-        f"{res['polygons_without_points']:,} without points"
-    )
-    echo(f"other-level pts   {res['points_other_level']:,} (under/over the polygons, not used)")
-    echo(f"map points        {res['n_map_points']:,} ({res['n_failed']:,} without height)")
-    echo(f"  σ mean / p95    {_fmt_cm(res['sigma_mean'])} / {_fmt_cm(res['sigma_p95'])}")
-    echo(f"TIN triangles     {res['n_triangles']:,}")
-    for i in np.flatnonzero(rec.polygon_status.astype(str) != "ok"):
-        echo(f"  polygon {rec.polygon_ids[i]}: {rec.polygon_status[i]}")
+    from ..report.analyses.roads import polygon_issues, roads_table
+
+    echo_tables(roads_table(res, rec.flags))
+    for issue in polygon_issues(rec):
+        echo(f"  {issue}")
     if rec.flags:
         echo("flags             " + ", ".join(rec.flags))
     params = dict(rec.parameters)

@@ -22,7 +22,7 @@ from ._catalog import (
     run_job,
     wants_catalog,
 )
-from ._common import Steps, classes_option, common_options, echo, settings
+from ._common import Steps, classes_option, common_options, echo, echo_tables, settings
 
 
 def _csv(rows: list[dict[str, Any]]) -> str:
@@ -33,11 +33,6 @@ def _csv(rows: list[dict[str, Any]]) -> str:
         for r in rows:
             w.writerow({k: ("" if v is None else v) for k, v in r.items()})
     return buf.getvalue()
-
-
-def _m(v: float | None) -> str:
-    """A length in metres to the millimetre (the unit policy: lengths in metres)."""
-    return "   n/a" if v is None or not np.isfinite(v) else f"{v:6.3f}"
 
 
 @click.command()
@@ -242,37 +237,9 @@ def swaths(
                 tmp.write_text(_csv(rows), encoding="utf-8")
             written.append(name)
 
-    lvl = rep.thresholds
-    echo(
-        f"quality level {rep.quality_level}: RMSDz ≤ {lvl['rmsdz']:.2f} m, max |dz| ≤ "
-        f"{lvl['max_abs']:.2f} m, repeatability ≤ {lvl['repeatability']:.2f} m; "
-        f"cell {rep.cell_size:g} m"
-    )
-    echo(
-        f"{'pair':>13} {'overlap m²':>11} {'area m²':>9} {'RMSDz':>6} {'mean':>6} "
-        f"{'median':>6} {'p95':>6} {'max':>6}  (m)"
-    )
-    for p in rep.pairs:
-        echo(
-            f"{p.strip_a:>6}-{p.strip_b:<6} {p.overlap_area:11,.0f} {p.area:9,.0f} {_m(p.rmsdz)} "
-            f"{_m(p.mean)} {_m(p.median)} {_m(p.p95_abs)} {_m(p.max_abs)}  "
-            f"{'pass' if p.passed else 'FAIL'}"
-        )
-    for r in rep.repeatability:
-        if r.assessed:
-            echo(
-                f"strip {r.strip}: repeatability RMSE {_m(r.rmse)} m, median max−min "
-                f"{_m(r.median_range)} m ({r.range_cell:g} m cells) on {r.area:,.0f} m²  "
-                f"{'pass' if r.passed else 'FAIL'}"
-            )
-    for o in rep.network_offsets or rep.pair_offsets:
-        if o.strip_a == o.strip_b:  # the reference strip itself
-            continue
-        echo(
-            f"offset {o.strip_b} − {o.strip_a} ({o.method}): dx {o.dx:+.3f} ± "
-            f"{o.sigma_dx:.3f}, dy {o.dy:+.3f} ± {o.sigma_dy:.3f}, dz "
-            f"{o.dz:+.3f} ± {o.sigma_dz:.3f} m"
-        )
+    from ..report.analyses.swaths import swaths_tables
+
+    echo_tables(*swaths_tables(rep))
     if np.isfinite(rep.e4):
         echo(
             f"E4 (strip height noise) {rep.e4:.3f} m; use: lidarqa heights ... "

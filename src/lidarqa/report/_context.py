@@ -30,7 +30,6 @@ __all__ = [
     "ParamDefaults",
     "sha256_file",
     "selection_label",
-    "fmt_or_dash",
 ]
 
 @dataclass
@@ -349,11 +348,3 @@ def write_vector(
         ctx.outputs[item.id].pop()
         write(obj, ctx.output_path(item, f"{base}.csv"), overwrite=True)
         notes.append(f"{base}: written as CSV ({fmt} needs the 'vector' extra)")
-
-
-
-def fmt_or_dash(v: Any) -> str:
-    from .html import fmt
-
-    return fmt(v)
-

@@ -18,7 +18,7 @@ from typing import Any
 
 from .labels import labelled_rows
 
-__all__ = ["Figure", "Table", "Section", "SummaryRow", "Report", "render_html", "fmt"]
+__all__ = ["Figure", "Table", "Section", "SummaryRow", "Report", "render_html", "fmt", "table_text"]
 
 
 @dataclass(frozen=True)
@@ -227,6 +227,31 @@ def _is_num(v: Any) -> bool:
     return isinstance(v, int | float) and not isinstance(v, bool)
 
 
+def _columns(t: Table) -> tuple[list[bool], list[bool]]:
+    """Which columns are numeric (right-aligned) and which hold identifiers (no separators)."""
+    ncol = max((len(r) for r in t.rows), default=0)
+    numeric_col = [
+        any(_is_num(r[j]) for r in t.rows if j < len(r))
+        and all(_is_num(r[j]) or r[j] is None for r in t.rows if j < len(r))
+        for j in range(ncol)
+    ]
+    # identifiers (point ids, strip ids, EPSG codes) are names, not quantities: no separators
+    id_col = [bool(_ID_HEADER.search(str(c))) for c in t.columns] + [False] * ncol
+    return numeric_col, id_col
+
+
+def _cell(t: Table, v: Any, is_id: bool) -> str:
+    """A table value as text: the one formatting of the HTML report and the terminal."""
+    is_int = (isinstance(v, int) and not isinstance(v, bool)) or (
+        getattr(getattr(v, "dtype", None), "kind", "") in ("i", "u")
+    )
+    if is_id and is_int:
+        return str(v)
+    if t.decimals is not None and _is_float(v):
+        return f"{float(v):.{t.decimals}f}"
+    return fmt(v)
+
+
 def _table(t: Table, *, numeric_right: bool = True) -> str:
     out = []
     if t.title:
@@ -237,28 +262,12 @@ def _table(t: Table, *, numeric_right: bool = True) -> str:
         + "".join(f'<th scope="col">{_e(c)}</th>' for c in t.columns)
         + "</tr></thead><tbody>"
     )
-    ncol = max((len(r) for r in t.rows), default=0)
-    numeric_col = [
-        numeric_right
-        and any(_is_num(r[j]) for r in t.rows if j < len(r))
-        and all(_is_num(r[j]) or r[j] is None for r in t.rows if j < len(r))
-        for j in range(ncol)
-    ]
-    # identifiers (point ids, strip ids, EPSG codes) are names, not quantities: no separators
-    id_col = [bool(_ID_HEADER.search(str(c))) for c in t.columns] + [False] * ncol
+    numeric_col, id_col = _columns(t)
     for row in t.rows:
         cells = []
         for j, v in enumerate(row):
-            num = numeric_col[j]
-            is_int = (isinstance(v, int) and not isinstance(v, bool)) or (
-                getattr(getattr(v, "dtype", None), "kind", "") in ("i", "u")
-            )
-            if id_col[j] and is_int:
-                text = str(v)
-            elif t.decimals is not None and _is_float(v):
-                text = f"{float(v):.{t.decimals}f}"
-            else:
-                text = fmt(v)
+            num = numeric_right and numeric_col[j]
+            text = _cell(t, v, id_col[j])
             cls = ' class="num"' if num else (' class="wrap"' if len(text) > 60 else "")
             shown = f"<code>{_e(text)}</code>" if j in t.code_columns else _e(text)
             cells.append(f"<td{cls}>{shown}</td>")
@@ -266,6 +275,39 @@ def _table(t: Table, *, numeric_right: bool = True) -> str:
     out.append("</tbody></table></div>")
     if t.note:
         out.append(f'<p class="note">{_e(t.note)}</p>')
+    return "\n".join(out)
+
+
+def table_text(t: Table) -> str:
+    """A table as plain text for the terminal: the report's rows, labels and formatting.
+
+    The columns of report.json keys (``code_columns``) are left out; a two-column
+    label/``value`` table is printed without its header.
+
+    Parameters
+    ----------
+    t : Table
+        The table, as a report section builds it.
+
+    Returns
+    -------
+    str
+        The title, the aligned rows (numbers right-aligned) and the note, one per line.
+    """
+    numeric_col, id_col = _columns(t)
+    keep = [j for j in range(len(t.columns)) if j not in t.code_columns]
+    rows = [[_cell(t, r[j], id_col[j]) if j < len(r) else "" for j in keep] for r in t.rows]
+    plain = len(keep) == 2 and t.columns[keep[1]] == "value"  # label / value: no header
+    head = [] if plain else [[str(t.columns[j]) for j in keep]]
+    width = [max((len(r[k]) for r in head + rows), default=0) for k in range(len(keep))]
+    out = [t.title] if t.title else []
+    num = [k > 0 and keep[k] < len(numeric_col) and numeric_col[keep[k]]
+           for k in range(len(keep))]  # numeric columns right-aligned (the labels aside)
+    for r in head + rows:
+        cells = [c.rjust(width[k]) if num[k] else c.ljust(width[k]) for k, c in enumerate(r)]
+        out.append(("  " + "  ".join(cells)).rstrip())
+    if t.note:
+        out.append(f"  ({t.note})")
     return "\n".join(out)
 
 

@@ -10,7 +10,6 @@ from ...errors import ConfigError
 from .._context import (
     RunContext,
     SectionResult,
-    fmt_or_dash,
     import_module,
     keyword_defaults,
     library_attr,
@@ -256,63 +255,7 @@ def run_checkpoints(ctx: RunContext, item: AnalysisItem) -> SectionResult:
             )
         )
         figures.append(Figure("Residual histograms", plots.plot_residual_histograms(residuals)))
-    stat_rows = []
-    for axis in ("z",) if opts["vertical"] else ("x", "y", "z"):
-        stat_rows.append(
-            [
-                axis,
-                res.get(f"mean_{axis}"),
-                res.get(f"std_{axis}"),
-                res.get(f"rmse_{axis}"),
-                res.get(f"max_abs_{axis}"),
-            ]
-        )
-    tables = [
-        Table(
-            "Residual statistics (m)",
-            ["axis", "mean", "std", "RMSE", "max |residual|"],
-            stat_rows,
-            note=f"{res['n_check']} check points"
-            + (f", {res['n_control']} control points" if res.get("n_control") else ""),
-        ),
-    ]
-    figures_json = {
-        "rmse_h": res.get("rmse_h"),
-        "rmse_3d": res.get("rmse_3d"),
-        "nssda": {k: v for k, v in (res.get("nssda") or {}).items() if k != "warnings"},
-        "asprs2023": {k: v for k, v in (res.get("asprs2023") or {}).items() if k != "warnings"},
-    }
-    acc_rows = [
-        r for r in labelled_rows(figures_json, none="") if r[1] != "" and r[1] == r[1]
-    ]  # undefined (None, NaN) figures are left out
-    tables.append(
-        Table(
-            "Accuracy figures",
-            ["figure", "value", "key in report.json"],
-            acc_rows,
-            code_columns=(2,),
-        )
-    )
-    tr = res.get("transform") or {}
-    if tr.get("name") not in (None, "none"):
-        tables.append(
-            Table(
-                f"Transformation: {tr['name']}",
-                ["parameter", "value", "σ"],
-                [
-                    [_with_unit(k), v, (tr.get("sigmas") or {}).get(k)]
-                    for k, v in (tr.get("params") or {}).items()
-                ],
-                note=f"σ0 = {fmt_or_dash(tr.get('sigma0'))} m"
-                + (
-                    "; tx, ty, tz are the shift of the control-point centroid "
-                    + ", ".join(f"{a} {fmt_or_dash(tr['origin'][a])}" for a in "xyz")
-                    + " m, about which rotations and scale act"
-                    if tr.get("origin")
-                    else ""
-                ),
-            )
-        )
+    tables = checkpoint_tables(res, opts["vertical"])
     if opts["vertical"]:
         resid_cols = ["id", "cloud z (TIN)", "dz", "flag"]
         resid_rows = [
@@ -358,9 +301,92 @@ def run_checkpoints(ctx: RunContext, item: AnalysisItem) -> SectionResult:
     return with_overview(out, run, f"{opts['measured']}: chunks read")
 
 
-def _with_unit(key: str) -> str:
-    """``"tx (m)"``; ``"kappa_deg"`` and ``"scale"`` stay: the unit policy of lidarqa.units."""
+def checkpoint_tables(res: dict[str, Any], vertical: bool) -> list[Table]:
+    """The figures of a check-point test: the report section's and ``lidarqa checkpoints``'.
+
+    Parameters
+    ----------
+    res : dict
+        ``CheckpointReport.to_dict()`` (or the vertical check's), residuals in metres.
+    vertical : bool
+        A vertical check of a cloud: z statistics only, and the TIN's figures.
+
+    Returns
+    -------
+    list of Table
+        Residual statistics, the TIN (vertical), the accuracy figures (ASPRS Ed. 2, NSSDA)
+        and the transformation when one was fitted.
+    """
+    stat_rows = [
+        [axis, res.get(f"mean_{axis}"), res.get(f"std_{axis}"), res.get(f"rmse_{axis}"),
+         res.get(f"max_abs_{axis}")]
+        for axis in (("z",) if vertical else ("x", "y", "z"))
+    ]
+    tables = [
+        Table(
+            "Residual statistics (m)",
+            ["axis", "mean", "std", "RMSE", "max |residual|"],
+            stat_rows,
+            decimals=4,  # metres to a tenth of a millimetre
+            note=f"{res['n_check']} check points"
+            + (f", {res['n_control']} control points" if res.get("n_control") else ""),
+        ),
+    ]
+    v = res.get("vertical")
+    if vertical and v:
+        tables.append(Table("TIN of the cloud", ["quantity", "value"], [
+            ["ground points", v["n_ground"]],
+            ["longest TIN edge at a check point (m)", v["max_edge"]],
+            *[[f"check points: {flag}", n] for flag, n in v["flags"].items()],
+        ]))
+    figures_json = {
+        "rmse_h": res.get("rmse_h"),
+        "rmse_3d": res.get("rmse_3d"),
+        "nssda": {k: x for k, x in (res.get("nssda") or {}).items() if k != "warnings"},
+        "asprs2023": {k: x for k, x in (res.get("asprs2023") or {}).items() if k != "warnings"},
+    }
+    acc_rows = [
+        r for r in labelled_rows(figures_json, none="") if r[1] != "" and r[1] == r[1]
+    ]  # undefined (None, NaN) figures are left out
+    tables.append(
+        Table(
+            "Accuracy figures",
+            ["figure", "value", "key in report.json"],
+            acc_rows,
+            code_columns=(2,),
+        )
+    )
+    tr = res.get("transform") or {}
+    if tr.get("name") not in (None, "none"):
+        params, sigmas = tr.get("params") or {}, tr.get("sigmas") or {}
+        order = sorted(params, key=lambda k: k not in ("tx", "ty", "tz"))
+        o = tr.get("origin")
+        tables.append(
+            Table(
+                f"Transformation: {tr['name']}",
+                ["parameter", "value ± σ"],
+                [[k.removesuffix("_deg"), _param_text(k, params[k], sigmas.get(k))]
+                 for k in order if k not in ("c", "d", "e")],  # c, d at the origin; e = tz
+                note=f"σ0 = {_fixed(tr.get('sigma0'), 4)} m"
+                + (f"; about the control-point centroid x {o['x']:.3f}  y {o['y']:.3f}  "
+                   f"z {o['z']:.3f} m (tx, ty, tz: its shift)" if o else ""),
+            )
+        )
+    return tables
+
+
+def _fixed(v: float | None, digits: int) -> str:
+    return "n/a" if v is None or not np.isfinite(v) else f"{v:.{digits}f}"
+
+
+def _param_text(key: str, value: float | None, sigma: float | None) -> str:
+    """``value ± σ unit`` of a transformation parameter, as in a surveyor's adjustment report."""
     from ...units import param_unit
 
-    unit = param_unit(key)
-    return f"{key} ({unit})" if unit and not key.endswith("_deg") else key
+    if key == "scale" and not sigma:
+        return "1 (fixed)"
+    digits = 7 if key in ("scale", "a", "b") else 4
+    text = f"{_fixed(value, digits)} ± {_fixed(sigma, digits)} {param_unit(key)}".rstrip()
+    if key == "scale" and value is not None and sigma is not None:  # surveyors read ppm
+        text += f"   ({(value - 1.0) * 1e6:+.1f} ± {sigma * 1e6:.1f} ppm)"
+    return text

@@ -142,27 +142,12 @@ def run_ground(ctx: RunContext, item: AnalysisItem) -> SectionResult:
                     "type I: reference ground rejected; type II: object accepted as ground",
                 )
             )
-    tables, headline = _isprs_tables(errors, ignore)
+    tables, headline = isprs_tables(errors, ignore)
     if errors is None:
         headline = f"{int(ground.sum()):,} of {n:,} points classified as ground"
     terrain = res.get("terrain")
     if terrain:
-        shown = {
-            k: v
-            for k, v in terrain.items()
-            if k not in ("note", "reason") and not (v is None and terrain["reason"])
-        }
-        tables.append(
-            Table(
-                "Terrain model (TIN of the filter's ground against the reference's)",
-                ["quantity", "value", "key in report.json"],
-                labelled_rows(shown, prefix="terrain"),
-                code_columns=(2,),
-                note=terrain["reason"]
-                or "cells: centres of a grid aligned on multiples of the cell, inside the convex "
-                "hulls of both ground sets; heights are vertical differences",
-            )
-        )
+        tables.append(terrain_table(terrain))
         if not terrain["reason"]:
             headline += (
                 f"; terrain RMSE {terrain['rmse_m']:.2f} m, "
@@ -175,18 +160,7 @@ def run_ground(ctx: RunContext, item: AnalysisItem) -> SectionResult:
                 f"non-ground points within {terrain['near_limit_m']:g} m of the reference ground "
                 "surface per reference ground point)"
             )
-    tables.append(
-        Table(
-            "Filter run",
-            ["quantity", "value"],
-            [
-                ["candidate points", res.get("n_candidates")],
-                ["ground points", res.get("n_ground")],
-                ["return handling", res.get("return_handling")],
-                ["noise points excluded", res.get("n_excluded_noise")],
-            ],
-        )
-    )
+    tables.append(filter_run_table(res))
     return SectionResult(
         results=res,
         headline=headline,
@@ -201,8 +175,43 @@ def run_ground(ctx: RunContext, item: AnalysisItem) -> SectionResult:
     )
 
 
-def _isprs_tables(e: Any, ignore: list[int]) -> tuple[list[Table], str]:
-    """The cross table and ISPRS errors of an evaluation, and the headline ([] and "" if None)."""
+def filter_run_table(res: dict[str, Any], chunked: Any = None, unit: str = "m") -> Table:
+    """Points, candidates, ground (and a catalog's chunks, in `unit`): report and CLI."""
+    frac = res.get("ground_fraction")
+    rows = [["points", res["n_points"]], ["candidate points", res.get("n_candidates")],
+            ["ground points", res["n_ground"]],
+            ["ground share (%)", None if frac is None else 100 * frac],
+            ["return handling", res.get("return_handling")],
+            ["noise points excluded", res.get("n_excluded_noise")]]
+    if chunked is not None:
+        rows += [["chunks", chunked.n_chunks], ["chunks resumed", chunked.n_chunks_resumed or None],
+                 [f"chunk size ({unit})", chunked.chunk_size], [f"buffer ({unit})", chunked.buffer]]
+    return Table("Filter run", ["quantity", "value"], [r for r in rows if r[1] is not None])
+
+
+def terrain_table(terrain: dict[str, Any]) -> Table:
+    """The filter's terrain model against the reference's: the report's and ``lidarqa ground``'s."""
+    shown = {
+        k: v
+        for k, v in terrain.items()
+        if k not in ("note", "reason") and not (v is None and terrain["reason"])
+    }
+    return Table(
+        "Terrain model (TIN of the filter's ground against the reference's)",
+        ["quantity", "value", "key in report.json"],
+        labelled_rows(shown, prefix="terrain"),
+        code_columns=(2,),
+        note=terrain["reason"]
+        or "cells: centres of a grid aligned on multiples of the cell, inside the convex "
+        "hulls of both ground sets; heights are vertical differences",
+    )
+
+
+def isprs_tables(e: Any, ignore: list[int], how: str = "") -> tuple[list[Table], str]:
+    """The cross table and ISPRS errors of an evaluation, and the headline ([] and "" if None).
+
+    The report's and ``lidarqa ground --evaluate``'s; `how` qualifies the counts in a note.
+    """
     if e is None:
         return [], ""
     tables = [
@@ -214,7 +223,8 @@ def _isprs_tables(e: Any, ignore: list[int]) -> tuple[list[Table], str]:
                 ["object", e.c, e.d, e.c + e.d],
                 ["total", e.a + e.c, e.b + e.d, e.n],
             ],
-            note=("classes " + ", ".join(map(str, ignore)) + " not evaluated") if ignore else "",
+            note="; ".join(filter(None, [how, ("classes " + ", ".join(map(str, ignore))
+                                                + " not evaluated") if ignore else ""])),
         ),
         Table(
             "ISPRS errors",
@@ -271,13 +281,10 @@ def _run_on_catalog(ctx: RunContext, item: AnalysisItem) -> SectionResult:
     if e is not None:
         d.update(type_i_pct=e.type_i_pct, type_ii_pct=e.type_ii_pct, total_pct=e.total_pct,
                  ignore_classes=ignore)
-    tables, headline = _isprs_tables(e, ignore)
+    tables, headline = isprs_tables(e, ignore, "counts summed over chunks")
     headline = (headline or f"{res.n_ground:,} of {res.n_points:,} points classified as "
                 "ground") + " (catalog)"
-    tables.append(Table("Filter run", ["quantity", "value"],
-                        [["points", res.n_points], ["ground points", res.n_ground],
-                         ["chunks", res.n_chunks], ["chunk size (m)", res.chunk_size],
-                         ["buffer (m)", res.buffer]]))
+    tables.append(filter_run_table(d, res))
     out = SectionResult(
         results=d, headline=headline, tables=tables, notes=notes,
         parameters={"filter": dict(res.parameters)},

@@ -207,21 +207,8 @@ def _heights_section(ctx: RunContext, item: AnalysisItem, rep: Any, laser: Any, 
     notes: list[str] = []
     paragraphs = [what]
     # Outputs.
-    mp_set = PointSet(
-        ids=np.arange(len(mpts)),
-        xyz=np.column_stack([mpts.xy, mpts.height]),
-        crs=ctx.crs,
-        attributes={
-            "sigma": mpts.sigma,
-            "sigma_plane": mpts.sigma_plane,
-            "sigma_block": mpts.sigma_block,
-            "sigma_model": mpts.sigma_model,
-            "n_points": mpts.n_points,
-            "radius": mpts.radius,
-            "failed": mpts.failed,
-            "reason": np.asarray(mpts.reason, dtype=object),
-        },
-    )
+    mp_set = map_point_set(mpts, mpts.xy, ctx.crs,
+                           (*SIGMAS, "n_points", "radius", "failed", "reason"))
     mp_ok = mp_set.subset(~mpts.failed) if mpts.failed.any() else mp_set
     write_vector(ctx, item, mp_ok, "map_points", opts["format"], notes)
     ref_set = PointSet(
@@ -281,34 +268,9 @@ def _heights_section(ctx: RunContext, item: AnalysisItem, rep: Any, laser: Any, 
             )
         )
     c, w, mpd = res["comparison"], res["w"], res["map_points"]
-    tables = [
-        Table(
-            "Map points",
-            ["quantity", "value"],
-            [
-                ["map points", mpd["n"]],
-                ["not fitted", mpd["n_failed"]],
-                ["mean predicted σ (m)", mpd["sigma_mean"]],
-                ["95th percentile σ (m)", mpd["sigma_p95"]],
-                *[[f"σ class {k}", v] for k, v in res["sigma_classes"].items()],
-            ],
-        ),
-        Table(
-            "Comparison with the reference",
-            ["quantity", "value", "key in report.json"],
-            labelled_rows(
-                {k: v for k, v in c.items() if not isinstance(v, list | dict)},
-                prefix="comparison",
-            ),
-            code_columns=(2,),
-        ),
-        Table(
-            "w-tests",
-            ["quantity", "value", "key in report.json"],
-            labelled_rows(dict(w), prefix="w"),
-            code_columns=(2,),
-        ),
-    ]
+    tables = heights_tables(mpd, c, w, n_reference=res["n_reference"],
+                            n_outside=res["n_reference_outside"],
+                            sigma_classes=res["sigma_classes"])
     wv = np.asarray(rep.w_values, dtype=float)
     order = np.argsort(-np.nan_to_num(np.abs(wv), nan=-1.0), kind="stable")[:10]
     order = order[np.isfinite(wv[order])]
@@ -343,3 +305,77 @@ def _heights_section(ctx: RunContext, item: AnalysisItem, rep: Any, laser: Any, 
         notes=notes,
         paragraphs=paragraphs,
     )
+
+
+#: the predicted σ of a map point and its three terms (m)
+SIGMAS = ("sigma", "sigma_plane", "sigma_block", "sigma_model")
+
+
+def map_point_set(mp: Any, xy: Any, crs: Any, fields: tuple[str, ...]) -> Any:
+    """Map points (at `xy`, their fitted height) with the `fields` of `mp` as attributes."""
+    from ...io.vector import PointSet
+
+    return PointSet(ids=np.arange(len(mp)), xyz=np.column_stack([xy, mp.height]), crs=crs,
+                    attributes={k: np.asarray(getattr(mp, k), dtype=object if k == "reason"
+                                              else None) for k in fields})
+
+
+def heights_tables(map_points: dict[str, Any] | None, comparison: dict[str, Any] | None,
+                   w: dict[str, Any] | None, *, n_reference: int | None = None,
+                   n_outside: int | None = None,
+                   sigma_classes: dict[str, int] | None = None) -> list[Table]:
+    """The figures of a height test: the report section's tables and ``lidarqa heights``' summary.
+
+    Parameters
+    ----------
+    map_points : dict or None
+        ``n``, ``n_failed``, ``sigma_mean`` and ``sigma_p95`` of the map points (m; None: no
+        map-point table).
+    comparison, w : dict or None
+        ``HeightReport.to_dict()["comparison"]`` and ``["w"]`` (None: no reference points).
+    n_reference, n_outside : int, optional
+        Reference points given, and those outside the TIN of the fitted map points.
+    sigma_classes : dict, optional
+        Map points per σ class (label -> count).
+
+    Returns
+    -------
+    list of Table
+        Map points; with `comparison`, the comparison with the reference and the w-tests.
+    """
+    tables = [] if map_points is None else [
+        Table(
+            "Map points",
+            ["quantity", "value"],
+            [
+                ["map points", map_points["n"]],
+                ["not fitted", map_points["n_failed"]],
+                ["mean predicted σ (m)", map_points["sigma_mean"]],
+                ["95th percentile σ (m)", map_points["sigma_p95"]],
+                *[[f"σ class {k}", v] for k, v in (sigma_classes or {}).items()],
+            ],
+        ),
+    ]
+    if comparison is None or w is None:
+        return tables
+    given = [["reference points", n_reference, "n_reference"]] if n_reference is not None else []
+    if n_outside is not None:
+        given.append(["outside the TIN of the map points", n_outside, "n_reference_outside"])
+    tables += [
+        Table(
+            "Comparison with the reference",
+            ["quantity", "value", "key in report.json"],
+            given + labelled_rows(
+                {k: v for k, v in comparison.items() if not isinstance(v, list | dict)},
+                prefix="comparison",
+            ),
+            code_columns=(2,),
+        ),
+        Table(
+            "w-tests",
+            ["quantity", "value", "key in report.json"],
+            labelled_rows(dict(w), prefix="w"),
+            code_columns=(2,),
+        ),
+    ]
+    return tables

@@ -71,48 +71,7 @@ def run_info(ctx: RunContext, item: AnalysisItem) -> SectionResult:
 def _section(info: dict[str, Any], figures: list[Figure],
              catalog: dict[str, Any] | None = None) -> SectionResult:
     """The tables and headline of a description (with a catalog's own section, if any)."""
-    b = info["bounds"]
-    rows = [
-        ["points", info["n_points"]],
-        ["x range", f"{b['min_x']:.2f} .. {b['max_x']:.2f}" if info["n_points"] else "–"],
-        ["y range", f"{b['min_y']:.2f} .. {b['max_y']:.2f}" if info["n_points"] else "–"],
-        ["z range", f"{b['min_z']:.2f} .. {b['max_z']:.2f}" if info["n_points"] else "–"],
-        [
-            "CRS",
-            (info["crs_name"] or "none")
-            + (f" (EPSG:{info['crs_epsg']})" if info["crs_epsg"] else ""),
-        ],
-        ["density (pts/m²)", info["density_per_m2"]],
-        [
-            "return numbers",
-            "valid"
-            if info["returns"].get("valid")
-            else (
-                "absent" if not info["returns"].get("present") else "present, partly invalid/zero"
-            ),
-        ],
-    ]
-    from ..plots import CLASS_NAMES
-
-    if catalog is not None:
-        rows += catalog["rows"]
-    tables = [Table("Cloud", ["property", "value"], rows)]
-    if info["classes"]:
-        tables.append(
-            Table(
-                "Classes",
-                ["class", "name", "points"],
-                [[int(k), CLASS_NAMES.get(int(k), ""), v] for k, v in info["classes"].items()],
-            )
-        )
-    if info["point_source_ids"]:
-        tables.append(
-            Table(
-                "Flight strips",
-                ["flight strip (point source ID)", "points"],
-                [[str(int(k)), v] for k, v in info["point_source_ids"].items()],
-            )
-        )
+    tables = info_tables({**(catalog or {}).get("catalog", {}), **info})  # info's own figures
     dens = info["density_per_m2"]
     headline = (
         f"{info['n_points']:,} points"
@@ -142,13 +101,84 @@ def _run_on_catalog(ctx: RunContext, item: AnalysisItem) -> SectionResult:
     chunks = make_chunks(cat)
     run = CatalogRun(None, cat, tuple(chunks), ())  # no job: the chunks a job would use
     sec = catalog_section(run, title=f"{name}: catalog")
-    d = cat.to_dict()
-    results = {**sec["results"], "gaps": len(cast(list, d.get("gaps", []))),
-               "overlaps": len(cast(list, d.get("overlaps", []))),
-               "chunk_size": chunks[0].size if chunks else None}
-    rows = [["tiles", len(cat.tiles)], ["gaps (missing tile cells)", results["gaps"]],
-            ["duplicate overlaps", results["overlaps"]],
-            ["default chunks", f"{len(chunks)} of {results['chunk_size']:g} m"
-             if chunks else "–"]]
-    return _section(info, [], {"results": results, "rows": rows, "figures": sec["figures"],
+    cres = catalog_results(cat, chunks)
+    results = {**sec["results"], "gaps": len(cast(list, cres["gaps"])),
+               "overlaps": len(cast(list, cres["overlaps"])),
+               "chunk_size": cres["default_chunks"]["chunk_size"]}
+    return _section(info, [], {"results": results, "catalog": cres, "figures": sec["figures"],
                                "tables": [sec["tables"][1]], "notes": sec["notes"]})
+
+
+def catalog_results(cat: Any, chunks: Any = None) -> dict[str, Any]:
+    """The catalog's own keys: tiles, header bounds, gaps, overlaps and default chunks."""
+    from ...tiling import make_chunks
+
+    d = cat.to_dict()
+    chunks = make_chunks(cat) if chunks is None else chunks
+    d["default_chunks"] = {
+        "n_chunks": len(chunks),
+        "chunk_size": chunks[0].size if chunks else None,
+        "buffer": float(chunks[0].buffered[2] - chunks[0].core[2]) if chunks else None,
+    }
+    return d
+
+
+def info_tables(d: dict[str, Any]) -> list[Table]:
+    """The description of a cloud or a catalog: the report's tables and ``lidarqa info``'s.
+
+    `d` is ``describe(...).to_dict()``, with a catalog's :func:`catalog_results` merged in
+    (tiles, header bounds, gaps, overlaps, default chunks).
+    """
+    from ..plots import CLASS_NAMES
+
+    catalog = "n_tiles" in d
+    b = d["bounds"]
+    if isinstance(b, list):  # a catalog's header bounds (x, y) and z range
+        b = dict(zip(("min_x", "min_y", "max_x", "max_y"), b, strict=True))
+        b.update(min_z=d["zrange"][0], max_z=d["zrange"][1])
+    r = d["returns"]
+    read = d.get("points_read", True)
+    rows: list[list[Any]] = []
+    if catalog:
+        rows.append(["tiles", f"{d['n_tiles']:,}" + (f" ({d['n_copc']} COPC)" if d["n_copc"]
+                                                     else "")])
+    rows += [
+        ["points", d["n_points"]],
+        *[[f"{a} range", f"{b['min_' + a]:.3f} .. {b['max_' + a]:.3f}" if d["n_points"] else "–"]
+          for a in "xyz"],
+        ["CRS", (d["crs_name"] or "none") + (f" (EPSG:{d['crs_epsg']})" if d["crs_epsg"] else "")],
+        ["vertical unit", d.get("vertical_unit")],
+        ["density (pts/m², points / occupied area)", d["density_per_m2"] if read else None],
+        ["return numbers", "not read (--headers)" if not read else "absent" if not r["present"]
+         else "valid" if r["valid"]
+         else f"present, {r['n_zero_return_number']:,} zero / {r['n_invalid']:,} invalid"],
+    ]
+    if catalog:
+        dc = d["default_chunks"]
+        rows += [
+            ["tile size (m, median)", d["tile_size"]],
+            ["point formats", ", ".join(str(f) for f in d["point_formats"])],
+            ["gaps (missing tile cells)", len(d["gaps"])],
+            ["duplicate overlaps", len(d["overlaps"])],
+            ["default chunks", f"{dc['n_chunks']} of {dc['chunk_size']:g} m, buffer "
+             f"{dc['buffer']:g} m" if dc["n_chunks"] else "–"],
+            ["bad inputs", len(d.get("bad") or [])],
+        ]
+    tables = [Table("Cloud", ["property", "value"], rows)]
+    if d["classes"]:
+        tables.append(
+            Table(
+                "Classes",
+                ["class", "name", "points"],
+                [[int(k), CLASS_NAMES.get(int(k), ""), v] for k, v in d["classes"].items()],
+            )
+        )
+    if d["point_source_ids"]:
+        tables.append(
+            Table(
+                "Flight strips",
+                ["flight strip (point source ID)", "points"],
+                [[str(int(k)), v] for k, v in d["point_source_ids"].items()],
+            )
+        )
+    return tables

@@ -28,7 +28,7 @@ from .._schema import (
     need_input,
     targets,
 )
-from ..html import Figure, Table
+from ..html import Figure, Table, fmt
 
 
 def _lines_params(options: dict) -> dict[str, Any]:
@@ -262,34 +262,7 @@ def run_lines(ctx: RunContext, item: AnalysisItem) -> SectionResult:
                 f"test: {tlabel}; model: {mlabel}",
             )
         )
-    rows = [
-        ["segments p (test) / q (model)", f"{p} / {q}", ""],
-        [
-            "threshold δ test→model / model→test (m)",
-            f"{m.threshold_tm:.4f} / {m.threshold_mt:.4f}",
-            f"{m.auto_tm.reason} / {m.auto_mt.reason}",
-        ],
-        ["pairs test→model / model→test", f"{m.n_pairs_tm} / {m.n_pairs_mt}", ""],
-        ["OLHD test→model (m)", m.olhd_tm, ""],
-        ["OLHD model→test (m)", m.olhd_mt, ""],
-        ["LHD (m)", m.lhd, "max of both directions"],
-        [
-            "Gao–Leung primary LHD test→model / model→test (m)",
-            f"{m.gao_leung_tm:.4f} / {m.gao_leung_mt:.4f}",
-            "no threshold",
-        ],
-    ]
-    if m.ground_truth:
-        g = m.ground_truth
-        rows.append(
-            [
-                "detection rate test→model / model→test",
-                f"{g.get('detection_rate_tm', float('nan')):.4f} / "
-                f"{g.get('detection_rate_mt', float('nan')):.4f}",
-                "(TP + TN) / (p·q)",
-            ]
-        )
-    tables = [Table("Line matching", ["quantity", "value", "note"], rows)]
+    tables = [lines_table(m)]
     k = np.flatnonzero(m.match_tm)
     k = k[np.argsort(comp[k, 3], kind="stable")]
     tables.append(
@@ -326,4 +299,32 @@ def run_lines(ctx: RunContext, item: AnalysisItem) -> SectionResult:
             "parallel and perpendicular components (weight W on the angle); "
             "OLHD is the length-weighted mean distance of matched pairs."
         ],
+    )
+
+
+def lines_table(m: Any) -> Table:
+    """The figures of a line matching, both directions: the report's table and ``lidarqa lines``'.
+
+    The LHD in the title; thresholds (and how they were chosen), pairs, OLHD and the
+    Gao–Leung primary LHD, and with a ground truth the confusion counts and detection rates.
+    """
+    def how(auto: Any) -> str:
+        return {"peak": "auto", "fixed": "fixed"}.get(auto.reason, f"fallback: {auto.reason}")
+
+    rows = [
+        ["threshold δ (m)", m.threshold_tm, m.threshold_mt, f"{how(m.auto_tm)} / {how(m.auto_mt)}"],
+        ["pairs", m.n_pairs_tm, m.n_pairs_mt, ""],
+        ["OLHD (m)", m.olhd_tm, m.olhd_mt, ""],
+        ["Gao–Leung primary LHD (m)", m.gao_leung_tm, m.gao_leung_mt, "no threshold"],
+    ]
+    g = m.ground_truth
+    if g:
+        rows += [[k.upper(), g[f"{k}_tm"], g[f"{k}_mt"], ""] for k in ("tp", "fp", "fn", "tn")]
+        rows.append(["detection rate (%)", 100 * g["detection_rate_tm"],
+                     100 * g["detection_rate_mt"], "(TP + TN) / (p·q)"])
+    return Table(
+        f"Line matching: LHD {fmt(m.lhd)} m (the larger OLHD)",
+        ["quantity", "test→model", "model→test", "note"],
+        rows,
+        note=f"p = {m.p} test segments, q = {m.q} model segments",
     )

@@ -65,7 +65,6 @@ LABELS = {
 def run_roads(ctx: Any, item: Any) -> SectionResult:
     """Reconstruct the 3D roads, write them, and w-test reference points on their levels."""
     from ...errors import MissingDependencyError
-    from ...io.vector import PointSet
     from ...tiling.jobs_api import catalog_roads
     from .. import plots
 
@@ -92,18 +91,9 @@ def run_roads(ctx: Any, item: Any) -> SectionResult:
     except MissingDependencyError as exc:  # no 'vector' extra: keep the map points as CSV
         ctx.outputs[item.id].pop()
         notes.append(f"roads3d.gpkg not written ({exc}); map points as CSV instead")
-        pts = PointSet(
-            ids=np.arange(len(mp)),
-            xyz=np.column_stack([mp.xy, mp.height]),
-            crs=ctx.crs,
-            attributes={
-                "road": mp.road,
-                "sigma": mp.sigma,
-                "sigma_plane": mp.sigma_plane,
-                "sigma_block": mp.sigma_block,
-                "sigma_model": mp.sigma_model,
-            },
-        )
+        from .heights import SIGMAS, map_point_set
+
+        pts = map_point_set(mp, mp.xy, ctx.crs, ("road", *SIGMAS))
         from ...io.vector import write_points
 
         write_points(pts, ctx.output_path(item, "map_points.csv"), overwrite=True)
@@ -147,23 +137,7 @@ def run_roads(ctx: Any, item: Any) -> SectionResult:
         )
     status = rec.polygon_status.astype(str)
     tables = [
-        Table(
-            "Roads",
-            ["quantity", "value"],
-            [
-                ["map shift dx (m)", res["shift"][0]],
-                ["map shift dy (m)", res["shift"][1]],
-                ["shift estimated", res["shift_estimated"]],
-                ["polygons", res["n_polygons"]],
-                ["roads (levels)", res["n_roads"]],
-                ["map points", res["n_map_points"]],
-                ["map points without height", res["n_failed"]],
-                ["mean predicted σ (m)", res["sigma_mean"]],
-                ["95th percentile σ (m)", res["sigma_p95"]],
-                ["points on other levels (not used)", res["points_other_level"]],
-                ["TIN triangles", res["n_triangles"]],
-            ],
-        ),
+        roads_table(res, rec.flags),
         Table(
             "Polygons",
             ["polygon", "road", "status", "level (m)", "points", "other level"],
@@ -180,8 +154,13 @@ def run_roads(ctx: Any, item: Any) -> SectionResult:
             ][:50],
         ),
     ]
-    for i in np.flatnonzero(status != "ok"):
-        notes.append(f"polygon {rec.polygon_ids[i]}: {status[i]}")
+    notes.extend(polygon_issues(rec))
+    if comp is not None:  # the reference tested on its levels, as by `lidarqa heights`
+        from .heights import heights_tables
+
+        ref_res = res["reference"]
+        tables += heights_tables(None, ref_res["comparison"], ref_res["w"],
+                                 n_reference=len(extra["reference_xyz"]))
     headline = (
         f"{res['n_roads']} road level(s) from {res['n_polygons']} polygons; "
         f"{res['n_map_points']} map points, mean σ {res['sigma_mean']:.3f} m; "
@@ -198,3 +177,48 @@ def run_roads(ctx: Any, item: Any) -> SectionResult:
         notes=notes,
         paragraphs=[f"Laser points: {label}. Map: {opts['map']} ({n_polys} polygons)."],
     )
+
+
+def roads_table(res: dict[str, Any], flags: Any = ()) -> Table:
+    """The figures of a road reconstruction: the report's table and ``lidarqa roads``' summary.
+
+    Parameters
+    ----------
+    res : dict
+        ``RoadReconstruction.to_dict()``.
+    flags : sequence of str
+        The reconstruction's flags (``shift_not_significant`` names why the map was kept).
+
+    Returns
+    -------
+    Table
+        Shift, polygons and roads, map points and their predicted σ (m), TIN size.
+    """
+    how = "estimated" if res["shift_estimated"] else "given"
+    if "shift_not_significant" in flags:
+        how = "no significant shift in the data: map kept"
+    return Table(
+        "Roads",
+        ["quantity", "value"],
+        [
+            ["map shift dx (m)", res["shift"][0]],
+            ["map shift dy (m)", res["shift"][1]],
+            ["shift", how],
+            ["polygons", res["n_polygons"]],
+            ["roads (levels)", res["n_roads"]],
+            ["polygons grown from a neighbour", res["polygons_grown"]],
+            ["polygons without points", res["polygons_without_points"]],
+            ["map points", res["n_map_points"]],
+            ["map points without height", res["n_failed"]],
+            ["mean predicted σ (m)", res["sigma_mean"]],
+            ["95th percentile σ (m)", res["sigma_p95"]],
+            ["points on other levels (not used)", res["points_other_level"]],
+            ["TIN triangles", res["n_triangles"]],
+        ],
+    )
+
+
+def polygon_issues(rec: Any) -> list[str]:
+    """``polygon ID: status`` of each polygon that did not get a road level."""
+    status = rec.polygon_status.astype(str)
+    return [f"polygon {rec.polygon_ids[i]}: {status[i]}" for i in np.flatnonzero(status != "ok")]

@@ -161,84 +161,7 @@ def swaths_section(ctx: RunContext, item: AnalysisItem, rep: Any, crs: Any) -> S
                 "dz between the strips' local planes on smooth cells; grey: not compared",
             )
         )
-    t = rep.thresholds
-    tables = [
-        Table(
-            f"Swath overlap ({rep.quality_level}: RMSDz ≤ {t['rmsdz']:.2f} m, "
-            f"max ≤ {t['max_abs']:.2f} m)",
-            [
-                "pair",
-                "overlap (m²)",
-                "compared (m²)",
-                "RMSDz (m)",
-                "mean (m)",
-                "median (m)",
-                "p95 |dz| (m)",
-                "max |dz| (m)",
-                "result",
-            ],
-            [
-                [
-                    f"{p.strip_a}–{p.strip_b}",
-                    round(p.overlap_area),
-                    round(p.area),
-                    _fmt_m(p.rmsdz),
-                    _fmt_m(p.mean),
-                    _fmt_m(p.median),
-                    _fmt_m(p.p95_abs),
-                    _fmt_m(p.max_abs),
-                    "pass" if p.passed else "FAIL",
-                ]
-                for p in rep.pairs
-            ],
-        ),
-        Table(
-            f"Smooth-surface repeatability (≤ {t['repeatability']:.2f} m)",
-            [
-                "strip",
-                "area (m²)",
-                "RMSE (m)",
-                "range cell (m)",
-                "median max−min (m)",
-                "p95 (m)",
-                "result",
-            ],
-            [
-                [
-                    r.strip,
-                    round(r.area),
-                    _fmt_m(r.rmse),
-                    f"{r.range_cell:g}",
-                    _fmt_m(r.median_range),
-                    _fmt_m(r.p95_range),
-                    "pass" if r.passed else "FAIL",
-                ]
-                for r in rep.repeatability
-                if r.assessed
-            ],
-        ),
-    ]
-    offs = rep.network_offsets or rep.pair_offsets
-    if offs:
-        tables.append(
-            Table(
-                "Strip offsets"
-                + (f" (network, strip {rep.reference_strip} fixed)" if rep.network_offsets else ""),
-                ["strip − reference", "dx (m)", "dy (m)", "dz (m)", "σ dx / dy / dz (m)"],
-                [
-                    [
-                        f"{o.strip_b} − {o.strip_a}",
-                        _fmt_m(o.dx),
-                        _fmt_m(o.dy),
-                        _fmt_m(o.dz),
-                        f"{_fmt_m(o.sigma_dx)} / {_fmt_m(o.sigma_dy)} / {_fmt_m(o.sigma_dz)}",
-                    ]
-                    for o in offs
-                    if o.strip_a != o.strip_b or not rep.network_offsets
-                ],
-                note=f"E4 (strip height noise) = {_fmt_m(rep.e4)} m",
-            )
-        )
+    tables = swaths_tables(rep)
     worst = res["max_rmsdz"]
     overlap_ok = all(p.passed for p in rep.pairs)
     repeat_ok = all(r.passed for r in rep.repeatability if r.assessed)
@@ -262,3 +185,94 @@ def swaths_section(ctx: RunContext, item: AnalysisItem, rep: Any, crs: Any) -> S
             "Positional Accuracy Standards Ed. 2 (2023) relative vertical accuracy."
         ],
     )
+
+
+def swaths_tables(rep: Any) -> list[Table]:
+    """The figures of a swath report: the report section's tables and ``lidarqa swaths``'.
+
+    Overlap per pair of strips, repeatability per strip (against the quality level's
+    thresholds) and the strip offsets with E4, in metres.
+    """
+    t = rep.thresholds
+    tables = [
+        Table(
+            f"Swath overlap ({rep.quality_level}: RMSDz ≤ {t['rmsdz']:.2f} m, "
+            f"max ≤ {t['max_abs']:.2f} m; cells of {rep.cell_size:g} m)",
+            [
+                "pair",
+                "overlap (m²)",
+                "compared (m²)",
+                "RMSDz (m)",
+                "mean (m)",
+                "median (m)",
+                "p95 |dz| (m)",
+                "max |dz| (m)",
+                "result",
+            ],
+            [
+                [
+                    f"{p.strip_a}–{p.strip_b}",
+                    round(p.overlap_area),
+                    round(p.area),
+                    p.rmsdz,
+                    p.mean,
+                    p.median,
+                    p.p95_abs,
+                    p.max_abs,
+                    "pass" if p.passed else "FAIL",
+                ]
+                for p in rep.pairs
+            ],
+            decimals=3,
+        ),
+        Table(
+            f"Smooth-surface repeatability (≤ {t['repeatability']:.2f} m)",
+            [
+                "strip",
+                "area (m²)",
+                "RMSE (m)",
+                "range cell (m)",
+                "median max−min (m)",
+                "p95 (m)",
+                "result",
+            ],
+            [
+                [
+                    r.strip,
+                    round(r.area),
+                    r.rmse,
+                    r.range_cell,
+                    r.median_range,
+                    r.p95_range,
+                    "pass" if r.passed else "FAIL",
+                ]
+                for r in rep.repeatability
+                if r.assessed
+            ],
+            decimals=3,
+        ),
+    ]
+    offs = rep.network_offsets or rep.pair_offsets
+    if offs:
+        tables.append(
+            Table(
+                "Strip offsets"
+                + (f" (network, strip {rep.reference_strip} fixed)" if rep.network_offsets else ""),
+                ["strip − reference", "method", "dx (m)", "dy (m)", "dz (m)", "σ dx / dy / dz (m)"],
+                [
+                    [
+                        f"{o.strip_b} − {o.strip_a}",
+                        o.method,
+                        o.dx,
+                        o.dy,
+                        o.dz,
+                        f"{_fmt_m(o.sigma_dx)} / {_fmt_m(o.sigma_dy)} / {_fmt_m(o.sigma_dz)}",
+                    ]
+                    for o in offs
+                    if o.strip_a != o.strip_b or not rep.network_offsets
+                ],
+                note=f"E4 (strip height noise) = {_fmt_m(rep.e4)} m",
+                decimals=3,
+            )
+        )
+    return tables
