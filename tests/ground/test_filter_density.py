@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from wet_street import street_over_echoes
 
 from lidarqa.errors import OptionError
 from lidarqa.ground import (
@@ -238,23 +239,9 @@ def test_join_below_is_chosen_for_dense_ground_based_scans_only():
             assert sources["join_below"] == "preset"
 
 
-def _street_over_echoes(seed: int):
-    """A dense street (200 pts/m², 2 % grade) with a wet band: one multipath echo 0.25-0.35 m
-    below the road in every 0.5 m cell of x 6-14 m, i.e. a lower layer the filter accepts."""
-    rng = np.random.default_rng(seed)
-    n = 200 * 20 * 20
-    xy = rng.uniform(0, 20, (n, 2))
-    z = 0.02 * xy[:, 0] + rng.normal(0, 0.01, n)
-    cx, cy = np.meshgrid(np.arange(6.25, 14, 0.5), np.arange(0.25, 20, 0.5))
-    e_xy = np.column_stack([cx.ravel(), cy.ravel()]) + rng.uniform(-0.2, 0.2, (cx.size, 2))
-    e_z = 0.02 * e_xy[:, 0] - rng.uniform(0.25, 0.35, cx.size)
-    p = np.vstack([np.column_stack([xy, z]), np.column_stack([e_xy, e_z])])
-    return p + [1000.0, 2000.0, 50.0], np.r_[np.zeros(n, bool), np.ones(cx.size, bool)]
-
-
 @pytest.mark.parametrize("seed", [0, 1])
 def test_surface_support_keeps_the_road_above_a_layer_of_echoes(seed):
-    p, echo = _street_over_echoes(seed)
+    p, echo = street_over_echoes(seed)
     band = (p[:, 0] > 1006.5) & (p[:, 0] < 1013.5) & ~echo
     off = SegmentPTD(filter_density=4.0, surface_support=0).run(p).ground_mask
     on = SegmentPTD(filter_density=4.0).run(p).ground_mask

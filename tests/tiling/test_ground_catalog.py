@@ -208,18 +208,11 @@ def test_dense_street_over_echoes_tiled_equals_untiled(tmp_path):
     # a ground-based scan (200 pts/m²) whose wet band leaves one multipath echo under every
     # 0.5 m cell: the surface rule (each cell filtered on its lowest return that starts a
     # surface) must give the same labels in chunks as in one run, and keep the road
+    from wet_street import street_over_echoes
+
     from lidarqa.ground import classify_ground
 
-    rng = np.random.default_rng(3)
-    n = 200 * 24 * 24
-    xy = rng.uniform(0, 24, (n, 2))
-    z = 0.02 * xy[:, 0] + rng.normal(0, 0.01, n)
-    cx, cy = np.meshgrid(np.arange(8.25, 16, 0.5), np.arange(0.25, 24, 0.5))
-    e_xy = np.column_stack([cx.ravel(), cy.ravel()]) + rng.uniform(-0.2, 0.2, (cx.size, 2))
-    e_z = 0.02 * e_xy[:, 0] - rng.uniform(0.25, 0.35, cx.size)
-    xyz = np.vstack([np.column_stack([xy, z]), np.column_stack([e_xy, e_z])])
-    xyz = np.round(xyz + [700000.0, 5400000.0, 30.0], 3)
-    echo = np.r_[np.zeros(n, bool), np.ones(cx.size, bool)]
+    xyz, echo = street_over_echoes(3, size=24.0, band=(8.0, 16.0), origin=(7e5, 54e5, 30.0))
     cls = np.where(echo, 1, 2).astype(np.uint8)  # the echoes are not the road
     tile = ((xyz[:, :2] - [700000.0, 5400000.0]) // 12).astype(int)
     paths = []
