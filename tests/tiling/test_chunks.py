@@ -107,26 +107,33 @@ def _grid_catalog(tile: float, density: float, n: int = 3) -> Catalog:
 
 
 @pytest.mark.parametrize(
-    "tile,density,expected,n",
+    "target,tile,density,expected,n",
     [
-        (1000.0, 25.0, 1000.0 / 3, 3),  # aligned with the tiles, 5 % more work than 370 m
-        (216.0, 25.0, 360.0, 4),  # 216 m would be 36 % more work: not snapped, 10 m steps
-        (305.0, 25.0, 305.0, 3),  # one tile per chunk: 11 % more work than 370 m
-        (50.0, 25.0, 350.0, 9),  # 7 tiles of 50 m
-        (1000.0, 2.0, 1000.0, 3),  # sparse: one tile per chunk (2 tiles would be over the target)
+        # the default target (3.5 M points per buffered chunk)
+        (None, 1000.0, 25.0, 250.0, 3),  # 1000 / 4: aligned with the tiles, 1 % more work
+        (None, 305.0, 25.0, 250.0, 3),  # 305 / 2 would be 46 % more work: not snapped
+        (None, 50.0, 25.0, 250.0, 6),  # 5 tiles of 50 m
+        (None, 1000.0, 2.0, 1000.0, 3),  # sparse: one tile per chunk (2 would be over the target)
+        # the ground job's (6 M)
+        (6e6, 1000.0, 25.0, 1000.0 / 3, 3),  # aligned with the tiles, 5 % more work than 370 m
+        (6e6, 216.0, 25.0, 360.0, 4),  # 216 m would be 36 % more work: not snapped, 10 m steps
+        (6e6, 305.0, 25.0, 305.0, 3),  # one tile per chunk: 11 % more work than 370 m
+        (6e6, 50.0, 25.0, 350.0, 9),  # 7 tiles of 50 m
     ],
 )
-def test_default_chunk_size_snaps_only_when_cheap(tile, density, expected, n):
+def test_default_chunk_size_snaps_only_when_cheap(target, tile, density, expected, n):
     from lidarqa.tiling.chunks import DEFAULT_BUFFER, SNAP_TOLERANCE, TARGET_POINTS, _work
 
     cat = _grid_catalog(tile, density, n)
-    size = default_chunk_size(cat)
+    size = default_chunk_size(cat, target_points=target)
     assert size == pytest.approx(expected)
-    raw = (TARGET_POINTS / cat.density) ** 0.5 - 2 * DEFAULT_BUFFER
+    raw = ((target or TARGET_POINTS) / cat.density) ** 0.5 - 2 * DEFAULT_BUFFER
     assert size <= raw + 1e-9  # the buffered box never holds more than the target
     assert _work(size, DEFAULT_BUFFER) <= SNAP_TOLERANCE * _work(raw, DEFAULT_BUFFER) or (
         size == pytest.approx(raw // 10 * 10)
     )
+    chunks = make_chunks(cat, target_points=target)
+    assert chunks and chunks[0].size == pytest.approx(size)
 
 
 def test_estimated_points_follow_the_overlap():

@@ -73,11 +73,11 @@ __all__ = [
 
 #: Default buffer around each chunk, m (the ground filter's default seed cell).
 DEFAULT_BUFFER = 60.0
-#: Points aimed at in one buffered chunk: about 1.2 GB of peak memory per worker for ground
-#: filtering (measured on a synthetic 25 pts/m² block: 1.21 GB with 5.95 M points in the
-#: buffered chunk, 0.94 GB with 2.8 M). Fewer, larger chunks read less buffer per point kept:
-#: 1.75 instead of 2.42 points there, 35 % less CPU for the whole block.
-TARGET_POINTS = 6_000_000
+#: Points aimed at in one buffered chunk when a job names no target of its own: below 2 GB of
+#: peak memory per worker for every job (measured on a synthetic 25 pts/m² block of eight
+#: 216 m tiles: edges 1.77 GB with 15 chunks of 216 m, 2.65 GB with 6 of 370 m, i.e. 6 M
+#: points). The ground job, lighter per point, asks for more (``tiling.ground``).
+TARGET_POINTS = 3_500_000
 #: Snap the chunk side to the tiling only when that costs at most this much more work: a
 #: buffered chunk reads and filters ((side + 2 buffer) / side)**2 points per core point.
 SNAP_TOLERANCE = 1.15
@@ -155,7 +155,11 @@ class Chunk:
 
 
 def default_chunk_size(
-    catalog: Tiles, *, buffer: float = DEFAULT_BUFFER, origin: tuple[float, float] = (0.0, 0.0)
+    catalog: Tiles,
+    *,
+    buffer: float = DEFAULT_BUFFER,
+    origin: tuple[float, float] = (0.0, 0.0),
+    target_points: float | None = None,
 ) -> float:
     """The default chunk side for `catalog` (see the module documentation), m.
 
@@ -166,10 +170,14 @@ def default_chunk_size(
         The job's margin, m: the side is at least :data:`MIN_BUFFERS` of it.
     origin : (float, float), default (0, 0)
         The chunk grid's origin (a catalog that fits one chunk is put in one grid cell).
+    target_points : float, optional
+        Points aimed at in one buffered chunk (default :data:`TARGET_POINTS`): the job's
+        memory per point decides it.
     """
     density = catalog.density
+    target = TARGET_POINTS if target_points is None else float(target_points)
     floor = max(MIN_CHUNK, MIN_BUFFERS * float(buffer))
-    raw = max(math.sqrt(TARGET_POINTS / density) - 2.0 * buffer, floor)
+    raw = max(math.sqrt(target / density) - 2.0 * buffer, floor)
     tile = catalog.tile_size()
     one = _one_chunk_side(catalog, raw, tile, origin)
     if one is not None:
@@ -243,6 +251,7 @@ def make_chunks(
     buffer: float | None = None,
     origin: tuple[float, float] = (0.0, 0.0),
     snap: tuple[float, float, float] | None = None,
+    target_points: float | None = None,
 ) -> tuple[Chunk, ...]:
     """The chunks covering `catalog`, row by row from the south-west.
 
@@ -260,12 +269,15 @@ def make_chunks(
         through ``(gx, gy)``. Jobs whose kernels lay a grid from the south-west corner
         of their input (the ground filter's seed cells) use it so every chunk lays its
         grid where one run over the whole catalog would.
+    target_points : float, optional
+        With the default `chunk_size`: points aimed at in one buffered chunk (default
+        :data:`TARGET_POINTS`).
     """
     buffer = DEFAULT_BUFFER if buffer is None else float(buffer)
     if not math.isfinite(buffer) or buffer < 0:
         raise OptionError(f"buffer must be >= 0 m, got {buffer}")
     size = (
-        default_chunk_size(catalog, buffer=buffer, origin=origin)
+        default_chunk_size(catalog, buffer=buffer, origin=origin, target_points=target_points)
         if chunk_size is None
         else float(chunk_size)
     )
