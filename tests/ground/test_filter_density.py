@@ -179,6 +179,12 @@ def test_bad_filter_density_is_refused(bad):
         SegmentPTD(join_distance=-0.1)
 
 
+@pytest.mark.parametrize("bad", [-1, 2.5])
+def test_bad_surface_support_is_refused(bad):
+    with pytest.raises(OptionError, match="surface_support must be an integer >= 0"):
+        SegmentPTD(surface_support=bad)
+
+
 def test_catalog_radius_is_the_thinned_clouds(dense_scene):
     from lidarqa.ground import default_grow_radius
     from lidarqa.tiling.ground import catalog_grow_radius
