@@ -8,6 +8,8 @@ the automatic parameters of dense airborne clouds switch the terrain-first pass 
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from scipy.interpolate import LinearNDInterpolator
@@ -85,6 +87,25 @@ def test_without_terrain_first_the_small_cells_fail(forest, auto_result):
     pts = forest[0]
     off = classify_ground(pts, terrain_density=0.0).ground_mask
     assert _dtm_rmse(pts, off) > 3 * _dtm_rmse(pts, auto_result.ground_mask)
+
+
+def test_the_fine_run_starts_from_the_terrains_ground(forest, auto_result):
+    # the 0.5 m run is seeded by the terrain's ground points among its cells, not by
+    # the lowest points of its 60 m seed cells (one seed on this 60 m plot)
+    pts = forest[0]
+    names = {f.name for f in dataclasses.fields(SegmentPTD)}
+    kw = {k: v for k, v in auto_result.parameters.items() if k in names}
+    first = SegmentPTD(**kw).run(pts)
+    alone = SegmentPTD(**{**kw, "terrain_density": 0.0}).run(pts)
+    terrain = SegmentPTD(
+        **{**kw, "filter_density": TERRAIN_DENSITY, "terrain_density": 0.0, "surface_support": 0}
+    ).run(pts)
+    assert np.array_equal(first.ground_mask, auto_result.ground_mask)
+    n_terrain = int(terrain.ground_mask.sum())
+    # measured: 814 seed points from 1,820 terrain ground points (the 1.4 m and 0.5 m
+    # grids do not nest, so a terrain point is not always its 0.5 m cell's lowest)
+    assert first.n_seed_points > 0.3 * n_terrain
+    assert alone.n_seed_points < 0.05 * n_terrain
 
 
 def test_independent_of_input_order(forest, auto_result):

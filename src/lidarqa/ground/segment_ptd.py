@@ -248,9 +248,11 @@ class SegmentPTD(TINParameters):
         Terrain first (points/m²; 0 = off; only with `filter_density`): the filter
         first runs, thinned the same way, at this lower density, where a cell is
         large enough to hold a ground return even under a closed canopy; its ground
-        is the terrain model. The ground of the run at `filter_density` is then
-        kept only up to `terrain_distance` m above the TIN of that terrain, and the
-        terrain's own ground points are added. Under forest the lowest point of a
+        is the terrain model. The run at `filter_density` starts its densification
+        from that ground (the terrain's ground points among its own cells are its seed
+        points, in place of its seed cells), its ground is then kept only up to
+        `terrain_distance` m above the TIN of the terrain, and the terrain's own
+        ground points are added. Under forest the lowest point of a
         small cell is often a branch or the understorey, and the small cells let the
         densification climb onto it; the large cells see the ground. In the open the
         small cells keep their detail (curbs, narrow paths). The automatic
@@ -463,6 +465,19 @@ class SegmentPTD(TINParameters):
         cand = np.ones(n, dtype=bool) if candidates is None else _mask(candidates, n, "candidates")
         if self.filter_density > 0 and labels is None and object_segments is None:
             return self._run_thinned(pts, cand, progress)
+        return self._run_points(pts, cand, labels, object_segments, progress)
+
+    def _run_points(
+        self,
+        pts: np.ndarray,
+        cand: np.ndarray,
+        labels: Any,
+        object_segments: Any,
+        progress: ProgressCallback | None,
+        seeds: np.ndarray | None = None,
+    ) -> SegmentPTDResult:
+        """The filter on every point given (no thinning); `seeds` replace the seed cells."""
+        n = pts.shape[0]
         radius = math.nan
         feature_idx = None
         if labels is None:
@@ -476,7 +491,8 @@ class SegmentPTD(TINParameters):
             lab = lab.astype(np.int64).copy()
         lab[~cand] = -1
         result = _segment_ptd(
-            pts, lab, cand, object_segments, self, radius, feature_idx, stage(progress, 0.4, 1.0)
+            pts, lab, cand, object_segments, self, radius, feature_idx, stage(progress, 0.4, 1.0),
+            seeds,
         )
         report(progress, 1.0)
         return result
@@ -510,7 +526,12 @@ class SegmentPTD(TINParameters):
         if self.surface_support > 0:
             win = surface_lowest(p, inv, win, int(self.surface_support))
         wp = np.ascontiguousarray(p[win])
-        res = inner.run(wp, progress=stage(progress, *fine))
+        # terrain first: the fine run starts from the terrain's ground (its cells hold
+        # no seed cell's worth of ground under a canopy), not from its own seed cells
+        seeds = None if terrain is None else np.flatnonzero(terrain.ground_mask[ci[win]])
+        res = inner._run_points(
+            wp, np.ones(wp.shape[0], dtype=bool), None, None, stage(progress, *fine), seeds
+        )
         wg = np.ascontiguousarray(res.ground_mask)
         planes = _cell_planes(cells, wp, wg, float(self.join_distance), bool(self.join_below))
         ok = _join(p, inv, wp, planes, float(self.join_distance))
@@ -1177,6 +1198,7 @@ def _segment_ptd(
     radius: float,
     feature_idx: Any = None,
     progress: ProgressCallback | None = None,
+    given_seeds: np.ndarray | None = None,
 ) -> SegmentPTDResult:
     n = points.shape[0]
     n_seg = int(lab.max()) + 1 if n and lab.max() >= 0 else 0
@@ -1224,7 +1246,16 @@ def _segment_ptd(
         return SegmentPTDResult(ground, lab, obj[:n_user], is_ground_seg[:n_user], 0, (), 0, radius)
     # 1-2. seed points (robust lowest per cell) -> seed segments, all their points ground
     pool = np.flatnonzero(usable if par.unsegmented == "point_ptd" else seg_pt)
-    seeds, virtual = initial_seeds(xyz, pool, par, crit)
+    seeds = None
+    if given_seeds is not None:
+        # ground of an earlier run (the terrain pass): no seed cells, no screening
+        seeds = np.intersect1d(given_seeds, pool)
+        if seeds.size >= 3:
+            virtual = virtual_hull(xyz, seeds, par.cell_size, colmin(xyz[pool]), colmax(xyz[pool]))
+        else:
+            seeds = None
+    if seeds is None:
+        seeds, virtual = initial_seeds(xyz, pool, par, crit)
     if par.seed_segments:
         seed_labels = np.unique(lab[seeds])
         is_ground_seg[seed_labels[seed_labels >= 0]] = True
