@@ -1249,7 +1249,9 @@ def _segment_ptd(
     seeds = None
     if given_seeds is not None:
         # ground of an earlier run (the terrain pass): no seed cells, no screening
-        seeds = np.intersect1d(given_seeds, pool)
+        in_pool = np.zeros(n, dtype=bool)
+        in_pool[pool] = True
+        seeds = given_seeds[in_pool[given_seeds]]  # sorted, distinct (flatnonzero)
         if seeds.size >= 3:
             virtual = virtual_hull(xyz, seeds, par.cell_size, colmin(xyz[pool]), colmax(xyz[pool]))
         else:
