@@ -81,7 +81,7 @@ def test_thin_lowest_matches_a_sort_and_ignores_order(n, cell, dup, seed):
 )
 def test_thin_median_matches_a_lexsort(n, cell, dup, seed):
     # the terrain model's median point per cell: (z, x, y, index) order, middle one;
-    # 100 m cells put hundreds of points in one cell (the merge-sort branch)
+    # 100 m cells put hundreds of points in one cell (quickselect over many rows)
     rng = np.random.default_rng(seed)
     p = _rounded_cloud(rng, n, dup)
     idx = np.sort(rng.choice(len(p), max(1, len(p) * 3 // 4), replace=False))

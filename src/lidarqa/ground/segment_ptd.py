@@ -906,12 +906,54 @@ def _before(p, u, v):  # pragma: no cover - numba
 
 @njit(cache=True)
 def _median_per_group(inv, p, n_groups):  # pragma: no cover - numba
-    """Per group of `inv`, the row of `p` at position (m - 1) // 2 in (z, x, y, row) order."""
-    start, rows = _group_sort(inv, p, n_groups, 0)
+    """Per group of `inv`, the row of `p` at position (m - 1) // 2 in (z, x, y, row) order.
+
+    Rows grouped by a counting sort (:func:`_group_sort`, no group sorted), then each
+    group's median selected (quickselect in a strict total order: the row a full
+    sort would put there, in O(m)).
+    """
+    start, rows = _group_sort(inv, p, n_groups, inv.size + 1)
     out = np.empty(n_groups, dtype=np.int64)
     for g in range(n_groups):
-        out[g] = rows[start[g] + (start[g + 1] - start[g] - 1) // 2]
+        s, m = start[g], start[g + 1] - start[g]
+        out[g] = _select(rows[s : s + m], (m - 1) // 2, p)
     return out
+
+
+@njit(cache=True)
+def _select(r, k, p):  # pragma: no cover - numba
+    """The row of `r` at position `k` in (z, x, y, row) order; reorders `r` in place."""
+    lo, hi = 0, r.size - 1
+    while lo < hi:
+        # median of three as the pivot, then a three-way split around it
+        mid = (lo + hi) // 2
+        a, b, c = r[lo], r[mid], r[hi]
+        if _before(p, b, a):
+            a, b = b, a
+        if _before(p, c, b):
+            b = c
+            if _before(p, b, a):
+                b = a
+        piv = b
+        i, lt, gt = lo, lo, hi
+        while i <= gt:
+            v = r[i]
+            if _before(p, v, piv):
+                r[i], r[lt] = r[lt], v
+                lt += 1
+                i += 1
+            elif _before(p, piv, v):
+                r[i], r[gt] = r[gt], v
+                gt -= 1
+            else:
+                i += 1
+        if k < lt:
+            hi = lt - 1
+        elif k > gt:
+            lo = gt + 1
+        else:
+            return piv
+    return r[lo]
 
 
 @njit(cache=True)
