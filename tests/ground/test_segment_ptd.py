@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 
 from lidarqa.errors import DegenerateGeometryWarning, InvalidPointsError, OptionError
 from lidarqa.ground import (
@@ -44,6 +45,24 @@ def test_scatterness_values():
     assert 0.02 < sc < 0.2
     g = np.mgrid[0:30, 0:30].reshape(2, -1).T.astype(float)
     assert np.nanmax(point_scatterness(np.column_stack([g, np.zeros(len(g))]))) < 1e-6
+
+
+@pytest.mark.parametrize("shape", ["isotropic", "planar", "linear", "coincident"])
+def test_scatterness_equals_the_lapack_eigenvalues(shape):
+    # the closed-form eigenvalues against numpy.linalg.eigvalsh of the same covariances
+    rng = np.random.default_rng(7)
+    scale = {"isotropic": (1, 1, 1), "planar": (1, 1, 1e-4), "linear": (1, 1e-2, 1e-2),
+             "coincident": (0, 0, 0)}[shape]
+    pts = rng.normal(size=(3000, 3)) * scale + [5.0e5, 6.0e6, 100.0]
+    got = point_scatterness(pts, k=10)
+    c = pts - pts.mean(axis=0)
+    _, nb = cKDTree(c).query(c, k=10)
+    d = c[nb] - c[nb].mean(axis=1, keepdims=True)
+    w = np.clip(np.linalg.eigvalsh(np.einsum("nki,nkj->nij", d, d) / 10), 0, None)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ref = np.where(w[:, 2] > 0, np.sqrt(w[:, 0] / w[:, 2]), np.nan)
+    np.testing.assert_array_equal(np.isnan(got), np.isnan(ref))
+    np.testing.assert_allclose(got[~np.isnan(ref)], ref[~np.isnan(ref)], rtol=1e-5, atol=1e-7)
 
 
 def test_object_rule():

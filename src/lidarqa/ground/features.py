@@ -9,10 +9,12 @@ scatterness exceeds `scatter_thr`.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from numba import njit
 from scipy.spatial import cKDTree
 
 from .._validate import as_points, check_positive, check_range
@@ -101,13 +103,8 @@ def point_scatterness(points: Any, *, k: int = 10, subset: Any = None) -> np.nda
     def chunk(s: int) -> None:
         q = idx[s : s + _SCATTER_CHUNK]
         _, nb = tree.query(c[q], k=kk)
-        nb = nb.reshape(q.size, kk)
-        nbp = c[nb]
-        nbp = nbp - nbp.mean(axis=1, keepdims=True)
-        cov = np.einsum("nki,nkj->nij", nbp, nbp) / kk
-        w, _ = _eig_sym3(cov)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            out[s : s + _SCATTER_CHUNK] = np.where(w[:, 2] > 0, np.sqrt(w[:, 0] / w[:, 2]), np.nan)
+        nb = np.asarray(nb, dtype=np.int64).reshape(q.size, kk)
+        out[s : s + _SCATTER_CHUNK] = _scatter_kernel(c, nb)
 
     # chunks are independent (each writes its own slice) and NumPy / cKDTree release
     # the GIL, so threads give the same result as one loop, whatever their number
@@ -124,7 +121,66 @@ def point_scatterness(points: Any, *, k: int = 10, subset: Any = None) -> np.nda
     return out
 
 
-_SCATTER_CHUNK = 100_000  # points per chunk of point_scatterness (bounds the (n, k, 3) arrays)
+_SCATTER_CHUNK = 100_000  # points per chunk of point_scatterness (bounds the (n, k) arrays)
+
+
+@njit(cache=True, nogil=True)
+def _scatter_kernel(c, nb):  # pragma: no cover - numba
+    """sqrt(λ3/λ1) of the covariance of each row's neighbours `nb` in `c`; nan where λ1 = 0.
+
+    The eigenvalues of the symmetric 3×3 covariance in closed form (trigonometric
+    solution of the characteristic cubic), clipped at 0 like the LAPACK ones.
+    """
+    m, k = nb.shape
+    out = np.empty(m)
+    for i in range(m):
+        mx = my = mz = 0.0
+        for j in range(k):
+            v = nb[i, j]
+            mx += c[v, 0]
+            my += c[v, 1]
+            mz += c[v, 2]
+        mx /= k
+        my /= k
+        mz /= k
+        a00 = a01 = a02 = a11 = a12 = a22 = 0.0
+        for j in range(k):
+            v = nb[i, j]
+            dx, dy, dz = c[v, 0] - mx, c[v, 1] - my, c[v, 2] - mz
+            a00 += dx * dx
+            a01 += dx * dy
+            a02 += dx * dz
+            a11 += dy * dy
+            a12 += dy * dz
+            a22 += dz * dz
+        a00 /= k
+        a01 /= k
+        a02 /= k
+        a11 /= k
+        a12 /= k
+        a22 /= k
+        p1 = a01 * a01 + a02 * a02 + a12 * a12
+        q = (a00 + a11 + a22) / 3.0
+        b00, b11, b22 = a00 - q, a11 - q, a22 - q
+        p2 = b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * p1
+        if p2 <= 0.0:  # a multiple of the identity (or all neighbours equal)
+            lo = hi = q
+        else:
+            pp = math.sqrt(p2 / 6.0)
+            det = (
+                b00 * (b11 * b22 - a12 * a12)
+                - a01 * (a01 * b22 - a12 * a02)
+                + a02 * (a01 * a12 - b11 * a02)
+            )
+            r = det / (2.0 * pp * pp * pp)
+            r = min(max(r, -1.0), 1.0)
+            phi = math.acos(r) / 3.0
+            hi = q + 2.0 * pp * math.cos(phi)
+            lo = q + 2.0 * pp * math.cos(phi + 2.0 * math.pi / 3.0)
+        lo = max(lo, 0.0)
+        hi = max(hi, 0.0)
+        out[i] = math.sqrt(lo / hi) if hi > 0.0 else np.nan
+    return out
 
 
 def segment_features(
