@@ -368,6 +368,8 @@ def ground_buffer(
 
 
 _AUTO_FIELDS = ("return_number", "number_of_returns", "scan_angle", "scan_angle_rank")
+#: the dimensions the filter reads (returns, classes for the noise and the evaluation)
+_CHUNK_FIELDS = (*_AUTO_FIELDS, "classification")
 
 
 def _catalog_sample(
@@ -573,6 +575,7 @@ def ground_catalog(
     from .catalog import Catalog, open_catalog
     from .chunks import make_chunks
     from .engine import Engine, run_chunks, run_tasks
+    from .reader import tile_cache
 
     if method not in METHODS:
         raise OptionError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
@@ -721,19 +724,22 @@ def ground_catalog(
 
     try:
         try:
-            outcomes = run_chunks(
-                catalog,
-                todo,
-                task,
-                engine=engine,
-                progress=progress,
-                retries=retries,
-                skip_failed=True,
-                on_outcome=save,
-                keep_results=False,
-                description="Ground",
-                order_seed=order_seed,
-            )
+            # a tile under several chunks' buffers is decompressed once (in this
+            # process: the serial engine), with the dimensions the filter reads only
+            with tile_cache(fields=_CHUNK_FIELDS):
+                outcomes = run_chunks(
+                    catalog,
+                    todo,
+                    task,
+                    engine=engine,
+                    progress=progress,
+                    retries=retries,
+                    skip_failed=True,
+                    on_outcome=save,
+                    keep_results=False,
+                    description="Ground",
+                    order_seed=order_seed,
+                )
         except BaseException:
             # nothing to resume (no chunk finished): leave nothing behind at the output path
             if not any(work.glob("*.npz")):
