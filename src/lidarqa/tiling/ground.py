@@ -35,7 +35,7 @@ import math
 import os
 import shutil
 import warnings
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -372,6 +372,23 @@ _AUTO_FIELDS = ("return_number", "number_of_returns", "scan_angle", "scan_angle_
 _CHUNK_FIELDS = (*_AUTO_FIELDS, "classification")
 
 
+def _tile_pieces(path: str, step: int) -> Iterator[Any]:
+    """The points of tile `path` in pieces of `step` (from the tile cache when one is open)."""
+    from ..io import PointCloud
+    from ..io.las import LasReader
+    from .reader import cached_tile
+
+    got = cached_tile(path)
+    if got is None:
+        with LasReader(path) as r:
+            yield from r.chunks(step)
+        return
+    xyz, fields = got
+    for a in range(0, len(xyz), step):
+        part = {k: v[a : a + step] for k, v in fields.items()}
+        yield PointCloud(xyz=xyz[a : a + step], fields=part)
+
+
 def _catalog_sample(
     catalog: Tiles,
     *,
@@ -387,7 +404,6 @@ def _catalog_sample(
     """
     from ..errors import DataQualityWarning
     from ..ground import ground_candidates
-    from ..io.las import LasReader
 
     n = len(catalog.tiles)
     total = catalog.n_points
@@ -403,19 +419,18 @@ def _catalog_sample(
         tile = catalog.tiles[t]
         if tile.n_points > budget and parts:
             break
-        with LasReader(tile.path) as r:
-            for piece in r.chunks(1_000_000):
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore", DataQualityWarning)
-                    cand, *_ = ground_candidates(
-                        piece,
-                        last_returns_only=last_returns_only,
-                        exclude_classes=exclude_classes,
-                    )
-                parts.append(piece.xyz[cand])
-                for fname, v in piece.fields.items():
-                    if fname in _AUTO_FIELDS:
-                        fields.setdefault(fname, []).append(np.asarray(v)[cand])
+        for piece in _tile_pieces(tile.path, 1_000_000):
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", DataQualityWarning)
+                cand, *_ = ground_candidates(
+                    piece,
+                    last_returns_only=last_returns_only,
+                    exclude_classes=exclude_classes,
+                )
+            parts.append(piece.xyz[cand])
+            for fname, v in piece.fields.items():
+                if fname in _AUTO_FIELDS:
+                    fields.setdefault(fname, []).append(np.asarray(v)[cand])
         budget -= tile.n_points
     xyz = np.concatenate(parts) if parts else np.empty((0, 3))
     joined = {k: np.concatenate(v) for k, v in fields.items() if len(v) == len(parts)}
@@ -615,13 +630,71 @@ def ground_catalog(
     -------
     CatalogGroundResult
     """
+    from .reader import tile_cache
+
+    # a tile that the sample and several chunks' buffers read is decompressed once (in
+    # this process: the serial engine's), with the dimensions the filter reads only
+    with tile_cache(fields=_CHUNK_FIELDS):
+        return _ground_catalog(
+            sources,
+            output_dir,
+            method=method,
+            preset=preset,
+            sensor=sensor,
+            last_returns_only=last_returns_only,
+            exclude_classes=exclude_classes,
+            evaluate=evaluate,
+            ignore_classes=ignore_classes,
+            chunk_size=chunk_size,
+            buffer=buffer,
+            origin=origin,
+            engine=engine,
+            workers=workers,
+            scheduler=scheduler,
+            resume=resume,
+            skip_bad=skip_bad,
+            overwrite=overwrite,
+            retries=retries,
+            progress=progress,
+            vpc_name=vpc_name,
+            order_seed=order_seed,
+            **params,
+        )
+
+
+def _ground_catalog(
+    sources: PathsInput | Catalog,
+    output_dir: str | os.PathLike[str],
+    *,
+    method: str = "segment-ptd",
+    preset: str | None = "auto",
+    sensor: str = "auto",
+    last_returns_only: bool = True,
+    exclude_classes: Iterable[int] | None = (7, 18),
+    evaluate: bool = False,
+    ignore_classes: Iterable[int] | None = None,
+    chunk_size: float | None = None,
+    buffer: float | None = None,
+    origin: tuple[float, float] | None = None,
+    engine: Engine | None = None,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    resume: bool = False,
+    skip_bad: bool = False,
+    overwrite: bool = False,
+    retries: int = 2,
+    progress: bool = False,
+    vpc_name: str | None = None,
+    order_seed: int | None = None,
+    **params: object,
+) -> CatalogGroundResult:
+    """:func:`ground_catalog` within its tile cache."""
     from .._validate import check_choice
     from ..ground import METHODS, PRESETS, filter_errors_from_counts
     from ..ground.auto import SENSORS, with_given
     from .catalog import Catalog, open_catalog
     from .chunks import make_chunks
     from .engine import Engine, run_chunks, run_tasks
-    from .reader import tile_cache
 
     if method not in METHODS:
         raise OptionError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
@@ -776,22 +849,19 @@ def ground_catalog(
 
     try:
         try:
-            # a tile under several chunks' buffers is decompressed once (in this
-            # process: the serial engine), with the dimensions the filter reads only
-            with tile_cache(fields=_CHUNK_FIELDS):
-                outcomes = run_chunks(
-                    catalog,
-                    todo,
-                    task,
-                    engine=engine,
-                    progress=progress,
-                    retries=retries,
-                    skip_failed=True,
-                    on_outcome=save,
-                    keep_results=False,
-                    description="Ground",
-                    order_seed=order_seed,
-                )
+            outcomes = run_chunks(
+                catalog,
+                todo,
+                task,
+                engine=engine,
+                progress=progress,
+                retries=retries,
+                skip_failed=True,
+                on_outcome=save,
+                keep_results=False,
+                description="Ground",
+                order_seed=order_seed,
+            )
         except BaseException:
             # nothing to resume (no chunk finished): leave nothing behind at the output path
             if not any(work.glob("*.npz")):

@@ -126,7 +126,8 @@ def _whole_tile(
         xyz = np.concatenate(parts_xyz) if len(parts_xyz) > 1 else parts_xyz[0]
         # copies: a view would keep the file's whole point records alive in the cache
         fields = {
-            k: (np.concatenate(v) if len(v) > 1 else np.array(v[0])) for k, v in parts_fields.items()
+            k: (np.concatenate(v) if len(v) > 1 else np.array(v[0]))
+            for k, v in parts_fields.items()
         }
     else:
         xyz, fields = np.empty((0, 3)), {}
@@ -179,6 +180,17 @@ def _in_box(xyz: np.ndarray, box: tuple[float, float, float, float]) -> np.ndarr
         & (xyz[:, 1] >= box[1] - _TOL)
         & (xyz[:, 1] <= box[3] + _TOL)
     )
+
+
+def cached_tile(path: str) -> tuple[np.ndarray, dict[str, np.ndarray]] | None:
+    """Every point of tile `path` (xyz and the cache's fields) through the active cache.
+
+    None outside :func:`tile_cache`. The arrays are the cache's own (read-only).
+    """
+    cache = _cache
+    if cache is None or cache.max_bytes <= 0:
+        return None
+    return _whole_tile(path, cache)
 
 
 def _read_tile_box(
