@@ -35,7 +35,7 @@ import math
 import os
 import shutil
 import warnings
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -368,6 +368,25 @@ def ground_buffer(
 
 
 _AUTO_FIELDS = ("return_number", "number_of_returns", "scan_angle", "scan_angle_rank")
+#: the dimensions the filter reads (returns, classes for the noise and the evaluation)
+_CHUNK_FIELDS = (*_AUTO_FIELDS, "classification")
+
+
+def _tile_pieces(path: str, step: int) -> Iterator[Any]:
+    """The points of tile `path` in pieces of `step` (from the tile cache when one is open)."""
+    from ..io import PointCloud
+    from ..io.las import LasReader
+    from .reader import cached_tile
+
+    got = cached_tile(path)
+    if got is None:
+        with LasReader(path) as r:
+            yield from r.chunks(step)
+        return
+    xyz, fields = got
+    for a in range(0, len(xyz), step):
+        part = {k: v[a : a + step] for k, v in fields.items()}
+        yield PointCloud(xyz=xyz[a : a + step], fields=part)
 
 
 def _catalog_sample(
@@ -385,7 +404,6 @@ def _catalog_sample(
     """
     from ..errors import DataQualityWarning
     from ..ground import ground_candidates
-    from ..io.las import LasReader
 
     n = len(catalog.tiles)
     total = catalog.n_points
@@ -401,19 +419,18 @@ def _catalog_sample(
         tile = catalog.tiles[t]
         if tile.n_points > budget and parts:
             break
-        with LasReader(tile.path) as r:
-            for piece in r.chunks(1_000_000):
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore", DataQualityWarning)
-                    cand, *_ = ground_candidates(
-                        piece,
-                        last_returns_only=last_returns_only,
-                        exclude_classes=exclude_classes,
-                    )
-                parts.append(piece.xyz[cand])
-                for fname, v in piece.fields.items():
-                    if fname in _AUTO_FIELDS:
-                        fields.setdefault(fname, []).append(np.asarray(v)[cand])
+        for piece in _tile_pieces(tile.path, 1_000_000):
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", DataQualityWarning)
+                cand, *_ = ground_candidates(
+                    piece,
+                    last_returns_only=last_returns_only,
+                    exclude_classes=exclude_classes,
+                )
+            parts.append(piece.xyz[cand])
+            for fname, v in piece.fields.items():
+                if fname in _AUTO_FIELDS:
+                    fields.setdefault(fname, []).append(np.asarray(v)[cand])
         budget -= tile.n_points
     xyz = np.concatenate(parts) if parts else np.empty((0, 3))
     joined = {k: np.concatenate(v) for k, v in fields.items() if len(v) == len(parts)}
@@ -489,6 +506,50 @@ def catalog_auto_parameters(
     return chosen, measures, regime
 
 
+def _ground_grid(
+    catalog: Tiles, *, buffer: float, cell: float
+) -> tuple[float, tuple[float, float]]:
+    """The ground job's default chunk side and grid origin: fewest chunks, fewest borders.
+
+    A chunk reads its buffer on each side of every border between chunks, so the
+    points read (and filtered) per point kept grow with the number of borders. The
+    side :func:`~lidarqa.tiling.chunks.default_chunk_size` gives (at most
+    :data:`GROUND_TARGET_POINTS` in a buffered chunk) is the largest allowed; laid
+    from (0, 0) its grid cuts a catalog into more columns and rows than it needs (a
+    648 m block into 3 x 2 chunks of 370 m, one column of them 38 m wide: 1.75 points
+    read per point kept). Laid from the catalog's south-west corner (the seed grid's
+    origin), ``ceil(span / side)`` chunks per axis cover it, of the even side rounded up
+    to whole seed cells when that stays within the allowed side (chunk borders on seed
+    cell lines: the buffered boxes need no widening to the seed grid): 2 x 2 chunks of
+    360 m there, 1.40 points read per point kept.
+
+    Returns
+    -------
+    (float, (float, float))
+        Chunk side and grid origin, in the catalog's units.
+    """
+    from .chunks import default_chunk_size
+
+    b = np.asarray([t.bounds2d for t in catalog.tiles if t.n_points > 0], dtype=float)
+    if not len(b):
+        return default_chunk_size(catalog, buffer=buffer, target_points=GROUND_TARGET_POINTS), (
+            0.0,
+            0.0,
+        )
+    x0, y0 = float(b[:, 0].min()), float(b[:, 1].min())
+    w, h = float(b[:, 2].max()) - x0, float(b[:, 3].max()) - y0
+    origin = (x0, y0)
+    side = default_chunk_size(
+        catalog, buffer=buffer, origin=origin, target_points=GROUND_TARGET_POINTS
+    )
+    nx, ny = max(1, math.ceil(w / side - 1e-9)), max(1, math.ceil(h / side - 1e-9))
+    even = max(w / nx, h / ny, 1e-9)
+    for step in (cell, 1.0):
+        if step > 0 and math.ceil(even / step) * step <= side:
+            return float(math.ceil(even / step) * step), origin
+    return float(side), origin
+
+
 def _plain_name(name: str) -> str:
     """Output name of input tile `name`: a COPC tile is written as a plain LAZ (``.laz``)."""
     from .._atomic import COPC_SUFFIX
@@ -525,7 +586,7 @@ def ground_catalog(
     ignore_classes: Iterable[int] | None = None,
     chunk_size: float | None = None,
     buffer: float | None = None,
-    origin: tuple[float, float] = (0.0, 0.0),
+    origin: tuple[float, float] | None = None,
     engine: Engine | None = None,
     workers: int | None = None,
     scheduler: str | None = None,
@@ -549,8 +610,10 @@ def ground_catalog(
         As :func:`lidarqa.ground.classify_ground`.
     chunk_size, buffer, origin
         The chunk grid (:func:`make_chunks`); the default buffer is
-        :func:`ground_buffer` (the filter's seed cell; two under a canopy) and the
-        default chunk size follows the density (:func:`default_chunk_size`).
+        :func:`ground_buffer` (the filter's seed cell; two under a canopy). Without
+        `chunk_size` and `origin` the grid is laid from the catalog's south-west corner
+        with the fewest chunks no larger than the density allows;
+        with `chunk_size` alone it goes through (0, 0).
     engine : Engine, optional
         Otherwise one is made from `scheduler` and `workers` (``workers=1`` without a
         scheduler runs serially in this process).
@@ -567,6 +630,65 @@ def ground_catalog(
     -------
     CatalogGroundResult
     """
+    from .reader import tile_cache
+
+    # a tile that the sample and several chunks' buffers read is decompressed once (in
+    # this process: the serial engine's), with the dimensions the filter reads only
+    with tile_cache(fields=_CHUNK_FIELDS):
+        return _ground_catalog(
+            sources,
+            output_dir,
+            method=method,
+            preset=preset,
+            sensor=sensor,
+            last_returns_only=last_returns_only,
+            exclude_classes=exclude_classes,
+            evaluate=evaluate,
+            ignore_classes=ignore_classes,
+            chunk_size=chunk_size,
+            buffer=buffer,
+            origin=origin,
+            engine=engine,
+            workers=workers,
+            scheduler=scheduler,
+            resume=resume,
+            skip_bad=skip_bad,
+            overwrite=overwrite,
+            retries=retries,
+            progress=progress,
+            vpc_name=vpc_name,
+            order_seed=order_seed,
+            **params,
+        )
+
+
+def _ground_catalog(
+    sources: PathsInput | Catalog,
+    output_dir: str | os.PathLike[str],
+    *,
+    method: str = "segment-ptd",
+    preset: str | None = "auto",
+    sensor: str = "auto",
+    last_returns_only: bool = True,
+    exclude_classes: Iterable[int] | None = (7, 18),
+    evaluate: bool = False,
+    ignore_classes: Iterable[int] | None = None,
+    chunk_size: float | None = None,
+    buffer: float | None = None,
+    origin: tuple[float, float] | None = None,
+    engine: Engine | None = None,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    resume: bool = False,
+    skip_bad: bool = False,
+    overwrite: bool = False,
+    retries: int = 2,
+    progress: bool = False,
+    vpc_name: str | None = None,
+    order_seed: int | None = None,
+    **params: object,
+) -> CatalogGroundResult:
+    """:func:`ground_catalog` within its tile cache."""
     from .._validate import check_choice
     from ..ground import METHODS, PRESETS, filter_errors_from_counts
     from ..ground.auto import SENSORS, with_given
@@ -645,6 +767,12 @@ def ground_catalog(
     # Seed cells are laid from the south-west corner of the filter's input: snap every
     # buffered box to the seed grid of the whole catalog (see make_chunks).
     bx, by = catalog.bounds[:2]
+    if origin is None:
+        origin = (0.0, 0.0)
+        if chunk_size is None:
+            chunk_size, origin = _ground_grid(
+                catalog, buffer=float(buffer), cell=float(filt.cell_size) / fh
+            )
     chunks = make_chunks(
         catalog,
         chunk_size=chunk_size,

@@ -9,10 +9,22 @@ numbers. Points come tile by tile (catalog order), in record order within a tile
 which makes every job's input, hence its result, deterministic, whichever way a tile
 is read. Core ownership is decided afterwards by the chunk (:meth:`Chunk.core_mask`,
 half-open grid cells), never by the reader.
+
+Within :func:`tile_cache` (the ground job runs its chunks in one), a LAZ/LAS tile is
+decompressed once: its points (the dimensions asked for only) are kept in a
+least-recently-used cache bounded in bytes, and the next chunk that needs a strip of
+it takes the strip from memory. Neighbouring chunks each read the tiles under their
+buffers, so without it a block of eight tiles in six chunks decompressed 28 tiles.
+The cache changes what is decompressed, never which points a chunk gets.
 """
 
 from __future__ import annotations
 
+import os
+import threading
+from collections import OrderedDict
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -23,11 +35,107 @@ if TYPE_CHECKING:
     from .catalog import Catalog
     from .chunks import Chunk
 
-__all__ = ["ChunkData", "read_chunk", "READ_STEP"]
+__all__ = ["ChunkData", "read_chunk", "READ_STEP", "tile_cache", "TILE_CACHE_BYTES"]
 
 #: Points read from a file at a time while streaming.
 READ_STEP = 1_000_000
+#: Default bound of :func:`tile_cache`, bytes of decompressed points kept.
+TILE_CACHE_BYTES = 512 * 2**20
 _TOL = 1e-6  # m
+
+
+class _TileCache:
+    """Decompressed tiles (xyz and some fields), least recently used first out."""
+
+    def __init__(self, max_bytes: int, fields: tuple[str, ...] | None) -> None:
+        self.max_bytes = int(max_bytes)
+        self.fields = fields
+        self.entries: OrderedDict[tuple, tuple[np.ndarray, dict[str, np.ndarray]]] = (
+            OrderedDict()
+        )
+        self.nbytes = 0
+        self.lock = threading.Lock()
+
+    def get(self, key: tuple) -> tuple[np.ndarray, dict[str, np.ndarray]] | None:
+        with self.lock:
+            hit = self.entries.get(key)
+            if hit is not None:
+                self.entries.move_to_end(key)
+            return hit
+
+    def put(self, key: tuple, value: tuple[np.ndarray, dict[str, np.ndarray]]) -> None:
+        size = value[0].nbytes + sum(v.nbytes for v in value[1].values())
+        if size > self.max_bytes:
+            return
+        with self.lock:
+            if key in self.entries:
+                return
+            while self.entries and self.nbytes + size > self.max_bytes:
+                _, (ox, of) = self.entries.popitem(last=False)
+                self.nbytes -= ox.nbytes + sum(v.nbytes for v in of.values())
+            self.entries[key] = value
+            self.nbytes += size
+
+
+_cache: _TileCache | None = None
+
+
+@contextmanager
+def tile_cache(
+    max_bytes: int = TILE_CACHE_BYTES, *, fields: Sequence[str] | None = None
+) -> Iterator[None]:
+    """Keep decompressed tiles in memory for the chunks read in this block (this process).
+
+    Parameters
+    ----------
+    max_bytes : int, default TILE_CACHE_BYTES
+        Bound of the memory the cached points take; 0 caches nothing.
+    fields : sequence of str, optional
+        Read only these dimensions (besides x, y, z) into each chunk's cloud; default
+        every dimension. A job that needs a few (the ground filter: returns and
+        classes) keeps the cache, and its chunks, small.
+    """
+    global _cache
+    saved = _cache
+    _cache = _TileCache(max_bytes, None if fields is None else tuple(fields))
+    try:
+        yield
+    finally:
+        _cache = saved
+
+
+def _whole_tile(
+    path: str, cache: _TileCache
+) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Every point of tile `path` (xyz, the cache's fields), from the cache or decompressed."""
+    from ..io.las import LasReader
+
+    st = os.stat(path)
+    key = (os.path.realpath(path), st.st_size, st.st_mtime_ns, cache.fields)
+    hit = cache.get(key)
+    if hit is not None:
+        return hit
+    parts_xyz: list[np.ndarray] = []
+    parts_fields: dict[str, list[np.ndarray]] = {}
+    with LasReader(path) as r:
+        for piece in r.chunks(READ_STEP, fields=cache.fields):
+            parts_xyz.append(piece.xyz)
+            for k, v in piece.fields.items():
+                parts_fields.setdefault(k, []).append(v)
+    if parts_xyz:
+        xyz = np.concatenate(parts_xyz) if len(parts_xyz) > 1 else parts_xyz[0]
+        # copies: a view would keep the file's whole point records alive in the cache
+        fields = {
+            k: (np.concatenate(v) if len(v) > 1 else np.array(v[0]))
+            for k, v in parts_fields.items()
+        }
+    else:
+        xyz, fields = np.empty((0, 3)), {}
+    xyz.flags.writeable = False
+    for v in fields.values():
+        v.flags.writeable = False
+    cache.put(key, (xyz, fields))
+    return xyz, fields
 
 
 @dataclass(eq=False)
@@ -74,6 +182,17 @@ def _in_box(xyz: np.ndarray, box: tuple[float, float, float, float]) -> np.ndarr
     )
 
 
+def cached_tile(path: str) -> tuple[np.ndarray, dict[str, np.ndarray]] | None:
+    """Every point of tile `path` (xyz and the cache's fields) through the active cache.
+
+    None outside :func:`tile_cache`. The arrays are the cache's own (read-only).
+    """
+    cache = _cache
+    if cache is None or cache.max_bytes <= 0:
+        return None
+    return _whole_tile(path, cache)
+
+
 def _read_tile_box(
     path: str, box: tuple[float, float, float, float], whole: bool, copc: bool = False
 ) -> tuple:
@@ -86,6 +205,19 @@ def _read_tile_box(
     if copc and not whole:
         cloud, idx = read_copc_box(path, box, tol=_TOL)
         return cloud.xyz, (cloud.fields if len(idx) else None), idx
+    cache = _cache
+    if cache is not None and cache.max_bytes > 0:
+        txyz, tfields = _whole_tile(path, cache)
+        if len(txyz) == 0:
+            return np.empty((0, 3)), None, np.empty(0, dtype=np.int64)
+        if whole:  # copies: the cached arrays stay as read
+            return txyz.copy(), {k: v.copy() for k, v in tfields.items()}, np.arange(
+                len(txyz), dtype=np.int64
+            )
+        sel = np.flatnonzero(_in_box(txyz, box))
+        if len(sel) == 0:
+            return np.empty((0, 3)), None, np.empty(0, dtype=np.int64)
+        return txyz[sel], {k: v[sel] for k, v in tfields.items()}, sel.astype(np.int64)
 
     parts_xyz, parts_idx = [], []
     parts_fields: dict[str, list[np.ndarray]] = {}

@@ -1,0 +1,75 @@
+"""The ground job's tile cache and default grid: less work, the same points and labels."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from lidarqa.tiling import open_catalog
+from lidarqa.tiling.chunks import make_chunks
+from lidarqa.tiling.reader import read_chunk, tile_cache
+
+FIELDS = ("return_number", "number_of_returns", "classification")
+
+
+def _same(a, b, fields) -> None:
+    np.testing.assert_array_equal(a.cloud.xyz, b.cloud.xyz)
+    np.testing.assert_array_equal(a.point_index, b.point_index)
+    np.testing.assert_array_equal(a.tile_index, b.tile_index)
+    np.testing.assert_array_equal(a.core, b.core)
+    for k in fields:
+        np.testing.assert_array_equal(a.cloud.fields[k], b.cloud.fields[k])
+
+
+@pytest.mark.parametrize("max_bytes", [512 * 2**20, 600_000, 100_000, 0])
+def test_cached_reads_give_the_same_points(scene_tiles, max_bytes):
+    # 40 m chunks with a 25 m buffer: strips of tiles, whole tiles, several chunks per
+    # tile; 600 kB holds two tiles of about 250 kB (evictions), 100 kB none; 0 is off
+    _, paths = scene_tiles
+    cat = open_catalog(paths)
+    chunks = make_chunks(cat, chunk_size=40.0, buffer=25.0)
+    plain = [read_chunk(cat, c) for c in chunks]
+    with tile_cache(max_bytes, fields=FIELDS):
+        cached = [read_chunk(cat, c) for c in chunks]
+        again = [read_chunk(cat, c) for c in reversed(chunks)][::-1]
+    for a, b, c in zip(plain, cached, again, strict=True):
+        _same(a, b, FIELDS)
+        _same(a, c, FIELDS)
+        if max_bytes:
+            assert set(b.cloud.fields) <= set(FIELDS)
+
+
+def test_cache_keeps_its_arrays_unchanged(scene_tiles):
+    _, paths = scene_tiles
+    cat = open_catalog(paths)
+    chunk = make_chunks(cat, chunk_size=200.0, buffer=0.0)[0]  # every tile whole
+    with tile_cache(fields=FIELDS):
+        first = read_chunk(cat, chunk)
+        ref = first.cloud.xyz.copy()
+        first.cloud.xyz[:] = 0.0  # a job may write into its own arrays
+        second = read_chunk(cat, chunk)
+    np.testing.assert_array_equal(second.cloud.xyz, ref)
+
+
+def test_default_ground_grid_has_the_fewest_chunks(scene_tiles, monkeypatch):
+    import lidarqa.tiling.ground as ground
+    from lidarqa.tiling.chunks import default_chunk_size
+
+    # a target that allows chunks of about one 60 m tile: from (0, 0) the 120 m block
+    # (x from 1000, not a multiple of 60) is cut into 3 x 3 chunks, from its corner 2 x 2
+    _, paths = scene_tiles
+    cat = open_catalog(paths)
+    target = cat.density * 90.0**2  # 70 m chunks + 2 x 10 m, snapped to the 60 m tiles
+    monkeypatch.setattr(ground, "GROUND_TARGET_POINTS", target)
+    x0, y0, x1, y1 = cat.bounds[:4]
+    side, origin = ground._ground_grid(cat, buffer=10.0, cell=20.0)
+    allowed = default_chunk_size(cat, buffer=10.0, origin=origin, target_points=target)
+    assert origin == (x0, y0)
+    assert side <= allowed
+    assert side % 20.0 == 0.0  # whole seed cells
+    n = math.ceil((x1 - x0) / allowed - 1e-9) * math.ceil((y1 - y0) / allowed - 1e-9)
+    ours = make_chunks(cat, chunk_size=side, buffer=10.0, origin=origin)
+    from_zero = make_chunks(cat, buffer=10.0, target_points=target)
+    assert len(ours) == n < len(from_zero)
