@@ -130,7 +130,6 @@ class Engine:
         self.memory_limit = memory_limit
         self.client: Any = None
         self.cluster: Any = None
-        self._warm: list[Any] = []
 
     @property
     def serial(self) -> bool:
@@ -159,34 +158,6 @@ class Engine:
             except Exception:
                 return 1
         return self.workers or (os.cpu_count() or 1)
-
-    def start_warm(self, warm: Callable[[], object]) -> Engine:
-        """Start the LocalCluster now and have every worker run ``warm()`` in the background.
-
-        For the serial work a job does before its chunks (reading a sample, choosing
-        parameters): meanwhile the workers import and load their compiled kernels, on
-        the core this process leaves idle, instead of at their first chunk. `warm` runs
-        as one task pinned to each worker, ahead of the chunks; it must be picklable,
-        its result and errors are ignored (a chunk that fails reports its own error).
-        Returns self; nothing to do when serial.
-        """
-        self.start()
-        if self.client is None or self.serial:
-            return self
-        token = f"{os.getpid()}-{time.monotonic_ns()}"
-        try:
-            for k, addr in enumerate(sorted(self.client.scheduler_info().get("workers", {}))):
-                # one task pinned to each worker, ahead of the chunks in its queue; kept
-                # (not awaited) until close so that Dask does not forget it
-                self._warm.append(
-                    self.client.submit(
-                        warm, key=f"lidarqa-warm-{k}-{token}", workers=[addr],
-                        allow_other_workers=False, pure=False,
-                    )
-                )
-        except Exception:
-            pass
-        return self
 
     def start(self) -> Engine:
         """Start the dask cluster (nothing to do when serial or already started); returns self."""
@@ -230,7 +201,6 @@ class Engine:
 
     def close(self) -> None:
         """Shut the dask client and cluster down (when this engine started them)."""
-        self._warm.clear()
         if self.client is not None:
             try:
                 self.client.close()

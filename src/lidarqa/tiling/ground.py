@@ -489,78 +489,6 @@ def catalog_auto_parameters(
     return chosen, measures, regime
 
 
-def _per(value: object, factor: float) -> object:
-    """`value` / `factor` when `value` is a number, else `value` (validated later)."""
-    return value / factor if isinstance(value, (int, float)) else value
-
-
-@dataclass(frozen=True)
-class _WarmGround:
-    """What a fresh worker runs before its first chunk: the ground task on a small corner.
-
-    Imports the reader and the filter and loads their compiled kernels (numba's cache),
-    the seconds a worker otherwise spends at its first chunk. The result is dropped.
-    """
-
-    catalog: Any
-    method: str = "segment-ptd"
-    side: float = 30.0
-
-    def __call__(self) -> None:
-        from .chunks import Chunk
-        from .engine import run_task
-
-        x0, y0 = (float(v) for v in self.catalog.bounds[:2])
-        box = (x0, y0, x0 + self.side, y0 + self.side)
-        tiles = tuple(
-            k
-            for k, t in enumerate(self.catalog.tiles)
-            if t.bounds2d[0] <= box[2] and t.bounds2d[2] >= x0
-            and t.bounds2d[1] <= box[3] and t.bounds2d[3] >= y0
-        )
-        chunk = Chunk("warm", 0, 0, box, box, tiles, (0, 0), self.side, (x0, y0))
-        run_task(self.catalog, chunk, GroundTask(method=self.method))
-
-
-def _early_engine(
-    catalog: Any,
-    engine: Engine | None,
-    scheduler: str | None,
-    workers: int | None,
-    chunk_size: float | None,
-    origin: tuple[float, float],
-    method: str,
-    cell_size: object,
-) -> Engine | None:
-    """A LocalCluster started now in the background when the job will likely need one.
-
-    Only for an engine ground_catalog makes itself, without a scheduler address, with
-    more than one worker and a chunk grid (laid with the default buffer) of more than one
-    chunk. Results never depend on it: a wrong guess costs a start-up, not an answer.
-    """
-    from ..errors import LidarQAError
-    from .chunks import make_chunks
-    from .engine import Engine
-
-    n = workers if workers is not None else (os.cpu_count() or 1)
-    if engine is not None or scheduler is not None or n <= 1 or not catalog.tiles:
-        return None
-    try:
-        cell = float(cell_size)  # type: ignore[arg-type]
-        chunks = make_chunks(
-            catalog,
-            chunk_size=chunk_size,
-            buffer=ground_buffer(catalog, cell_size=cell),
-            origin=origin,
-            target_points=GROUND_TARGET_POINTS,
-        )
-    except (LidarQAError, TypeError, ValueError):
-        return None  # bad options: the job reports them itself
-    if len(chunks) <= 1:
-        return None
-    return Engine(None, workers=workers).start_warm(_WarmGround(catalog, method))
-
-
 def _plain_name(name: str) -> str:
     """Output name of input tile `name`: a COPC tile is written as a plain LAZ (``.laz``)."""
     from .._atomic import COPC_SUFFIX
@@ -671,140 +599,126 @@ def ground_catalog(
         )
         return (xyz if in_metres else xyz * np.array([fh, fh, fv])), fields
 
-    # a LocalCluster starts now and its workers load the filter while this process reads
-    # the sample and chooses the parameters (seconds of serial work)
-    early = _early_engine(catalog, engine, scheduler, workers, chunk_size, origin, method,
-                          _per(params.get("cell_size", 60.0), fh))
+    auto = None
+    measures = None
+    if preset == "auto":
+        # measured once on a sample of whole tiles, then fixed for every chunk
+        sample = metric_sample()
+        chosen, measures, regime = catalog_auto_parameters(
+            catalog, method, sensor=sensor, sample=sample
+        )
+        auto = {"regime": regime, "measured": measures.to_dict(), "chosen": dict(chosen)}
+        full_params = with_given(chosen, full_params)
+        preset = None
+    # validate the parameters once, here, before any work
+    from ..ground import PTD, SegmentPTD
+
+    cls_type = SegmentPTD if method == "segment-ptd" else PTD
     try:
-        auto = None
-        measures = None
-        if preset == "auto":
-            # measured once on a sample of whole tiles, then fixed for every chunk
+        filt = cls_type(**{**(PRESETS[preset][method] if preset else {}), **full_params})
+    except TypeError as exc:
+        raise OptionError(f"invalid parameter for method {method!r}: {exc}") from None
+    if buffer is None:
+        canopy = measures is not None and measures.multi_return_share >= CANOPY_MULTI_RETURN
+        buffer = ground_buffer(catalog, cell_size=float(filt.cell_size) / fh, canopy=bool(canopy))
+    if isinstance(filt, SegmentPTD):  # method segment-ptd
+        if sample is None and not in_metres:
             sample = metric_sample()
-            chosen, measures, regime = catalog_auto_parameters(
-                catalog, method, sensor=sensor, sample=sample
+        # one surface-growing radius for the whole catalog, as one in-memory run would
+        # estimate it, instead of one per chunk (see catalog_grow_radius); the same for
+        # the terrain pass's radius, estimated on its own cells
+        def radius(density: float) -> float:
+            return catalog_grow_radius(
+                catalog,
+                last_returns_only=bool(last_returns_only),
+                exclude_classes=tuple(exclude_classes or ()),
+                factor=float(filt.grow_radius_factor),
+                sample=None if sample is None else sample[0],
+                filter_density=density,
             )
-            auto = {"regime": regime, "measured": measures.to_dict(), "chosen": dict(chosen)}
-            full_params = with_given(chosen, full_params)
-            preset = None
-        # validate the parameters once, here, before any work
-        from ..ground import PTD, SegmentPTD
 
-        cls_type = SegmentPTD if method == "segment-ptd" else PTD
+        terrain = 0 < filt.terrain_density < filt.filter_density
+        if (terrain and filt.terrain_grow_radius is None and filt.grow_radius is None):
+            full_params["terrain_grow_radius"] = radius(float(filt.terrain_density))
+        if filt.grow_radius is None:
+            full_params["grow_radius"] = radius(float(filt.filter_density))
+    # Seed cells are laid from the south-west corner of the filter's input: snap every
+    # buffered box to the seed grid of the whole catalog (see make_chunks).
+    bx, by = catalog.bounds[:2]
+    chunks = make_chunks(
+        catalog,
+        chunk_size=chunk_size,
+        buffer=buffer,
+        origin=origin,
+        snap=(bx, by, float(filt.cell_size) / fh),
+        target_points=GROUND_TARGET_POINTS,
+    )
+    if not chunks:
+        raise TilingError("the catalog holds no point")
+    task = GroundTask(
+        method=method,
+        last_returns_only=bool(last_returns_only),
+        exclude_classes=tuple(int(c) for c in (exclude_classes or ())),
+        preset=preset,
+        params=tuple(sorted(full_params.items())),
+        evaluate=bool(evaluate),
+        ignore_classes=tuple(int(c) for c in (ignore_classes or ())),
+    )
+    out_dir = Path(output_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise OptionError(f"output {out_dir} exists and is not a folder")
+    outputs = _output_names(catalog, out_dir)
+    inputs = {str(Path(t.path).resolve()) for t in catalog.tiles}
+    for o in outputs:
+        if str(o.resolve()) in inputs:
+            raise OptionError(f"output {o} is also an input; lidarqa never modifies its inputs")
+    vpc_path = out_dir / (vpc_name or f"{out_dir.resolve().name or 'ground'}.vpc")
+    existing = [o for o in [*outputs, vpc_path] if o.exists()]
+    if existing and not (overwrite or resume):
+        raise OutputExistsError(
+            f"output {existing[0]} exists"
+            + (f" (and {len(existing) - 1} more)" if len(existing) > 1 else "")
+            + "; pass --overwrite (overwrite=True) to replace, or --resume to finish a run"
+        )
+    own = engine is None
+    if own:  # made (not started) before anything is written: bad options fail here
+        # one chunk (a catalog that fits one) gains nothing from a cluster but its start-up
+        serial = scheduler is None and (workers == 1 or (workers is None and len(chunks) == 1))
+        engine = Engine("serial") if serial else Engine(scheduler, workers=workers)
+    made_dir = not out_dir.exists()
+    out_dir.mkdir(parents=True, exist_ok=True)
+    work = out_dir / WORK_DIR
+    fp = _fingerprint(catalog, chunks, task)
+    fp_text = json.dumps(fp, sort_keys=True)
+    done: dict[str, ChunkGround] = {}
+    if work.exists():
+        same = False
         try:
-            filt = cls_type(**{**(PRESETS[preset][method] if preset else {}), **full_params})
-        except TypeError as exc:
-            raise OptionError(f"invalid parameter for method {method!r}: {exc}") from None
-        if buffer is None:
-            canopy = measures is not None and measures.multi_return_share >= CANOPY_MULTI_RETURN
-            buffer = ground_buffer(
-                catalog, cell_size=float(filt.cell_size) / fh, canopy=bool(canopy)
-            )
-        if isinstance(filt, SegmentPTD):  # method segment-ptd
-            if sample is None and not in_metres:
-                sample = metric_sample()
-            # one surface-growing radius for the whole catalog, as one in-memory run would
-            # estimate it, instead of one per chunk (see catalog_grow_radius); the same for
-            # the terrain pass's radius, estimated on its own cells
-            def radius(density: float) -> float:
-                return catalog_grow_radius(
-                    catalog,
-                    last_returns_only=bool(last_returns_only),
-                    exclude_classes=tuple(exclude_classes or ()),
-                    factor=float(filt.grow_radius_factor),
-                    sample=None if sample is None else sample[0],
-                    filter_density=density,
-                )
-
-            terrain = 0 < filt.terrain_density < filt.filter_density
-            if (terrain and filt.terrain_grow_radius is None and filt.grow_radius is None):
-                full_params["terrain_grow_radius"] = radius(float(filt.terrain_density))
-            if filt.grow_radius is None:
-                full_params["grow_radius"] = radius(float(filt.filter_density))
-        # Seed cells are laid from the south-west corner of the filter's input: snap every
-        # buffered box to the seed grid of the whole catalog (see make_chunks).
-        bx, by = catalog.bounds[:2]
-        chunks = make_chunks(
-            catalog,
-            chunk_size=chunk_size,
-            buffer=buffer,
-            origin=origin,
-            snap=(bx, by, float(filt.cell_size) / fh),
-            target_points=GROUND_TARGET_POINTS,
-        )
-        if not chunks:
-            raise TilingError("the catalog holds no point")
-        task = GroundTask(
-            method=method,
-            last_returns_only=bool(last_returns_only),
-            exclude_classes=tuple(int(c) for c in (exclude_classes or ())),
-            preset=preset,
-            params=tuple(sorted(full_params.items())),
-            evaluate=bool(evaluate),
-            ignore_classes=tuple(int(c) for c in (ignore_classes or ())),
-        )
-        out_dir = Path(output_dir)
-        if out_dir.exists() and not out_dir.is_dir():
-            raise OptionError(f"output {out_dir} exists and is not a folder")
-        outputs = _output_names(catalog, out_dir)
-        inputs = {str(Path(t.path).resolve()) for t in catalog.tiles}
-        for o in outputs:
-            if str(o.resolve()) in inputs:
-                raise OptionError(f"output {o} is also an input; lidarqa never modifies its inputs")
-        vpc_path = out_dir / (vpc_name or f"{out_dir.resolve().name or 'ground'}.vpc")
-        existing = [o for o in [*outputs, vpc_path] if o.exists()]
-        if existing and not (overwrite or resume):
-            raise OutputExistsError(
-                f"output {existing[0]} exists"
-                + (f" (and {len(existing) - 1} more)" if len(existing) > 1 else "")
-                + "; pass --overwrite (overwrite=True) to replace, or --resume to finish a run"
-            )
-        own = engine is None
-        if own:  # made (not started) before anything is written: bad options fail here
-            # one chunk (a catalog that fits one) gains nothing from a cluster but its start-up
-            serial = scheduler is None and (workers == 1 or (workers is None and len(chunks) == 1))
-            if early is not None:  # started for more chunks than came: still the same results
-                engine = early
-            else:
-                engine = Engine("serial") if serial else Engine(scheduler, workers=workers)
-        made_dir = not out_dir.exists()
-        out_dir.mkdir(parents=True, exist_ok=True)
-        work = out_dir / WORK_DIR
-        fp = _fingerprint(catalog, chunks, task)
-        fp_text = json.dumps(fp, sort_keys=True)
-        done: dict[str, ChunkGround] = {}
-        if work.exists():
+            same = (work / "run.json").read_text(encoding="utf-8") == fp_text
+        except OSError:
             same = False
-            try:
-                same = (work / "run.json").read_text(encoding="utf-8") == fp_text
-            except OSError:
-                same = False
-            if resume and same:
-                for c in chunks:
-                    r = _load_chunk(work, c.id)
-                    if r is not None:
-                        done[c.id] = r
-            else:
-                if resume and not same:
-                    warnings.warn(
-                        "the work folder is from a run with other settings; starting over",
-                        stacklevel=2,
-                    )
-                shutil.rmtree(work)
-        work.mkdir(exist_ok=True)
-        (work / "run.json").write_text(fp_text, encoding="utf-8")
-        todo = [c for c in chunks if c.id not in done]
-        messages: set[str] = set()
+        if resume and same:
+            for c in chunks:
+                r = _load_chunk(work, c.id)
+                if r is not None:
+                    done[c.id] = r
+        else:
+            if resume and not same:
+                warnings.warn(
+                    "the work folder is from a run with other settings; starting over",
+                    stacklevel=2,
+                )
+            shutil.rmtree(work)
+    work.mkdir(exist_ok=True)
+    (work / "run.json").write_text(fp_text, encoding="utf-8")
+    todo = [c for c in chunks if c.id not in done]
+    messages: set[str] = set()
 
-        def save(oc: Any) -> None:
-            if oc.ok:
-                _save_chunk(work, oc.result)
-                messages.update(oc.result.warnings)
+    def save(oc: Any) -> None:
+        if oc.ok:
+            _save_chunk(work, oc.result)
+            messages.update(oc.result.warnings)
 
-    except BaseException:
-        if early is not None:
-            early.close()
-        raise
     try:
         try:
             outcomes = run_chunks(
