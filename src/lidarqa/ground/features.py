@@ -17,6 +17,7 @@ import numpy as np
 from numba import njit
 from scipy.spatial import cKDTree
 
+from .._gridkernels import centred_moments
 from .._validate import as_points, check_positive, check_range
 from ..errors import InvalidPointsError
 from ._tin import tree_workers
@@ -134,25 +135,7 @@ def _scatter_kernel(c, nb):  # pragma: no cover - numba
     m, k = nb.shape
     out = np.empty(m)
     for i in range(m):
-        mx = my = mz = 0.0
-        for j in range(k):
-            v = nb[i, j]
-            mx += c[v, 0]
-            my += c[v, 1]
-            mz += c[v, 2]
-        mx /= k
-        my /= k
-        mz /= k
-        a00 = a01 = a02 = a11 = a12 = a22 = 0.0
-        for j in range(k):
-            v = nb[i, j]
-            dx, dy, dz = c[v, 0] - mx, c[v, 1] - my, c[v, 2] - mz
-            a00 += dx * dx
-            a01 += dx * dy
-            a02 += dx * dz
-            a11 += dy * dy
-            a12 += dy * dz
-            a22 += dz * dz
+        _, _, _, a00, a01, a02, a11, a12, a22 = centred_moments(c, nb[i], k)
         a00 /= k
         a01 /= k
         a02 /= k

@@ -44,6 +44,7 @@ import numpy as np
 
 from .._arrays import colmin
 from ..errors import OptionError, OutputExistsError, TilingError
+from .reader import tile_cache
 
 if TYPE_CHECKING:
     from ..ground.auto import CloudMeasures
@@ -573,6 +574,9 @@ def _output_names(catalog: Any, output_dir: Path) -> list[Path]:
     return [output_dir / n for n in names]
 
 
+# a tile that the sample and several chunks' buffers read is decompressed once (in this
+# process: the serial engine's), with the dimensions the filter reads only
+@tile_cache(fields=_CHUNK_FIELDS)
 def ground_catalog(
     sources: PathsInput | Catalog,
     output_dir: str | os.PathLike[str],
@@ -630,65 +634,6 @@ def ground_catalog(
     -------
     CatalogGroundResult
     """
-    from .reader import tile_cache
-
-    # a tile that the sample and several chunks' buffers read is decompressed once (in
-    # this process: the serial engine's), with the dimensions the filter reads only
-    with tile_cache(fields=_CHUNK_FIELDS):
-        return _ground_catalog(
-            sources,
-            output_dir,
-            method=method,
-            preset=preset,
-            sensor=sensor,
-            last_returns_only=last_returns_only,
-            exclude_classes=exclude_classes,
-            evaluate=evaluate,
-            ignore_classes=ignore_classes,
-            chunk_size=chunk_size,
-            buffer=buffer,
-            origin=origin,
-            engine=engine,
-            workers=workers,
-            scheduler=scheduler,
-            resume=resume,
-            skip_bad=skip_bad,
-            overwrite=overwrite,
-            retries=retries,
-            progress=progress,
-            vpc_name=vpc_name,
-            order_seed=order_seed,
-            **params,
-        )
-
-
-def _ground_catalog(
-    sources: PathsInput | Catalog,
-    output_dir: str | os.PathLike[str],
-    *,
-    method: str = "segment-ptd",
-    preset: str | None = "auto",
-    sensor: str = "auto",
-    last_returns_only: bool = True,
-    exclude_classes: Iterable[int] | None = (7, 18),
-    evaluate: bool = False,
-    ignore_classes: Iterable[int] | None = None,
-    chunk_size: float | None = None,
-    buffer: float | None = None,
-    origin: tuple[float, float] | None = None,
-    engine: Engine | None = None,
-    workers: int | None = None,
-    scheduler: str | None = None,
-    resume: bool = False,
-    skip_bad: bool = False,
-    overwrite: bool = False,
-    retries: int = 2,
-    progress: bool = False,
-    vpc_name: str | None = None,
-    order_seed: int | None = None,
-    **params: object,
-) -> CatalogGroundResult:
-    """:func:`ground_catalog` within its tile cache."""
     from .._validate import check_choice
     from ..ground import METHODS, PRESETS, filter_errors_from_counts
     from ..ground.auto import SENSORS, with_given
