@@ -73,3 +73,43 @@ def test_default_ground_grid_has_the_fewest_chunks(scene_tiles, monkeypatch):
     ours = make_chunks(cat, chunk_size=side, buffer=10.0, origin=origin)
     from_zero = make_chunks(cat, buffer=10.0, target_points=target)
     assert len(ours) == n < len(from_zero)
+
+
+def test_a_worker_keeps_its_tiles_across_chunks(scene_tiles, monkeypatch):
+    # what a Dask worker does per chunk (run_task with a task that declares its fields):
+    # the second chunk over the same tiles decompresses nothing, the points are the same
+    import lidarqa.io.las as las
+    from lidarqa.tiling import reader
+    from lidarqa.tiling.engine import run_task
+
+    class Task:
+        tile_fields = FIELDS
+
+        def __call__(self, data):
+            return data
+
+    _, paths = scene_tiles
+    cat = open_catalog(paths)
+    chunks = make_chunks(cat, chunk_size=40.0, buffer=25.0)
+    opened: list[str] = []
+    real = las.LasReader
+
+    class Counting(real):
+        def __init__(self, path, *a, **k):
+            opened.append(str(path))
+            super().__init__(path, *a, **k)
+
+    plain = [read_chunk(cat, c) for c in chunks]
+    monkeypatch.setattr(las, "LasReader", Counting)
+    try:
+        first = [run_task(cat, c, Task()) for c in chunks]
+        n_first = len(opened)
+        again = [run_task(cat, c, Task()) for c in chunks]
+        assert len(opened) == n_first == len(paths)  # each tile decompressed once
+    finally:
+        reader.clear_worker_tile_cache()
+    for a, b, c in zip(plain, first, again, strict=True):
+        _same(a, b, FIELDS)
+        _same(a, c, FIELDS)
+    assert reader._worker_cache is None
+    assert reader._active() is None  # nothing left active in this thread

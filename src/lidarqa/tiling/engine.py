@@ -28,6 +28,7 @@ import os
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import partial
 from typing import TYPE_CHECKING, Any, Generic, TypeVar, cast
 
 from ..errors import ChunkFailedError, MissingDependencyError, OptionError, TilingError
@@ -240,12 +241,19 @@ def run_task(catalog: Tiles, chunk: Chunk, task: Callable[[ChunkData], R]) -> R:
     `catalog` is a :class:`~lidarqa.tiling.Catalog` (every point) or a
     :class:`~lidarqa.tiling.source.Source` (its selection and units applied at read time).
     """
-    reader = getattr(catalog, "read_chunk", None)
-    if reader is not None:
-        return task(reader(chunk))
-    from .reader import read_chunk
+    from .reader import read_chunk, worker_tile_cache
 
-    return task(read_chunk(cast("Catalog", catalog), chunk))  # no read_chunk: a Catalog
+    reader = getattr(catalog, "read_chunk", None)
+    if reader is None:  # a Catalog
+        reader = partial(read_chunk, cast("Catalog", catalog))
+    fields = getattr(task, "tile_fields", None)
+    if fields is None:
+        return task(reader(chunk))
+    # a task that reads a few dimensions: the worker keeps its tiles decompressed
+    # across chunks (a serial run's own cache, if one is active, is used instead)
+    with worker_tile_cache(fields):
+        data = reader(chunk)
+    return task(data)
 
 
 @dataclass(frozen=True)
@@ -498,6 +506,18 @@ def _run_dask(engine, catalog, chunks, order, task, retries, record, bar, runner
         for fut in list(fut_index):
             fut.cancel()
         raise
+    if getattr(task, "tile_fields", None) is not None:
+        _free_worker_caches(client)
+
+
+def _free_worker_caches(client: Any) -> None:
+    """Free the tiles the workers kept for a job (a cluster may outlive it: ``--scheduler``)."""
+    from .reader import clear_worker_tile_cache
+
+    try:
+        client.run(clear_worker_tile_cache)
+    except Exception:  # a worker gone: its cache went with it
+        pass
 
 
 def run_tiles(

@@ -38,7 +38,7 @@ import warnings
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
@@ -66,6 +66,9 @@ __all__ = [
 ]
 
 WORK_DIR = ".lidarqa-work"
+_AUTO_FIELDS = ("return_number", "number_of_returns", "scan_angle", "scan_angle_rank")
+#: the dimensions the filter reads (returns, classes for the noise and the evaluation)
+_CHUNK_FIELDS = (*_AUTO_FIELDS, "classification")
 
 
 @dataclass(frozen=True)
@@ -92,6 +95,9 @@ class GroundTask:
     params: tuple[tuple[str, object], ...] = ()
     evaluate: bool = False
     ignore_classes: tuple[int, ...] = ()
+    #: the dimensions a chunk is read with: a worker keeps its tiles decompressed with
+    #: these only, across its chunks (:func:`~lidarqa.tiling.reader.worker_tile_cache`)
+    tile_fields: ClassVar[tuple[str, ...]] = _CHUNK_FIELDS
 
     def to_dict(self) -> dict[str, object]:
         """The task's parameters as a JSON-ready dict."""
@@ -367,10 +373,6 @@ def ground_buffer(
             b = min(b, float(math.ceil(span)))
     return b
 
-
-_AUTO_FIELDS = ("return_number", "number_of_returns", "scan_angle", "scan_angle_rank")
-#: the dimensions the filter reads (returns, classes for the noise and the evaluation)
-_CHUNK_FIELDS = (*_AUTO_FIELDS, "classification")
 
 
 def _tile_pieces(path: str, step: int) -> Iterator[Any]:

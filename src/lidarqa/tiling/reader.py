@@ -15,7 +15,8 @@ decompressed once: its points (the dimensions asked for only) are kept in a
 least-recently-used cache bounded in bytes, and the next chunk that needs a strip of
 it takes the strip from memory. Neighbouring chunks each read the tiles under their
 buffers, so without it a block of eight tiles in six chunks decompressed 28 tiles.
-The cache changes what is decompressed, never which points a chunk gets.
+The cache changes what is decompressed, never which points a chunk gets. A Dask worker
+keeps one of its own across the chunks it runs (:func:`worker_tile_cache`).
 """
 
 from __future__ import annotations
@@ -35,7 +36,15 @@ if TYPE_CHECKING:
     from .catalog import Catalog
     from .chunks import Chunk
 
-__all__ = ["ChunkData", "read_chunk", "READ_STEP", "tile_cache", "TILE_CACHE_BYTES"]
+__all__ = [
+    "ChunkData",
+    "read_chunk",
+    "READ_STEP",
+    "tile_cache",
+    "worker_tile_cache",
+    "clear_worker_tile_cache",
+    "TILE_CACHE_BYTES",
+]
 
 #: Points read from a file at a time while streaming.
 READ_STEP = 1_000_000
@@ -78,6 +87,14 @@ class _TileCache:
 
 
 _cache: _TileCache | None = None
+# a worker's lasting cache (kept across the chunks a Dask worker runs), active per thread
+_worker_cache: _TileCache | None = None
+_local = threading.local()
+
+
+def _active() -> _TileCache | None:
+    cache = getattr(_local, "cache", None)
+    return cache if cache is not None else _cache
 
 
 @contextmanager
@@ -102,6 +119,40 @@ def tile_cache(
         yield
     finally:
         _cache = saved
+
+
+@contextmanager
+def worker_tile_cache(
+    fields: Sequence[str], max_bytes: int = TILE_CACHE_BYTES
+) -> Iterator[None]:
+    """The process's lasting tile cache for `fields`, active in this thread for the block.
+
+    What a Dask worker wraps around each chunk read of a job that declares its fields
+    (:attr:`GroundTask.tile_fields`): the cache outlives the task, so the next chunk the
+    worker runs takes the tiles it shares with this one from memory, as a serial run
+    does within :func:`tile_cache`. Inside an active :func:`tile_cache` (the serial
+    engine) that cache is used instead. :func:`clear_worker_tile_cache` frees it at the
+    end of the job.
+    """
+    global _worker_cache
+    if _active() is not None:
+        yield
+        return
+    key = tuple(fields)
+    cache = _worker_cache
+    if cache is None or cache.fields != key or cache.max_bytes != int(max_bytes):
+        cache = _worker_cache = _TileCache(max_bytes, key)
+    _local.cache = cache
+    try:
+        yield
+    finally:
+        _local.cache = None
+
+
+def clear_worker_tile_cache() -> None:
+    """Free the worker's lasting tile cache (the engine runs it on every worker after a job)."""
+    global _worker_cache
+    _worker_cache = None
 
 
 def _whole_tile(
@@ -187,7 +238,7 @@ def cached_tile(path: str) -> tuple[np.ndarray, dict[str, np.ndarray]] | None:
 
     None outside :func:`tile_cache`. The arrays are the cache's own (read-only).
     """
-    cache = _cache
+    cache = _active()
     if cache is None or cache.max_bytes <= 0:
         return None
     return _whole_tile(path, cache)
@@ -205,7 +256,7 @@ def _read_tile_box(
     if copc and not whole:
         cloud, idx = read_copc_box(path, box, tol=_TOL)
         return cloud.xyz, (cloud.fields if len(idx) else None), idx
-    cache = _cache
+    cache = _active()
     if cache is not None and cache.max_bytes > 0:
         txyz, tfields = _whole_tile(path, cache)
         if len(txyz) == 0:
