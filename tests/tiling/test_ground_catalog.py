@@ -228,3 +228,19 @@ def test_dense_street_over_echoes_tiled_equals_untiled(tmp_path):
     assert np.mean(tiled == untiled) >= 0.999
     road = whole.fields["classification"] == 2
     assert tiled[road].mean() >= 0.999 and not tiled[~road].any()
+
+
+def test_a_one_chunk_catalog_starts_no_cluster_to_write(scene_tiles, tmp_path, monkeypatch):
+    # --workers 2 on a catalog that fits one chunk: the chunk runs here, and so do the
+    # writes (a LocalCluster started only for them costs more than they take)
+    from lidarqa.tiling.engine import Engine
+
+    def no_start(self):
+        raise AssertionError("a cluster was started")
+
+    monkeypatch.setattr(Engine, "start", no_start)
+    _, paths = scene_tiles
+    res = ground_catalog(paths, tmp_path / "one", chunk_size=1000.0, workers=2)
+    assert res.n_chunks == 1
+    ref = ground_catalog(paths, tmp_path / "ref", chunk_size=1000.0, workers=1)
+    assert _digests(res.outputs) == _digests(ref.outputs)

@@ -842,7 +842,9 @@ def ground_catalog(
                     (tile.path, str(outputs[k]), k, tile.n_points, str(work), per_tile.get(k, []))
                     for k, tile in enumerate(catalog.tiles)
                 ],
-                engine=engine,
+                # a LocalCluster that the chunks did not start (one chunk: a catalog of a
+                # few million points) would cost more to start than these writes take
+                engine=engine if engine.scheduler or engine.client else Engine("serial"),
                 progress=progress,
                 description="Writing tiles",
                 names=[str(t.path) for t in catalog.tiles],
