@@ -184,6 +184,9 @@ class Engine:
             # again for the next: 4x the page faults and 16 % more CPU for the ground filter
             # (measured on 2 M points), more again with two workers sharing memory bandwidth
             "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
+            # the dashboard's statistical profiler samples each worker's task thread every
+            # 10 ms (it takes the GIL to walk the stack); nobody reads it behind the CLI
+            "distributed.worker.profile.enabled": False,
         }):
             self.cluster = distributed.LocalCluster(
                 n_workers=n,
