@@ -756,7 +756,7 @@ def ground_catalog(
             + "; pass --overwrite (overwrite=True) to replace, or --resume to finish a run"
         )
     own = engine is None
-    if own:  # made (not started) before anything is written: bad options fail here
+    if engine is None:  # made (not started) before anything is written: bad options fail here
         # one chunk (a catalog that fits one) gains nothing from a cluster but its start-up
         serial = scheduler is None and (workers == 1 or (workers is None and len(chunks) == 1))
         engine = Engine("serial") if serial else Engine(scheduler, workers=workers)
@@ -835,6 +835,9 @@ def ground_catalog(
             if cc is not None:
                 counts += np.asarray(cc, dtype=np.int64)
                 have_counts = True
+        # a LocalCluster that the chunks did not start (one chunk: a catalog of a few
+        # million points) would cost more to start than these writes take
+        writer = engine if engine.scheduler or engine.client else Engine("serial")
         n_ground = sum(
             run_tasks(
                 _assemble_tile,
@@ -842,9 +845,7 @@ def ground_catalog(
                     (tile.path, str(outputs[k]), k, tile.n_points, str(work), per_tile.get(k, []))
                     for k, tile in enumerate(catalog.tiles)
                 ],
-                # a LocalCluster that the chunks did not start (one chunk: a catalog of a
-                # few million points) would cost more to start than these writes take
-                engine=engine if engine.scheduler or engine.client else Engine("serial"),
+                engine=writer,
                 progress=progress,
                 description="Writing tiles",
                 names=[str(t.path) for t in catalog.tiles],
