@@ -374,7 +374,6 @@ def ground_buffer(
     return b
 
 
-
 def _tile_pieces(path: str, step: int) -> Iterator[Any]:
     """The points of tile `path` in pieces of `step` (from the tile cache when one is open)."""
     from ..io import PointCloud

@@ -236,7 +236,8 @@ def _in_box(xyz: np.ndarray, box: tuple[float, float, float, float]) -> np.ndarr
 def cached_tile(path: str) -> tuple[np.ndarray, dict[str, np.ndarray]] | None:
     """Every point of tile `path` (xyz and the cache's fields) through the active cache.
 
-    None outside :func:`tile_cache`. The arrays are the cache's own (read-only).
+    None outside :func:`tile_cache` and :func:`worker_tile_cache`. The arrays are the
+    cache's own (read-only).
     """
     cache = _active()
     if cache is None or cache.max_bytes <= 0:
