@@ -86,39 +86,17 @@ def common_options(func: Callable[..., Any]) -> Callable[..., Any]:
 
     The values land in :func:`settings`; the command function does not receive them.
     """
+
+    def setting(*decls: str, name: str, **kwargs: Any) -> Callable[..., Any]:
+        return click.option(*decls, expose_value=False, callback=_merge_flag(name), **kwargs)
+
     opts = [
-        click.option(
-            "--json",
-            "json_path",
-            type=click.Path(dir_okay=False),
-            default=None,
-            expose_value=False,
-            callback=_merge_flag("json_path"),
-            help="Also write the results as a JSON document to this path.",
-        ),
-        click.option(
-            "--overwrite",
-            is_flag=True,
-            expose_value=False,
-            callback=_merge_flag("overwrite"),
-            help="Replace output files that already exist.",
-        ),
-        click.option(
-            "-q",
-            "--quiet",
-            is_flag=True,
-            expose_value=False,
-            callback=_merge_flag("quiet"),
-            help="No progress display.",
-        ),
-        click.option(
-            "-v",
-            "--verbose",
-            count=True,
-            expose_value=False,
-            callback=_merge_flag("verbose"),
-            help="Show tracebacks on errors.",
-        ),
+        setting("--json", "json_path", name="json_path", type=click.Path(dir_okay=False),
+                default=None, help="Also write the results as a JSON document to this path."),
+        setting("--overwrite", name="overwrite", is_flag=True,
+                help="Replace output files that already exist."),
+        setting("-q", "--quiet", name="quiet", is_flag=True, help="No progress display."),
+        setting("-v", "--verbose", name="verbose", count=True, help="Show tracebacks on errors."),
     ]
     for opt in reversed(opts):
         func = opt(func)
