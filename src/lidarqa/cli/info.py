@@ -163,12 +163,10 @@ def polar(
     st = Station(x0, y0, z0, orientation, instrument_height)
     target_crs = parse_crs(crs)
     ids, xyz = read_polar_csv(observations, station=st, angle_unit=angle_unit)
-    from .._atomic import check_output
     from ..errors import WriteError
     from ..io.vector import VECTOR_SUFFIXES
 
     suffix = Path(output).suffix.lower()
-    check_output(output, overwrite=settings().overwrite)
     if suffix in {".las", ".laz"}:
         write(
             PointCloud(
