@@ -37,6 +37,7 @@ __all__ = [
     "parse_int_list",
     "INT_LIST",
     "crs_option",
+    "output_option",
     "classes_option",
     "source_id_option",
     "input_crs",
@@ -113,6 +114,15 @@ CRS_HELP = (
 def crs_option(func: Callable[..., Any]) -> Callable[..., Any]:
     """``--crs CRS``: the CRS of inputs that declare none (see :func:`input_crs`)."""
     return click.option("--crs", "crs", default=None, metavar="CRS", help=CRS_HELP)(func)
+
+
+def output_option(help: str, *, required: bool = False) -> Callable[..., Any]:
+    """``-o/--output FILE``: the file a command writes, with the command's own help text.
+
+    Required, or None when not given.
+    """
+    given: dict[str, Any] = {"required": True} if required else {"default": None}
+    return click.option("-o", "--output", type=click.Path(dir_okay=False), help=help, **given)
 
 
 def classes_option(func: Callable[..., Any] | None = None, /, *, default: str | None = None,
