@@ -347,7 +347,7 @@ class Steps:
     kernel reports a fraction, the spinner becomes a bar with percentage,
     elapsed time and ETA. When stderr is not a terminal (piped, redirected,
     CI logs) there is no live display and no control code: one plain line per
-    finished step, never wrapped. For loops with a known length use :meth:`track`.
+    finished step, never wrapped.
     """
 
     def __init__(self, quiet: bool | None = None, console: Any = None) -> None:
@@ -420,21 +420,4 @@ class Steps:
                 bar.update(task, total=1.0, completed=f, refresh=True)
 
             yield update
-        self._done(description, time.perf_counter() - t0)
-
-    def track(self, iterable: Any, description: str, total: int | None = None) -> Iterator[Any]:
-        """Iterate with a progress bar (count, %, ETA) when live; plain lines otherwise."""
-        if self._console is None:
-            yield from iterable
-            return
-        t0 = time.perf_counter()
-        if not self.live:
-            yield from iterable
-            self._done(description, time.perf_counter() - t0)
-            return
-        from rich.progress import track
-
-        yield from track(
-            iterable, description=description, total=total, console=self._console, transient=True
-        )
         self._done(description, time.perf_counter() - t0)
