@@ -347,9 +347,7 @@ def plot_matrix(
     return _png(fig)
 
 
-def plot_threshold_curve(
-    curves: Sequence[dict[str, Any]], title: str = "Automatic threshold"
-) -> bytes:
+def plot_threshold_curve(curves: Sequence[dict[str, Any]]) -> bytes:
     """Sorted nearest distances, their second differences and the chosen peak.
 
     Each curve is a dict with ``label``, ``sorted`` (ascending nearest
@@ -380,7 +378,7 @@ def plot_threshold_curve(
                 if 0 <= j < len(sd):
                     axes[1].plot([int(pk)], [sd[j]], "o", mfc="none", mec="k", ms=9)
     axes[0].set_ylabel("nearest distance d")
-    axes[0].set_title(title)
+    axes[0].set_title("Automatic threshold")
     axes[0].legend(fontsize=8, frameon=False)
     axes[1].set_ylabel("second difference")
     axes[1].set_xlabel("rank (sorted)")
@@ -573,7 +571,6 @@ def sigma_class(sigma: np.ndarray) -> np.ndarray:
 def plot_sigma_classes(
     xy: np.ndarray,
     sigma: np.ndarray,
-    title: str = "Predicted σ of map points",
     background: np.ndarray | None = None,
 ) -> bytes:
     """Map points coloured in the paper's three σ classes (green < 20 cm ≤ yellow ≤ 50 cm < red)."""
@@ -616,7 +613,7 @@ def plot_sigma_classes(
             label=f"not fitted ({int(m.sum())})",
             zorder=3,
         )
-    ax.set_title(title)
+    ax.set_title("Predicted σ of map points")
     ax.legend(
         loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False, markerscale=1.2
     )
