@@ -37,6 +37,7 @@ __all__ = [
     "parse_int_list",
     "INT_LIST",
     "crs_option",
+    "output_option",
     "classes_option",
     "source_id_option",
     "input_crs",
@@ -86,39 +87,17 @@ def common_options(func: Callable[..., Any]) -> Callable[..., Any]:
 
     The values land in :func:`settings`; the command function does not receive them.
     """
+
+    def setting(*decls: str, name: str, **kwargs: Any) -> Callable[..., Any]:
+        return click.option(*decls, expose_value=False, callback=_merge_flag(name), **kwargs)
+
     opts = [
-        click.option(
-            "--json",
-            "json_path",
-            type=click.Path(dir_okay=False),
-            default=None,
-            expose_value=False,
-            callback=_merge_flag("json_path"),
-            help="Also write the results as a JSON document to this path.",
-        ),
-        click.option(
-            "--overwrite",
-            is_flag=True,
-            expose_value=False,
-            callback=_merge_flag("overwrite"),
-            help="Replace output files that already exist.",
-        ),
-        click.option(
-            "-q",
-            "--quiet",
-            is_flag=True,
-            expose_value=False,
-            callback=_merge_flag("quiet"),
-            help="No progress display.",
-        ),
-        click.option(
-            "-v",
-            "--verbose",
-            count=True,
-            expose_value=False,
-            callback=_merge_flag("verbose"),
-            help="Show tracebacks on errors.",
-        ),
+        setting("--json", "json_path", name="json_path", type=click.Path(dir_okay=False),
+                default=None, help="Also write the results as a JSON document to this path."),
+        setting("--overwrite", name="overwrite", is_flag=True,
+                help="Replace output files that already exist."),
+        setting("-q", "--quiet", name="quiet", is_flag=True, help="No progress display."),
+        setting("-v", "--verbose", name="verbose", count=True, help="Show tracebacks on errors."),
     ]
     for opt in reversed(opts):
         func = opt(func)
@@ -135,6 +114,15 @@ CRS_HELP = (
 def crs_option(func: Callable[..., Any]) -> Callable[..., Any]:
     """``--crs CRS``: the CRS of inputs that declare none (see :func:`input_crs`)."""
     return click.option("--crs", "crs", default=None, metavar="CRS", help=CRS_HELP)(func)
+
+
+def output_option(help: str, *, required: bool = False) -> Callable[..., Any]:
+    """``-o/--output FILE``: the file a command writes, with the command's own help text.
+
+    Required, or None when not given.
+    """
+    given: dict[str, Any] = {"required": True} if required else {"default": None}
+    return click.option("-o", "--output", type=click.Path(dir_okay=False), help=help, **given)
 
 
 def classes_option(func: Callable[..., Any] | None = None, /, *, default: str | None = None,
@@ -359,7 +347,7 @@ class Steps:
     kernel reports a fraction, the spinner becomes a bar with percentage,
     elapsed time and ETA. When stderr is not a terminal (piped, redirected,
     CI logs) there is no live display and no control code: one plain line per
-    finished step, never wrapped. For loops with a known length use :meth:`track`.
+    finished step, never wrapped.
     """
 
     def __init__(self, quiet: bool | None = None, console: Any = None) -> None:
@@ -432,21 +420,4 @@ class Steps:
                 bar.update(task, total=1.0, completed=f, refresh=True)
 
             yield update
-        self._done(description, time.perf_counter() - t0)
-
-    def track(self, iterable: Any, description: str, total: int | None = None) -> Iterator[Any]:
-        """Iterate with a progress bar (count, %, ETA) when live; plain lines otherwise."""
-        if self._console is None:
-            yield from iterable
-            return
-        t0 = time.perf_counter()
-        if not self.live:
-            yield from iterable
-            self._done(description, time.perf_counter() - t0)
-            return
-        from rich.progress import track
-
-        yield from track(
-            iterable, description=description, total=total, console=self._console, transient=True
-        )
         self._done(description, time.perf_counter() - t0)

@@ -24,6 +24,7 @@ from ._common import (
     echo,
     echo_tables,
     input_crs,
+    output_option,
     prepare_outputs,
     settings,
     source_id_option,
@@ -138,14 +139,8 @@ def _units(measured: Any, check: Any, notes: list[str]) -> tuple[Any, float, flo
     show_default=True,
     help="Vertical RMSE of the check-point survey (m), folded into the ASPRS Ed. 2 figures.",
 )
-@click.option(
-    "-o",
-    "--output",
-    type=click.Path(dir_okay=False),
-    default=None,
-    help="Write per-point residuals (.csv, .gpkg or .geojson); they carry the CRS of the "
-    "inputs (a CSV in a .prj file next to it).",
-)
+@output_option("Write per-point residuals (.csv, .gpkg or .geojson); they carry the CRS of "
+               "the inputs (a CSV in a .prj file next to it).")
 @crs_option
 @catalog_options
 @target_options(

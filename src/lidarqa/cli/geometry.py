@@ -26,6 +26,7 @@ from ._common import (
     crs_option,
     echo,
     input_crs,
+    output_option,
     prepare_outputs,
     settings,
     source_id_option,
@@ -37,8 +38,7 @@ _OUT_SUFFIXES = (".csv", ".gpkg", ".geojson", ".json")
 def _selection_options(func: Callable[..., Any]) -> Callable[..., Any]:
     opts: list[Callable[..., Any]] = [
         click.argument("paths", nargs=-1, required=True, type=click.Path()),
-        click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
-                     help="Output file: .csv, .gpkg or .geojson (by extension)."),
+        output_option("Output file: .csv, .gpkg or .geojson (by extension).", required=True),
         classes_option,
         source_id_option,
         click.option("--grow-radius", type=float, default=None,

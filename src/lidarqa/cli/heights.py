@@ -39,6 +39,7 @@ from ._common import (
     echo_tables,
     finish,
     input_crs,
+    output_option,
     prepare_outputs,
     settings,
     source_id_option,
@@ -237,14 +238,8 @@ def laser_noise_options(func: Any) -> Any:
     is_flag=True,
     help="Fit only the laser points of the largest surface-growing segment.",
 )
-@click.option(
-    "-o",
-    "--output",
-    type=click.Path(dir_okay=False),
-    default=None,
-    help="Per-point output (.csv, .gpkg or .geojson, layer 'heights'): a row per map point "
-    "and per reference point, told apart by the 'kind' column.",
-)
+@output_option("Per-point output (.csv, .gpkg or .geojson, layer 'heights'): a row per map "
+               "point and per reference point, told apart by the 'kind' column.")
 @crs_option
 @catalog_options
 @common_options

@@ -14,6 +14,7 @@ from ._common import (
     echo_tables,
     finish,
     input_crs,
+    output_option,
     prepare_outputs,
     settings,
 )
@@ -106,13 +107,7 @@ def _station(value: str | None) -> tuple[float, float, float]:
 
 @click.command()
 @click.argument("observations", type=click.Path(dir_okay=True))
-@click.option(
-    "-o",
-    "--output",
-    required=True,
-    type=click.Path(dir_okay=False),
-    help="Point list (.csv/.gpkg/.geojson) or point cloud (.las/.laz).",
-)
+@output_option("Point list (.csv/.gpkg/.geojson) or point cloud (.las/.laz).", required=True)
 @click.option("--station", default=None, help="Station position X,Y,Z in metres (default 0,0,0).")
 @click.option(
     "--orientation",
@@ -163,12 +158,10 @@ def polar(
     st = Station(x0, y0, z0, orientation, instrument_height)
     target_crs = parse_crs(crs)
     ids, xyz = read_polar_csv(observations, station=st, angle_unit=angle_unit)
-    from .._atomic import check_output
     from ..errors import WriteError
     from ..io.vector import VECTOR_SUFFIXES
 
     suffix = Path(output).suffix.lower()
-    check_output(output, overwrite=settings().overwrite)
     if suffix in {".las", ".laz"}:
         write(
             PointCloud(

@@ -277,37 +277,15 @@ def _write_pairs(r: Any, path: Any) -> None:
     import numpy as np
 
     keep = np.flatnonzero(r.match_tm | r.match_mt)
-    tids, mids = r.test_ids, r.model_ids
     with open(path, "w", encoding="utf-8", newline="") as fh:
         w = csv.writer(fh)
-        w.writerow(
-            [
-                "test_id",
-                "model_id",
-                "d_theta",
-                "d_par",
-                "d_perp",
-                "d_tm",
-                "d_mt",
-                "match_tm",
-                "match_mt",
-            ]
-        )
+        w.writerow(["test_id", "model_id", "d_theta", "d_par", "d_perp", "d_tm", "d_mt",
+                    "match_tm", "match_mt"])
         for k in keep.tolist():
-            c = r.pair_components[k]
-            w.writerow(
-                [
-                    tids[r.pair_test[k]],
-                    mids[r.pair_model[k]],
-                    format_decimal(float(c[0])),
-                    format_decimal(float(c[1])),
-                    format_decimal(float(c[2])),
-                    format_decimal(float(c[3])),
-                    format_decimal(float(r.pair_d_mt[k])),
-                    "true" if r.match_tm[k] else "false",
-                    "true" if r.match_mt[k] else "false",
-                ]
-            )
+            distances = [*r.pair_components[k], r.pair_d_mt[k]]  # d_theta .. d_tm, d_mt
+            w.writerow([r.test_ids[r.pair_test[k]], r.model_ids[r.pair_model[k]],
+                        *(format_decimal(float(d)) for d in distances),
+                        *("true" if match[k] else "false" for match in (r.match_tm, r.match_mt))])
 
 
 @click.command()

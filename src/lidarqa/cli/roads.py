@@ -19,6 +19,7 @@ from ._common import (
     echo_tables,
     finish,
     input_crs,
+    output_option,
     prepare_outputs,
     settings,
 )
@@ -40,13 +41,7 @@ def _parse_shift(value: str | None) -> tuple[float, float] | None:
 @click.command()
 @click.argument("cloud", type=click.Path())
 @click.argument("map_path", metavar="MAP", type=click.Path())
-@click.option(
-    "-o",
-    "--output",
-    required=True,
-    type=click.Path(dir_okay=False),
-    help="GeoPackage with layers map_points, polygons_3d and tin.",
-)
+@output_option("GeoPackage with layers map_points, polygons_3d and tin.", required=True)
 @classes_option(default="2,17", help="Laser point classes used (ground/road and bridge deck).")
 @click.option(
     "--spacing",

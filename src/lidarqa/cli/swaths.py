@@ -162,12 +162,10 @@ def swaths(
             "one file is one flight strip: give one file per strip, or --by-source-id to split "
             "the file by point_source_id"
         )
-    if not no_maps:
-        from .._validate import require
-
-        require("matplotlib", "report")
     from .._validate import require
 
+    if not no_maps:
+        require("matplotlib", "report")
     require("rasterio", "raster")
     steps = Steps()
     options: dict[str, Any] = dict(

@@ -140,16 +140,10 @@ def dataclass_defaults(cls: Any, *, exclude: tuple[str, ...] = ()) -> ParamDefau
     return out
 
 
-def sha256_file(path: str | Path, chunk: int = 1 << 20) -> str:
+def sha256_file(path: str | Path) -> str:
     """SHA-256 of a file, streamed."""
-    h = hashlib.sha256()
     with open(path, "rb") as fh:
-        while True:
-            block = fh.read(chunk)
-            if not block:
-                break
-            h.update(block)
-    return h.hexdigest()
+        return hashlib.file_digest(fh, "sha256").hexdigest()
 
 
 # ------------------------------------------------------------------ context
@@ -245,17 +239,16 @@ class RunContext:
             self._segments[name] = seg
         return self._segments[name]
 
-    def points(self, name: str, *, require_z: bool = True) -> Any:
-        key = (name, require_z)
-        if key not in self._points:
+    def points(self, name: str) -> Any:
+        if name not in self._points:
             from ..io.vector import read_points
 
             spec = self.config.inputs[name]
-            pts = read_points(spec.path, require_z=require_z)
+            pts = read_points(spec.path, require_z=True)
             if pts.crs is None:
                 pts.crs = spec.effective_crs or self.crs
-            self._points[key] = pts
-        return self._points[key]
+            self._points[name] = pts
+        return self._points[name]
 
     def select(self, name: str, classes: Any = None, source_id: Any = None) -> Any:
         """A subset of cloud `name` by classes and flight strips (None = all)."""

@@ -108,15 +108,13 @@ def _map_axes(ax: Any, xy: np.ndarray | None = None) -> tuple[float, float]:
     return x0, y0
 
 
-def _raster_grid(
-    xy: np.ndarray, max_pixels: int = 500
-) -> tuple[np.ndarray, np.ndarray, float, tuple]:
-    """Pixel indices of points on a top-view raster (cell ≈ spacing, ≤ `max_pixels` across)."""
+def _raster_grid(xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, tuple]:
+    """Pixel indices of points on a top-view raster (cell ≈ spacing, ≤ 500 pixels across)."""
     lo = xy.min(axis=0)
     hi = xy.max(axis=0)
     ext = np.maximum(hi - lo, 1e-6)
     spacing = float(np.sqrt(ext[0] * ext[1] / max(len(xy), 1)))
-    cell = max(spacing * 1.6, float(ext.max()) / max_pixels)
+    cell = max(spacing * 1.6, float(ext.max()) / 500)
     shape = (int(ext[1] // cell) + 1, int(ext[0] // cell) + 1)
     col = ((xy[:, 0] - lo[0]) / cell).astype(np.int64)
     row = ((xy[:, 1] - lo[1]) / cell).astype(np.int64)
@@ -310,10 +308,7 @@ def plot_matrix(
     matrix: np.ndarray,
     title: str,
     *,
-    xlabel: str = "model segments",
-    ylabel: str = "test segments",
     label: str = "",
-    cmap: str = "viridis_r",
     binary: bool = False,
 ) -> bytes:
     """Heatmap of a (p, q) matrix (similarity distances, or a 0/1 correspondence)."""
@@ -339,22 +334,20 @@ def plot_matrix(
         hi = np.percentile(m[finite], 95) if finite.any() else 1.0
         im = ax.imshow(
             np.where(finite, m, np.nan),
-            cmap=cmap,
+            cmap="viridis_r",
             vmin=0,
             vmax=hi,
             interpolation="nearest",
             aspect="auto",
         )
         fig.colorbar(im, ax=ax, label=label, shrink=0.85)
-    ax.set_xlabel(xlabel)
-    ax.set_ylabel(ylabel)
+    ax.set_xlabel("model segments")
+    ax.set_ylabel("test segments")
     ax.set_title(title)
     return _png(fig)
 
 
-def plot_threshold_curve(
-    curves: Sequence[dict[str, Any]], title: str = "Automatic threshold"
-) -> bytes:
+def plot_threshold_curve(curves: Sequence[dict[str, Any]]) -> bytes:
     """Sorted nearest distances, their second differences and the chosen peak.
 
     Each curve is a dict with ``label``, ``sorted`` (ascending nearest
@@ -385,7 +378,7 @@ def plot_threshold_curve(
                 if 0 <= j < len(sd):
                     axes[1].plot([int(pk)], [sd[j]], "o", mfc="none", mec="k", ms=9)
     axes[0].set_ylabel("nearest distance d")
-    axes[0].set_title(title)
+    axes[0].set_title("Automatic threshold")
     axes[0].legend(fontsize=8, frameon=False)
     axes[1].set_ylabel("second difference")
     axes[1].set_xlabel("rank (sorted)")
@@ -430,8 +423,6 @@ def plot_matched_segments(
     model: tuple[np.ndarray, np.ndarray],
     test_distance: np.ndarray,
     title: str,
-    *,
-    label: str = "distance d",
 ) -> bytes:
     """Model segments in grey, test segments coloured by their distance to the matched one.
 
@@ -477,7 +468,7 @@ def plot_matched_segments(
         lc.set_array(d[matched])
         lc.set_clim(0, max(float(np.percentile(d[matched], 95)), 1e-6))
         ax.add_collection(lc)
-        fig.colorbar(lc, ax=ax, label=label, shrink=0.8)
+        fig.colorbar(lc, ax=ax, label="distance d", shrink=0.8)
     ax.autoscale_view()
     ax.set_title(title)
     ax.legend(fontsize=8, frameon=False, loc="upper left")
@@ -529,11 +520,7 @@ def plot_residual_vectors(
     return _png(fig)
 
 
-def plot_residual_histograms(
-    residuals: np.ndarray,
-    title: str = "Residual distributions",
-    axes_names: Sequence[str] = ("x", "y", "z"),
-) -> bytes:
+def plot_residual_histograms(residuals: np.ndarray) -> bytes:
     """Histograms of residual components (one panel each, NaN-only components skipped)."""
     plt = _plt()
     r = np.asarray(residuals, dtype=float).reshape(len(residuals), -1)
@@ -553,9 +540,9 @@ def plot_residual_histograms(
                 float(np.mean(v)), color="#d32f2f", lw=1, ls="--", label=f"mean {np.mean(v):+.3f}"
             )
             ax.legend(fontsize=8, frameon=False)
-        ax.set_xlabel(f"residual {axes_names[i] if i < len(axes_names) else i} (m)")
+        ax.set_xlabel(f"residual {'xyz'[i] if i < 3 else i} (m)")
     axes[0][0].set_ylabel("count")
-    fig.suptitle(title)
+    fig.suptitle("Residual distributions")
     return _png(fig)
 
 
@@ -584,7 +571,6 @@ def sigma_class(sigma: np.ndarray) -> np.ndarray:
 def plot_sigma_classes(
     xy: np.ndarray,
     sigma: np.ndarray,
-    title: str = "Predicted σ of map points",
     background: np.ndarray | None = None,
 ) -> bytes:
     """Map points coloured in the paper's three σ classes (green < 20 cm ≤ yellow ≤ 50 cm < red)."""
@@ -627,7 +613,7 @@ def plot_sigma_classes(
             label=f"not fitted ({int(m.sum())})",
             zorder=3,
         )
-    ax.set_title(title)
+    ax.set_title("Predicted σ of map points")
     ax.legend(
         loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False, markerscale=1.2
     )

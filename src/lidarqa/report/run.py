@@ -98,16 +98,10 @@ class _Progress:
     @contextlib.contextmanager
     def __call__(self, description: str) -> Iterator[Any]:
         """Yield the step's progress callback (a no-op for nested steps)."""
-        if self.steps is None or self.depth > 0:
-            self.depth += 1
-            try:
-                yield _no_progress
-            finally:
-                self.depth -= 1
-            return
+        outer = self.steps is not None and self.depth == 0
         self.depth += 1
         try:
-            with self.steps(description) as progress:
+            with self.steps(description) if outer else contextlib.nullcontext() as progress:
                 yield progress if callable(progress) else _no_progress
         finally:
             self.depth -= 1

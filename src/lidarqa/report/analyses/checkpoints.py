@@ -37,18 +37,17 @@ def sample_check_points(
     seed: int,
     min_spacing: float,
     near: np.ndarray | None = None,
-    near_distance: float = 1.0,
 ) -> np.ndarray:
     """Indices of up to `n` well-spread points (one per `min_spacing` cell, deterministic).
 
-    With `near`, only points within `near_distance` (XY) of a point of `near` qualify
+    With `near`, only points within 1 m (XY) of a point of `near` qualify
     (so that check points fall where the tested cloud has data).
     """
     cand = np.arange(len(xyz))
     if near is not None and len(near):
         from scipy.spatial import cKDTree
 
-        dist, _ = cKDTree(near[:, :2]).query(xyz[:, :2], k=1, distance_upper_bound=near_distance)
+        dist, _ = cKDTree(near[:, :2]).query(xyz[:, :2], k=1, distance_upper_bound=1.0)
         cand = cand[np.isfinite(dist)]
     if len(cand) == 0:
         return cand

@@ -19,7 +19,7 @@ from ..labels import Label
 __all__ = ["plot_dz_map", "run_swaths"]
 
 
-def plot_dz_map(grid: Any, *, vmax: float = 0.16, title: str | None = None) -> bytes:
+def plot_dz_map(grid: Any, *, vmax: float = 0.16) -> bytes:
     """A diverging colour map of a :class:`~lidarqa.accuracy.swaths.DzGrid` (PNG bytes).
 
     Colours saturate at ±`vmax` metres (the quality level's max |dz| by default).
@@ -42,7 +42,7 @@ def plot_dz_map(grid: Any, *, vmax: float = 0.16, title: str | None = None) -> b
     ax.set_aspect("equal")
     ax.set_xlabel(f"x − {grid.x0:,.0f} (m)")
     ax.set_ylabel(f"y − {grid.y1 - rows * grid.cell_size:,.0f} (m)")
-    ax.set_title(title or f"dz = strip {grid.strip_b} − strip {grid.strip_a}")
+    ax.set_title(f"dz = strip {grid.strip_b} − strip {grid.strip_a}")
     fig.colorbar(im, ax=ax, label="dz (m)", shrink=0.85)
     return _png(fig)
 
