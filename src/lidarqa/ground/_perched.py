@@ -21,7 +21,8 @@ or roof 5 m above its surroundings entirely up to about 6 m wide, along its
 middle up to about 9 m (at 45°; the reach grows with the drop), wider ones not.
 Spreading the rejection over the rest of a raised surface at the same level was
 tried and removed: on the ISPRS samples it leaked onto hillsides and terraces
-next to houses.
+next to houses. Segment-PTD instead judges an accepted segment this test cuts into
+as a whole, by its raised border (:class:`~lidarqa.ground.SegmentPTD`, `perched_step`).
 """
 
 from __future__ import annotations

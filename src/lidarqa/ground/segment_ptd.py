@@ -211,7 +211,14 @@ class SegmentPTD(TINParameters):
         `perched_angle` degrees, on opposite sides within `perched_radius` m is
         rejected: roofs reached from a hillside, bridge decks, wall tops. Terrain
         drops on one side only (terrace edges, cuts) or at a slope's grade
-        (embankments), and stays ground.
+        (embankments), and stays ground. The test sees only the part of a surface
+        with drops on both sides; an accepted segment it cuts into is then judged
+        whole by the raised test (as for `raised_step`, with `perched_step` and
+        `perched_angle` as the step and the angle) against the ground that
+        remains, and rejected when at least `raised_ratio` of its border points
+        (10 or more) are raised: a flat roof built into a slope, whose uphill
+        edge meets the terrain, goes whole once its perched part and the
+        point-wise ground on it are gone.
     perched_angle : float, default 45.0
     perched_radius : float, default 8.0
     filter_density : float, default 0.0
@@ -1406,7 +1413,7 @@ def _segment_ptd(
             ground &= ~((lab >= 0) & roof[lab_c])
     # 9. perched-surface test: accepted ground that drops steeply on opposite sides
     if par.perched_step > 0 and ground.any():
-        ground &= ~perched_mask(
+        perched = perched_mask(
             points,
             ground,
             cand,
@@ -1414,6 +1421,20 @@ def _segment_ptd(
             angle=float(par.perched_angle),
             radius=float(par.perched_radius),
         )
+        ground &= ~perched
+        # 9b. an accepted segment the test cut into: the raised test on what is left
+        # of it, against the ground that remains (a plane is one surface)
+        cut = np.zeros(n_seg, dtype=bool)
+        cut[lab[perched & (lab >= 0)]] = True
+        cut &= is_ground_seg
+        if cut.any():
+            par_up = replace(par, raised_step=par.perched_step, raised_angle=par.perched_angle)
+            n_b, n_up, _ = _border_counts(
+                xyz, lab, seg_pt & ground & cut[lab_c], ground, n_seg, par_up
+            )
+            roof = cut & (n_b >= _ROOF_MIN_BORDER) & (n_up >= par.raised_ratio * n_b - 1e-9)
+            is_ground_seg &= ~roof
+            ground &= ~((lab >= 0) & roof[lab_c])
     return SegmentPTDResult(
         ground,
         lab,
