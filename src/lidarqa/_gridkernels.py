@@ -14,7 +14,7 @@ from numba import njit, prange
 __all__ = ["centred_moments", "grid_keys"]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def centred_moments(pts, rows, cnt):  # pragma: no cover - numba
     """Mean (x, y, z) and centred second-moment sums (xx, xy, xz, yy, yz, zz).
 
@@ -46,7 +46,7 @@ def centred_moments(pts, rows, cnt):  # pragma: no cover - numba
     return mx, my, mz, c00, c01, c02, c11, c12, c22
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True, parallel=True)
 def grid_keys(x, y, cell, lo_x, lo_y, span_y):  # pragma: no cover - numba
     """Row-major number of the `cell`-sized XY grid cell of each point, one pass.
 

@@ -44,7 +44,7 @@ def prepare(start: np.ndarray, end: np.ndarray, origin: np.ndarray) -> tuple[np.
 # ------------------------------------------------------------------ pair kernel
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def _one(ct0, ct1, ct2, ut0, ut1, ut2, lt, cm0, cm1, cm2, um0, um1, um2, lm, rotate_test):
     # angle distance (Chen et al. 2003): shorter length * sin(theta), undirected
     x0 = ut1 * um2 - ut2 * um1
@@ -81,7 +81,7 @@ def _one(ct0, ct1, ct2, ut0, ut1, ut2, lt, cm0, cm1, cm2, um0, um1, um2, lm, rot
     return d_theta, d_par, d_perp
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _pairs_kernel(ct, ut, lt, cm, um, lm, ii, jj, weight, rotate_test, out):
     n = ii.shape[0]
     for k in range(n):
@@ -211,7 +211,7 @@ def candidate_pairs(a: BinnedTree, b: BinnedTree, cutoff: float) -> tuple[np.nda
     return key // nb, key % nb
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def group_min(keys, values, n):
     """Minimum of `values` per key in 0..n-1 (inf where absent) and the index of its first hit."""
     best = np.full(n, np.inf)

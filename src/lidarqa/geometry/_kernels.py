@@ -17,7 +17,7 @@ from .._gridkernels import centred_moments
 # ----------------------------------------------------------------- eigen / fits
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def eigvals_sym3(a00, a01, a02, a11, a12, a22):
     """Eigenvalues (descending) of a symmetric 3x3 matrix, closed form (Smith 1961)."""
     p1 = a01 * a01 + a02 * a02 + a12 * a12
@@ -49,7 +49,7 @@ def eigvals_sym3(a00, a01, a02, a11, a12, a22):
     return e1, e2, e3
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def planarity_knn(pts, knn):
     """lambda3 / (lambda1+lambda2+lambda3) of each point's k-neighbourhood (N,)."""
     n, k = knn.shape
@@ -66,7 +66,7 @@ def planarity_knn(pts, knn):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def canonical_normal(nx, ny, nz):
     """Flip a unit normal so n_z >= 0 (if 0: n_x >= 0, then n_y >= 0)."""
     flip = False
@@ -82,7 +82,7 @@ def canonical_normal(nx, ny, nz):
     return nx, ny, nz
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def normal_from_moments(n, sx, sy, sz, sxx, sxy, sxz, syy, syz, szz):
     """TLS normal (canonical sign) and mean from first/second moment sums."""
     mx = sx / n
@@ -103,7 +103,7 @@ def normal_from_moments(n, sx, sy, sz, sxx, sxy, sxz, syy, syz, szz):
     return nx, ny, nz, mx, my, mz
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def fit_subset(pts, idx, m, ox, oy, oz):
     """TLS plane of pts[idx[:m]] about origin o: (nx, ny, nz, mx, my, mz), mean in the o-frame."""
     sx = sy = sz = sxx = sxy = sxz = syy = syz = szz = 0.0
@@ -127,7 +127,7 @@ def fit_subset(pts, idx, m, ox, oy, oz):
 # ------------------------------------------------------------------ PRNG
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def splitmix64(state):
     """One step of splitmix64: returns (new_state, random uint64 as int64 bits)."""
     state = (state + np.uint64(0x9E3779B97F4A7C15)) & np.uint64(0xFFFFFFFFFFFFFFFF)
@@ -141,7 +141,7 @@ def splitmix64(state):
 # ------------------------------------------------------------------ grid search
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def grid_neighbours(pts, q, r2, cx, cy, cz, nyz, nz, cell_keys, cell_start, order, out):
     """Indices of points within sqrt(r2) of pts[q] (excluding q) into out; returns count."""
     m = 0
@@ -175,7 +175,7 @@ def grid_neighbours(pts, q, r2, cx, cy, cz, nyz, nz, cell_keys, cell_start, orde
     return m
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def grid_count(pts, queries, r2, cx, cy, cz, nyz, nz, cell_keys, cell_start, order):
     """Number of points within sqrt(r2) of each point `queries` (itself included).
 
@@ -248,7 +248,7 @@ def build_grid(pts: np.ndarray, cell: float, offset: np.ndarray | None = None):
 # ------------------------------------------------------------------ seeds
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _count_within(pts, cand, m, nx, ny, nz, mx, my, mz, ox, oy, oz, dist, flag):
     """Count cand points within dist of the plane (n, mean m in the o-frame); set flag."""
     cnt = 0
@@ -263,7 +263,7 @@ def _count_within(pts, cand, m, nx, ny, nz, mx, my, mz, ox, oy, oz, dist, flag):
     return cnt
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def hough_directions(step_deg):
     """Unit normals on the upper hemisphere in steps of step_deg (tilt 0..90, azimuth 0..360)."""
     nt = int(math.floor(90.0 / step_deg + 1e-9)) + 1
@@ -286,7 +286,7 @@ def hough_directions(step_deg):
     return out[:m]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _seed_plane(pts, i, cand, m, method, seed_dist, dirs, rng_seed, flag, tmp):
     """Plane of a seed around trial point i: (ok, nx, ny, nz, mx, my, mz) in the frame of pts[i]."""
     ox = pts[i, 0]
@@ -415,7 +415,7 @@ def _seed_plane(pts, i, cand, m, method, seed_dist, dirs, rng_seed, flag, tmp):
 # ------------------------------------------------------------------ growing
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def surface_growing_kernel(pts, trial_order, knn, knn_k, method, seed_dist, min_seed_points, dirs,
                            rng_seed, grow_r2, grow_dist, refit_growth, min_segment_size,
                            cx, cy, cz, nyz, nz_cells, cell_keys, cell_start, order, max_cell):
@@ -522,7 +522,7 @@ def surface_growing_kernel(pts, trial_order, knn, knn_k, method, seed_dist, min_
 # ------------------------------------------------------------------ kNN on the grid
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _knn_one(pts, i, k, rmax, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, order, cand, dist,
              out, r0=1, by_index=False):
     """Exact k nearest neighbours of pts[i] (including i) by expanding cube rings.
@@ -616,7 +616,7 @@ def _knn_one(pts, i, k, rmax, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, 
     return False
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True, parallel=True)
 def knn_grid(pts, k, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, order, rmax, max_cand,
              n_chunks, by_index=False):
     """The k nearest neighbours of every point (N, k); rows that failed are all -1.
@@ -808,7 +808,7 @@ def segment_planes_tls(pts: np.ndarray, labels: np.ndarray, n_labels: int):
 # ------------------------------------------------------------------ adjacency
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def contact_pairs(pts, labels, r2, cx, cy, cz, nyz, nz, cell_keys, cell_start, order):
     """Point pairs (i, j) with labels[i] != labels[j], both >= 0, within sqrt(r2) (grid cell >= r).
 
@@ -882,7 +882,7 @@ def contact_pairs(pts, labels, r2, cx, cy, cz, nyz, nz, cell_keys, cell_start, o
 # ------------------------------------------------------------------ canonical order
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _lex_less(pts, a, b):
     if pts[a, 0] != pts[b, 0]:
         return pts[a, 0] < pts[b, 0]
@@ -891,7 +891,7 @@ def _lex_less(pts, a, b):
     return pts[a, 2] < pts[b, 2]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def sort_runs_lex(perm, key_sorted, pts):
     """Sort each run of equal keys of `perm` by (x, y, z) in place (stable insertion sort)."""
     n = perm.shape[0]

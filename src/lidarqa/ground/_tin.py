@@ -372,7 +372,7 @@ def best_per_triangle(
     )
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _best_per_group(grp, n_grp, score, beta, p, idx):  # pragma: no cover - numba
     best = np.full(n_grp, -1, np.int64)
     for j in range(grp.size):
@@ -430,7 +430,7 @@ def _interleave(v: np.ndarray) -> np.ndarray:
 # ---------------------------------------------------------------- compiled kernels
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True, parallel=True)
 def _setup_kernel(vxyz, vsrc, simp, nb, have_nb):  # pragma: no cover - numba
     """Orient triangles CCW (in place), fill adjacency ``nb`` unless given, facet geometry.
 
@@ -511,12 +511,12 @@ def _setup_kernel(vxyz, vsrc, simp, nb, have_nb):  # pragma: no cover - numba
     return edge_max, normal, slope, n_virtual
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _orient(vxy, a, b, px, py):  # pragma: no cover - numba
     return (vxy[b, 0] - vxy[a, 0]) * (py - vxy[a, 1]) - (vxy[b, 1] - vxy[a, 1]) * (px - vxy[a, 0])
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _locate_one(px, py, start, vxy, simp, nb, n_virtual):  # pragma: no cover - numba
     """Visibility walk from triangle `start`; -1 outside the TIN.
 
@@ -565,7 +565,7 @@ def _locate_one(px, py, start, vxy, simp, nb, n_virtual):  # pragma: no cover - 
     return -1
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _locate_kernel(pts, vxy, simp, nb, n_virtual):  # pragma: no cover - numba
     """Triangle of each point, walking from the previous hit (pass points spatially sorted)."""
     out = np.empty(pts.shape[0], np.int64)
@@ -578,7 +578,7 @@ def _locate_kernel(pts, vxy, simp, nb, n_virtual):  # pragma: no cover - numba
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _facet_dist(px, py, pz, vxyz, simp, normal, t):  # pragma: no cover - numba
     """Distance of P to the plane of facet t."""
     i0 = simp[t, 0]
@@ -589,7 +589,7 @@ def _facet_dist(px, py, pz, vxyz, simp, normal, t):  # pragma: no cover - numba
     )
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _facet_beta(px, py, pz, dist, vxyz, simp, t):  # pragma: no cover - numba
     """The largest vertex angle beta (rad) of P at distance `dist` from facet t.
 
@@ -605,7 +605,7 @@ def _facet_beta(px, py, pz, dist, vxyz, simp, t):  # pragma: no cover - numba
     return math.asin(min(max(smax, 0.0), 1.0))
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True, parallel=True)
 def _judge_kernel(
     p,
     vxyz,
@@ -748,7 +748,7 @@ def _judge_kernel(
     )
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _facet_key(px, py, t, vxy, simp):  # pragma: no cover - numba
     """Sorted vertex triple of facet `t` in 21 bits each; -1 when (px, py) is on an edge.
 
@@ -773,7 +773,7 @@ def facets_present(tin: TIN, keys: np.ndarray) -> np.ndarray:
     return _facets_present(tin.simplices, np.ascontiguousarray(keys, dtype=np.int64))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _facets_present(simp, keys):  # pragma: no cover - numba
     # open-addressing hash set of the facets' keys, then one probe per query
     size = 1

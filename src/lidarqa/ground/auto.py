@@ -279,7 +279,7 @@ def _min_raster(x: np.ndarray, y: np.ndarray, z: np.ndarray, cell: float) -> np.
     return flat.reshape(shape)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _min_per_cell(flat, z, size):  # pragma: no cover - numba
     """Lowest `z` per cell number (nan where empty)."""
     out = np.full(size, np.inf)

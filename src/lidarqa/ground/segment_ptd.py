@@ -611,7 +611,7 @@ def _argmin_per_group(
     )
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _group_argmin_dense(key, value, p, n_keys):  # pragma: no cover - numba
     # same winners as the sorted scan: smallest value, then x, y, z; full ties keep
     # the smallest index (points are visited in index order)
@@ -648,7 +648,7 @@ def _group_argmin_dense(key, value, p, n_keys):  # pragma: no cover - numba
     return winners[:g], inv
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _group_argmin_scan(sorted_key, order, value, p):  # pragma: no cover - numba
     n = sorted_key.size
     winners = np.empty(n, np.int64)
@@ -732,7 +732,7 @@ def thin_lowest(points: Any, cell: float) -> tuple[np.ndarray, np.ndarray, np.nd
     return win, inv, np.ascontiguousarray(np.floor(p[win, :2] / cell))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _find_cell(cells, cx, cy):  # pragma: no cover - numba
     """Row of (cx, cy) in `cells` sorted lexicographically, -1 if absent."""
     lo, hi = 0, cells.shape[0]
@@ -767,7 +767,7 @@ def _cell_lut(cells: np.ndarray) -> tuple[np.ndarray, float, float, int]:
     return lut, float(lo[0]), float(lo[1]), ny
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _cell_row(cells, lut, x0, y0, ny, cx, cy):  # pragma: no cover - numba
     """Row of cell (cx, cy): from the raster `lut` when there is one, else by bisection."""
     if lut.size == 0:
@@ -788,7 +788,7 @@ def _cell_planes(cells, wp, wg, tol, below):
     return _cell_planes_kernel(cells, lut, x0, y0, ny, wp, wg, tol, below)
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True, parallel=True)
 def _cell_planes_kernel(cells, lut, x0, y0, ny, wp, wg, tol, below):  # pragma: no cover - numba
     """Per cell: (a, b, c, has) of z = a + b·dx + c·dy about its lowest point.
 
@@ -831,7 +831,7 @@ def _cell_planes_kernel(cells, lut, x0, y0, ny, wp, wg, tol, below):  # pragma: 
     return out
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, nogil=True, parallel=True)
 def _join(p, inv, wp, planes, tol):  # pragma: no cover - numba
     """Points within `tol` (vertically) of their cell's ground plane."""
     n = p.shape[0]
@@ -899,7 +899,7 @@ def _thin_median(xyz: np.ndarray, idx: np.ndarray, cell: float) -> np.ndarray:
     return np.sort(idx[_median_per_group(inv, p, cells.shape[0])])
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _before(p, u, v):  # pragma: no cover - numba
     """Row `u` of `p` comes before row `v` in (z, x, y, row) order."""
     if p[u, 2] != p[v, 2]:
@@ -911,7 +911,7 @@ def _before(p, u, v):  # pragma: no cover - numba
     return u < v
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _median_per_group(inv, p, n_groups):  # pragma: no cover - numba
     """Per group of `inv`, the row of `p` at position (m - 1) // 2 in (z, x, y, row) order.
 
@@ -927,7 +927,7 @@ def _median_per_group(inv, p, n_groups):  # pragma: no cover - numba
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _select(r, k, p):  # pragma: no cover - numba
     """The row of `r` at position `k` in (z, x, y, row) order; reorders `r` in place."""
     lo, hi = 0, r.size - 1
@@ -963,7 +963,7 @@ def _select(r, k, p):  # pragma: no cover - numba
     return r[lo]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _group_sort(inv, p, n_groups, min_size):  # pragma: no cover - numba
     """Rows of `p` by group of `inv`, in (z, x, y, row) order within a group: ``(start, rows)``.
 
@@ -1052,7 +1052,7 @@ def surface_lowest(p: np.ndarray, inv: np.ndarray, lowest: np.ndarray, support: 
     return _surface_lowest_kernel(start, rows, z, lowest, int(support), SURFACE_SLAB, SURFACE_SHARE)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _surface_lowest_kernel(start, rows, z, lowest, support, slab, share):  # pragma: no cover
     out = lowest.copy()
     for g in range(lowest.size):

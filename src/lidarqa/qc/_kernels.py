@@ -8,7 +8,7 @@ from numba import njit
 __all__ = ["open_square", "scan_piece"]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def open_square(empty: np.ndarray, k: int) -> np.ndarray:  # pragma: no cover - numba
     """Morphological opening of the bool grid `empty` by a ``k x k`` square.
 
@@ -51,7 +51,7 @@ def open_square(empty: np.ndarray, k: int) -> np.ndarray:  # pragma: no cover - 
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def scan_piece(x, y, z, rn, nr, cls, withheld, overlap, synthetic, key_point, sid, angle,
                all_first, max_returns, legacy_overlap,
                vgrid, fgrid, occupied, water_void, water, firsts, counts, slot_of,

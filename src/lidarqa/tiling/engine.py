@@ -559,8 +559,8 @@ def _drive(
 
     When this process is one of the workers (:attr:`Engine.head_works`) the cluster
     starts in a thread while this process already runs the first items, and each
-    worker process holds at most two items at a time: the rest stay here, where
-    whoever is free takes the next.
+    worker process holds at most two items at a time (one when fewer remain): the
+    rest stay here, where whoever is free takes the next.
     """
     from collections import deque
 
@@ -582,9 +582,16 @@ def _drive(
             bar.advance()
         cond.notify_all()
 
+    def room() -> int:
+        # a worker process holds a second item (queued behind its first, so that it never
+        # waits for this process to hand it one) only while every process can still get
+        # two: near the end an item queued on a worker would leave this process idle
+        n = window[0]
+        return n if not engine.head_works or len(pending) >= n + 2 else n // 2
+
     def feed() -> None:
         with cond:
-            while pending and len(flying) < window[0] and not failed:
+            while pending and not failed and len(flying) < room():
                 i = pending.popleft()
                 fut = submit(i)
                 flying[fut] = i
