@@ -212,10 +212,10 @@ class SegmentPTD(TINParameters):
         rejected: roofs reached from a hillside, bridge decks, wall tops. Terrain
         drops on one side only (terrace edges, cuts) or at a slope's grade
         (embankments), and stays ground. The test sees only the part of a surface
-        with drops on both sides; an accepted segment it cuts into is then judged
-        whole by the raised test (as for `raised_step`, with `perched_step` and
-        `perched_angle` as the step and the angle) against the ground that
-        remains, and rejected when at least `raised_ratio` of its border points
+        with drops on both sides; where the raised test is on (`raised_step` > 0),
+        an accepted segment it cuts into is then judged whole by it (with
+        `perched_step` and `perched_angle` as the step and the angle) against the
+        ground that remains, and rejected when at least `raised_ratio` of its border points
         (10 or more) are raised: a flat roof built into a slope, whose uphill
         edge meets the terrain, goes whole once its perched part and the
         point-wise ground on it are gone.
@@ -1127,6 +1127,9 @@ def _border_counts(
     pool = np.flatnonzero(ground | src_mask)
     if src.size == 0 or not ground.any():
         return zero, zero.copy(), zero.copy()
+    src = src[_may_border(xyz[:, :2], lab, src, np.flatnonzero(ground), float(par.raised_radius))]
+    if src.size == 0:
+        return zero, zero.copy(), zero.copy()
     tree = cKDTree(xyz[pool, :2])
     k = min(_BORDER_K, pool.size)
     d, j = tree.query(
@@ -1153,6 +1156,36 @@ def _border_counts(
         np.bincount(ls[up], minlength=n_seg),
         np.bincount(ls[ok], minlength=n_seg),
     )
+
+
+def _may_border(
+    xy: np.ndarray, lab: np.ndarray, src: np.ndarray, ground: np.ndarray, r: float
+) -> np.ndarray:
+    """Mask of the `src` points that may have a `ground` point of another label within `r`.
+
+    Such a neighbour lies in the point's `r` m cell or next to it, so a point is kept when a
+    label other than its own (unsegmented: -1) occurs among the ground points of those nine
+    cells: every border point is kept, and the interior of a large segment is not searched.
+    """
+    from scipy.ndimage import maximum_filter, minimum_filter
+
+    pts = np.concatenate([src, ground])
+    lo = xy[pts].min(axis=0)
+    c = np.floor((xy[pts] - lo) / r).astype(np.int64)
+    shape = tuple(int(v) for v in c.max(axis=0) + 1)
+    if shape[0] * shape[1] > 4 * pts.size:  # a sparse cloud over a wide area: search all
+        return np.ones(src.size, dtype=bool)
+    g = c[src.size :]
+    big = np.iinfo(np.int64).max
+    low = np.full(shape, big, dtype=np.int64)
+    high = np.full(shape, -big, dtype=np.int64)
+    np.minimum.at(low, (g[:, 0], g[:, 1]), lab[ground])
+    np.maximum.at(high, (g[:, 0], g[:, 1]), lab[ground])
+    low = minimum_filter(low, size=3, mode="constant", cval=big)
+    high = maximum_filter(high, size=3, mode="constant", cval=-big)
+    s = c[: src.size]
+    own = lab[src]
+    return (low[s[:, 0], s[:, 1]] < own) | (high[s[:, 0], s[:, 1]] > own)
 
 
 def _border_tests(
@@ -1422,12 +1455,12 @@ def _segment_ptd(
             radius=float(par.perched_radius),
         )
         ground &= ~perched
-        # 9b. an accepted segment the test cut into: the raised test on what is left
-        # of it, against the ground that remains (a plane is one surface)
+        # 9b. an accepted segment the test cut into: the raised test (where it is on) on
+        # what is left of it, against the ground that remains (a plane is one surface)
         cut = np.zeros(n_seg, dtype=bool)
         cut[lab[perched & (lab >= 0)]] = True
         cut &= is_ground_seg
-        if cut.any():
+        if par.raised_step > 0 and cut.any():
             par_up = replace(par, raised_step=par.perched_step, raised_angle=par.perched_angle)
             n_b, n_up, _ = _border_counts(
                 xyz, lab, seg_pt & ground & cut[lab_c], ground, n_seg, par_up
