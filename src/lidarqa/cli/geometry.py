@@ -132,15 +132,11 @@ def _run(kind: str, paths: tuple[str, ...], output: str, classes: Any, source_id
                     "per_chunk": dict(sorted(per_chunk.items()))})
     echo(said + (f" ({', '.join(f'{k}: {v}' for k, v in left.items())})" if left else "")
          + f" -> {output}")
-    c = run.chunks[0] if run.chunks else None
-    finish_run(kind, run, on_catalog, record=True,
+    finish_run(kind, run, on_catalog, record=True, cat_opts=cat,
                inputs={"paths": list(paths), **({} if on_catalog else {"path": paths[0]}),
                        "classes": classes, "source_id": source_id,
                        "n_points_selected": s["n_points"], "crs": crs_name(source.crs)},
                parameters={**s["parameters"], **extra["segment_options"], **extra["options"],
-                           "chunk_size": c.size if c else None,
-                           "buffer": (c.buffered[2] - c.core[2]) if c else None,
-                           "workers": cat.get("workers"), "scheduler": cat.get("scheduler"),
                            "rule": "anchor-in-core (corner point, edge midpoint, plane centroid)"},
                results=results)
 

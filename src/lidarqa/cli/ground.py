@@ -6,7 +6,13 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
-from ._catalog import catalog_options, open_catalog_source, sigterm_as_interrupt, wants_catalog
+from ._catalog import (
+    catalog_options,
+    catalog_settings,
+    open_catalog_source,
+    sigterm_as_interrupt,
+    wants_catalog,
+)
 from ._common import (
     INT_LIST,
     Steps,
@@ -245,10 +251,7 @@ def ground(
             inputs={"paths": list(paths), "output": output},
             parameters={
                 **{k: v for k, v in job.items() if k != "evaluate"},
-                "chunk_size": cres.chunk_size,
-                "buffer": cres.buffer,
-                "workers": cat_opts["workers"],
-                "scheduler": cat_opts["scheduler"],
+                **catalog_settings(cat_opts, cres.chunk_size, cres.buffer),
                 **cres.parameters.get("filter", {}),
                 **({"auto": cres.parameters["auto"]} if "auto" in cres.parameters else {}),
             },

@@ -26,7 +26,6 @@ from ._catalog import (
     finish_run,
     job_options,
     open_catalog_source,
-    option_given,
     reproducible_vectors,
     wants_catalog,
 )
@@ -379,9 +378,7 @@ def heights(
         crs=crs,
         sigma_strip_source=sigma_strip_source,
     )
-    if on_catalog:
-        params.update({k: v for k, v in cat_opts.items() if option_given(v)})
-    finish_run("heights", run, on_catalog, parameters=params, results=res,
+    finish_run("heights", run, on_catalog, parameters=params, results=res, cat_opts=cat_opts,
                inputs={"cloud": cloud, "map": map_path, "reference": reference, "output": output})
 
 

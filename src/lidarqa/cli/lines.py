@@ -413,10 +413,8 @@ def repeatability(
         finish_run("repeatability", run, True, inputs={"files": list(files)},
                parameters={"by_source_id": True, "source_id": source_id, "classes": classes,
                            **match_options, **extra["segment_options"],
-                           **extra["edge_options"],
-                           **{k: cat_opts.get(k) for k in ("chunk_size", "buffer", "workers",
-                                                           "scheduler")}},
-               results={"pairs": run.value, "strips": strips})
+                           **extra["edge_options"]},
+               results={"pairs": run.value, "strips": strips}, cat_opts=cat_opts)
         return
     if catalog_options_given(cat_opts):
         raise OptionError("catalog options apply to repeatability --by-source-id only")

@@ -17,7 +17,6 @@ from ._catalog import (
     catalog_options_given,
     finish_run,
     open_catalog_source,
-    option_given,
     pop_catalog_options,
     run_job,
     wants_catalog,
@@ -258,9 +257,9 @@ def swaths(
             classes=classes,
             all_returns=all_returns,
             crs=crs_option,
-            **({k: v for k, v in cat_opts.items() if option_given(v)}),
         ),
         results=results,
+        cat_opts=cat_opts,
     )
 
 
