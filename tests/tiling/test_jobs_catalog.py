@@ -480,3 +480,18 @@ def test_every_catalog_command_records_the_same_catalog_settings(name, tiles, ti
     got = {k: params.get(k, "missing") for k in ("chunk_size", "buffer", "workers", "scheduler")}
     assert all(isinstance(got[k], float) for k in ("chunk_size", "buffer")), got
     assert (got["workers"], got["scheduler"]) == (1, None), got
+
+
+@pytest.mark.parametrize("name", CATALOG_COMMANDS)
+def test_every_catalog_command_refuses_an_existing_json_alike(name, tiles, tiles_check, tmp_path):
+    """Regression (issue #26): ground on a catalog and swaths checked the --json path with the
+    library's message ("pass --overwrite (overwrite=True)"); every command says the same."""
+    _, folder, _ = tiles
+    js = tmp_path / "r.json"
+    js.write_text("{}")
+    r = _cli(["-q", *_catalog_commands(folder, tiles_check, tmp_path)[name], "--workers", "1",
+              "--json", js])
+    assert r.exit_code == 1, r.output
+    assert r.output.strip().endswith(f"output {js} exists; add --overwrite to replace it"), \
+        r.output
+    assert js.read_text() == "{}"

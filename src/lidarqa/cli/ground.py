@@ -219,11 +219,8 @@ def ground(
     if wants_catalog(paths, cat_opts):
         from ..tiling.ground import ground_catalog
 
+        prepare_outputs(inputs=tuple(paths))  # the --json path (OUTDIR: ground_catalog)
         s = settings()
-        if s.json_path:
-            from ..io import check_output
-
-            check_output(s.json_path, overwrite=s.overwrite)
         catalog = open_catalog_source(paths, cat_opts, crs=given_crs,
                                       z_to_metres=False).catalog
         with sigterm_as_interrupt():
