@@ -69,6 +69,7 @@ def _run(kind: str, paths: tuple[str, ...], output: str, classes: Any, source_id
     from ..io.crs import crs_name, require_metric_xy
     from ..io.vector import metric_lengths, write_points, write_segments
     from ..tiling.jobs_api import catalog_features
+    from ..tiling.source import Selection
 
     cat = pop_catalog_options(opts)
     on_catalog = wants_catalog(paths, cat)
@@ -83,11 +84,9 @@ def _run(kind: str, paths: tuple[str, ...], output: str, classes: Any, source_id
     extra: dict[str, Any] = run.extra  # the job's details
     f, s = run.value, extra["summary"]
     if s["n_points"] < 3:
-        what = [f"classes {','.join(map(str, classes))}"] if classes else []
-        what += [f"source ids {','.join(map(str, source_id))}"] if source_id else []
-        sel = (" with " + " and ".join(what)) if what else ""
-        raise InvalidPointsError(f"{source.label}: {s['n_points']} point(s){sel}; at least 3 "
-                                 "are needed")
+        what = Selection.of(classes, source_id).describe()
+        raise InvalidPointsError(f"{source.label}: {s['n_points']} point(s)"
+                                 + (f" with {what}" if what else "") + "; at least 3 are needed")
     with Steps()(f"Writing {output}"), reproducible_vectors():
         write = write_segments if kind == "edges" else write_points
         write(f, output, overwrite=settings().overwrite, layer=kind)
