@@ -196,7 +196,6 @@ def edges(paths: tuple[str, ...], output: str, classes: list[int] | None,
     """
     from .._validate import check_positive, check_range
 
-    _check_suffix(output)
     if near_dist is not None:
         check_positive(near_dist, "--near-dist")
     check_range(min_angle, "--min-angle", 0.0, 90.0)
@@ -227,7 +226,6 @@ def corners(paths: tuple[str, ...], output: str, classes: list[int] | None,
     """
     from .._validate import check_positive, check_range
 
-    _check_suffix(output)
     check_range(min_det, "--min-det", 0.0, 1.0)
     check_range(min_angle, "--min-angle", 0.0, 90.0)
     check_positive(max_dist, "--max-dist")
