@@ -138,7 +138,8 @@ def test_cli_crs_mismatch(scene, tmp_path):
     assert "Error" in r.output and "Traceback" not in r.output and "CRS" in r.output
 
 
-def test_cli_polygon_map(scene, tmp_path):
+def _roads_map(tmp_path):
+    """One road polygon over the scene (a GeoJSON file)."""
     pyogrio = pytest.importorskip("pyogrio")
     shapely = pytest.importorskip("shapely")
     x0, y0 = 650_000.0, 6_860_000.0
@@ -153,6 +154,31 @@ def test_cli_polygon_map(scene, tmp_path):
         crs="EPSG:2154",
         driver="GeoJSON",
     )
+    return path
+
+
+@pytest.mark.parametrize("kind", ["points", "road polygons"])
+def test_cli_gpkg_output_is_the_same_bytes_run_to_run(kind, scene, tmp_path):
+    """Regression (issue #26): with road polygons the GeoPackage carried its writing time."""
+    import sqlite3
+
+    from lidarqa.cli._catalog import FIXED_GPKG_TIME
+
+    pytest.importorskip("pyogrio")
+    mp = scene / "map.csv" if kind == "points" else _roads_map(tmp_path)
+    outs = [tmp_path / "a.gpkg", tmp_path / "b.gpkg"]
+    for out in outs:
+        r = run("heights", scene / "cloud.las", mp, scene / "ref.csv", "--spacing", "15",
+                "-o", out, "-q")
+        assert r.exit_code == 0, r.output
+    with sqlite3.connect(outs[0]) as db:
+        assert db.execute("SELECT last_change FROM gpkg_contents").fetchall() == \
+            [(FIXED_GPKG_TIME,)]
+    assert outs[0].read_bytes() == outs[1].read_bytes()
+
+
+def test_cli_polygon_map(scene, tmp_path):
+    path = _roads_map(tmp_path)
     out = tmp_path / "h.json"
     r = run(
         "heights",

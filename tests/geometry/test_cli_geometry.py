@@ -111,6 +111,24 @@ def test_bad_inputs(tmp_path: Path, demo_tile: Path) -> None:
     assert r.exit_code == 1 and existing.read_text() == "x"
 
 
+@pytest.mark.parametrize("kind", ["planes", "edges", "corners"])
+def test_the_output_suffix_is_checked_once(kind: str, tmp_path: Path, demo_tile: Path,
+                                           monkeypatch: pytest.MonkeyPatch) -> None:
+    """Regression (issue #26): edges and corners checked it in the command and in the job."""
+    from lidarqa.cli import geometry
+
+    calls = []
+    check = geometry._check_suffix
+    monkeypatch.setattr(geometry, "_check_suffix", lambda out: (calls.append(out), check(out)))
+    r = CliRunner().invoke(cli, [kind, str(demo_tile), "-o", str(tmp_path / "o.txt")])
+    assert r.exit_code == 1 and "use a .csv, .gpkg or .geojson file name" in r.output
+    calls.clear()
+    out = str(tmp_path / "o.csv")
+    r = CliRunner().invoke(cli, [kind, str(tmp_path / "missing.laz"), "-o", out])
+    assert r.exit_code == 1 and "Traceback" not in r.output
+    assert calls == [out]
+
+
 def test_degenerate_cloud_writes_no_nan(tmp_path: Path) -> None:
     t = np.linspace(0, 10, 200)
     line = lidarqa.io.PointCloud(xyz=np.column_stack([t, t, t]),

@@ -11,10 +11,11 @@ import numpy as np
 import pytest
 
 from lidarqa.errors import OutputExistsError
-from lidarqa.report import analyses as analyses_mod
-from lidarqa.report import run_assessment
+from lidarqa.report import _registry, run_assessment
 
 from .conftest import CHECK_OFFSET, LIGHT_TOML, SHIFT, SYNTHETIC_TOML, write_config
+
+_registry.specs()  # the built-in analyses registered, so that the tests' patches hold
 
 
 @pytest.fixture(scope="module")
@@ -132,7 +133,7 @@ def _interrupt(*args, **kwargs):
 
 
 def test_ctrl_c_leaves_no_partial_report(synthetic_config, tmp_path, monkeypatch):
-    monkeypatch.setitem(analyses_mod.ANALYSES, "lines", _interrupt)
+    monkeypatch.setitem(_registry.ANALYSES, "lines", _interrupt)
     out = tmp_path / "out"
     with pytest.raises(KeyboardInterrupt):
         run_assessment(synthetic_config, out)
@@ -146,7 +147,7 @@ def test_ctrl_c_keeps_the_previous_report(synthetic_config, tmp_path, monkeypatc
     out = tmp_path / "out"
     first = run_assessment(synthetic_config, out)
     before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
-    monkeypatch.setitem(analyses_mod.ANALYSES, "lines", _interrupt)
+    monkeypatch.setitem(_registry.ANALYSES, "lines", _interrupt)
     with pytest.raises(KeyboardInterrupt):
         run_assessment(synthetic_config, out, overwrite=True)
     after = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
@@ -160,7 +161,7 @@ def test_failing_analysis_is_reported_and_others_still_run(synthetic_config, tmp
     def boom(ctx, item):
         raise DegenerateGeometryError("all points collinear")
 
-    monkeypatch.setitem(analyses_mod.ANALYSES, "lines", boom)
+    monkeypatch.setitem(_registry.ANALYSES, "lines", boom)
     run = run_assessment(synthetic_config, tmp_path / "out")
     assert run.errors == {"lines": "all points collinear"}
     assert run.document["verdicts"]["lines"]["verdict"] == "error"
@@ -177,7 +178,7 @@ def test_cli_exits_nonzero_when_an_analysis_fails(synthetic_config, tmp_path, mo
     def boom(ctx, item):
         raise DegenerateGeometryError("all points collinear")
 
-    monkeypatch.setitem(analyses_mod.ANALYSES, "lines", boom)
+    monkeypatch.setitem(_registry.ANALYSES, "lines", boom)
     out = tmp_path / "out"
     r = CliRunner().invoke(cli, ["assess", str(synthetic_config), "--out", str(out), "-q"])
     assert r.exit_code == 1
@@ -216,7 +217,7 @@ def test_cli_ctrl_c_exits_130_without_report(synthetic_config, tmp_path, monkeyp
 
     from lidarqa.cli.main import cli
 
-    monkeypatch.setitem(analyses_mod.ANALYSES, "lines", _interrupt)
+    monkeypatch.setitem(_registry.ANALYSES, "lines", _interrupt)
     out = tmp_path / "out"
     r = CliRunner().invoke(cli, ["assess", str(synthetic_config), "--out", str(out), "-q"])
     assert r.exit_code == 130

@@ -18,7 +18,7 @@ from lidarqa.report.catalog_overview import (  # noqa: E402
 from lidarqa.tiling.jobs_api import CatalogRun  # noqa: E402
 
 
-def _fake_run(failed=("c0001_r0000",), retried=("c0000_r0001",), strips=None):
+def _fake_run(failed=("c0001_r0000",), retried=("c0000_r0001",), strips=None, resumed=()):
     tiles = tuple(SimpleNamespace(path=f"/data/t_{i}_{j}.laz", n_points=1000,
                                   bounds=(i * 50.0, j * 50.0, i * 50.0 + 50, j * 50.0 + 50, 0, 9))
                   for j in range(2) for i in range(3))
@@ -32,7 +32,7 @@ def _fake_run(failed=("c0001_r0000",), retried=("c0000_r0001",), strips=None):
         if ch.id in failed:
             outs.append(SimpleNamespace(chunk=ch, ok=False, error="MemoryError", attempts=3))
         else:
-            outs.append(SimpleNamespace(chunk=ch, ok=True, error=None,
+            outs.append(SimpleNamespace(chunk=ch, ok=True, error=None, resumed=ch.id in resumed,
                                         attempts=2 if ch.id in retried else 1))
     return CatalogRun(None, cat, chunks, tuple(outs), {"strip_chunks": strips or {}})
 
@@ -57,6 +57,15 @@ def test_section_counts_lists_failed_first_and_names_bad_tiles():
     assert any("broken.laz" in n for n in sec["notes"])
     assert any("c0001_r0000" in n for n in sec["notes"])
     assert "1 failed" in sec["headline"]
+
+
+def test_section_gives_the_figures_of_the_json_record():
+    """Regression (issue #26): the section recounted the chunks (without ``resumed``)."""
+    run = _fake_run(resumed=("c0002_r0000", "c0003_r0000"))
+    r = catalog_section(run)["results"]
+    assert r["chunk_status"] == {"ok": 20, "retried": 1, "failed": 1, "skipped": 0, "resumed": 2}
+    for k, v in run.to_dict().items():
+        assert r[k] == v, k
 
 
 def test_overview_map_shows_the_status_colours():

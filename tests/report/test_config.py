@@ -8,10 +8,12 @@ import numpy as np
 import pytest
 
 from lidarqa.errors import ConfigError, CRSMismatchError
-from lidarqa.report import analyses as analyses_mod
+from lidarqa.report import _registry
 from lidarqa.report.config import ConfigCRSMismatchError, load_config
 
 from .conftest import LIGHT_TOML, write_config
+
+_registry.specs()  # the built-in analyses registered, so that the tests' patches hold
 
 
 @pytest.fixture
@@ -187,7 +189,7 @@ def test_cli_refuses_bad_config_before_any_work(light, tmp_path, monkeypatch):
     from lidarqa.cli.main import cli
 
     called = []
-    monkeypatch.setitem(analyses_mod.ANALYSES, "lines", lambda *a: called.append(1))
+    monkeypatch.setitem(_registry.ANALYSES, "lines", lambda *a: called.append(1))
     cfg = _cfg(tmp_path, light.replace("[lines]\n", "[lines]\nbogus_option = 1\n"))
     out = tmp_path / "out"
     r = CliRunner().invoke(cli, ["assess", str(cfg), "--out", str(out), "-q"])
@@ -224,7 +226,7 @@ def test_unavailable_analysis_is_refused_unless_skipping(synthetic, tmp_path, mo
             "analysis [lines] needs lidarqa.accuracy.lines, which is missing"
         )
 
-    monkeypatch.setitem(analyses_mod._PARAMS, "lines", unavailable)
+    monkeypatch.setitem(_registry._PARAMS, "lines", unavailable)
     text = LIGHT_TOML.format(d=synthetic["dir"].as_posix())
     with pytest.raises(AnalysisUnavailableError, match="lidarqa.accuracy.lines"):
         load_config(_cfg(tmp_path, text))

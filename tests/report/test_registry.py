@@ -15,6 +15,14 @@ def test_every_module_of_the_package_registers_its_kind() -> None:
     assert kinds[:6] == ["info", "ground", "edges", "lines", "checkpoints", "heights"]
 
 
+def test_the_package_holds_the_analyses_only() -> None:
+    """Regression (issue #26): it re-exported the old ``analyses.py`` names, a second path to
+    the registry and the run context that nothing used."""
+    public = {k for k in vars(analyses_pkg) if not k.startswith("__")}
+    assert public - {"annotations", "importlib", "pkgutil", "_name"} == \
+        {"BUILTIN", *analyses_pkg.BUILTIN}
+
+
 @pytest.fixture
 def probe_kind():
     kind = "zz_probe"

@@ -60,7 +60,7 @@ def test_section_results_maps_and_verdict(block, tmp_path, target, verdict):
 
 
 def test_config_rejects_bad_quality_level(block, tmp_path):
-    from lidarqa.report.analyses import library_params
+    from lidarqa.report._registry import library_params
     from lidarqa.report.config import load_config
 
     cfg = tmp_path / "a.toml"

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from datapaths import SHARED, needs_shared
@@ -426,3 +428,70 @@ def test_an_analysis_without_a_catalog_version_runs_on_the_catalog_in_memory(til
     cloud = ctx.cloud("block")
     assert len(cloud) == len(whole)
     assert np.array_equal(np.sort(cloud.xyz[:, 2]), np.sort(whole.xyz[:, 2]))
+
+
+# ------------------------------------------------------------------ every catalog command alike
+
+
+def _catalog_commands(folder, chk, out):
+    """Every command with catalog options, on the folder `folder` (serial, one worker)."""
+    return {
+        "ground": ["ground", folder, "-o", out / "g"],
+        "planes": ["planes", folder, "--classes", "6", "-o", out / "p.csv"],
+        "edges": ["edges", folder, "--classes", "6", "-o", out / "e.csv"],
+        "corners": ["corners", folder, "--classes", "6", "-o", out / "c.csv"],
+        "checkpoints": ["checkpoints", folder, chk, "--vertical"],
+        "heights": ["heights", folder, chk, chk, "--classes", "2", "--max-radius", "4"],
+        "repeatability": ["repeatability", folder, "--by-source-id", "--classes", "6"],
+        "swaths": ["swaths", folder, "--by-source-id", "-o", out / "s", "--no-maps"],
+    }
+
+
+CATALOG_COMMANDS = sorted(_catalog_commands("", "", Path()))
+
+
+@pytest.fixture(scope="module")
+def tiles_check(tiles, tmp_path_factory):
+    from lidarqa.io.vector import write_points
+
+    scene, _, _ = tiles
+    path = tmp_path_factory.mktemp("chk") / "check.csv"
+    write_points(sample_checkpoints(scene, 25, seed=9), path)
+    return path
+
+
+@pytest.mark.slow  # ~30 s over the commands: one catalog run each
+@pytest.mark.parametrize("name", CATALOG_COMMANDS)
+def test_every_catalog_command_records_the_same_catalog_settings(name, tiles, tiles_check,
+                                                                 tmp_path):
+    """Regression (issue #26): each command recorded its own subset of the catalog settings
+    (the ones given, or None for the defaults); every one records the chunk size and buffer
+    the job ran with, the workers and the scheduler."""
+    import json
+
+    if name == "swaths":
+        pytest.importorskip("rasterio")
+    _, folder, _ = tiles
+    js = tmp_path / "r.json"
+    r = _cli(["-q", *_catalog_commands(folder, tiles_check, tmp_path)[name], "--workers", "1",
+              "--json", js])
+    assert r.exit_code == 0, r.output
+    params = json.loads(js.read_text())["parameters"]
+    got = {k: params.get(k, "missing") for k in ("chunk_size", "buffer", "workers", "scheduler")}
+    assert all(isinstance(got[k], float) for k in ("chunk_size", "buffer")), got
+    assert (got["workers"], got["scheduler"]) == (1, None), got
+
+
+@pytest.mark.parametrize("name", CATALOG_COMMANDS)
+def test_every_catalog_command_refuses_an_existing_json_alike(name, tiles, tiles_check, tmp_path):
+    """Regression (issue #26): ground on a catalog and swaths checked the --json path with the
+    library's message ("pass --overwrite (overwrite=True)"); every command says the same."""
+    _, folder, _ = tiles
+    js = tmp_path / "r.json"
+    js.write_text("{}")
+    r = _cli(["-q", *_catalog_commands(folder, tiles_check, tmp_path)[name], "--workers", "1",
+              "--json", js])
+    assert r.exit_code == 1, r.output
+    assert r.output.strip().endswith(f"output {js} exists; add --overwrite to replace it"), \
+        r.output
+    assert js.read_text() == "{}"

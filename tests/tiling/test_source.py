@@ -80,5 +80,36 @@ def test_the_sample_window_does_not_depend_on_the_tiling(scene_tiles):
 
 
 def test_selection_describes_itself():
-    assert Selection([6, 2], 706).describe() == "classes 2, 6, source ids 706"
+    assert Selection([6, 2], 706).describe() == "classes 2,6 and source ids 706"
+    assert Selection([6, 2], 706).label("a.laz") == "a.laz (classes 2,6 and source ids 706)"
+    assert Selection().describe() == "" and Selection().label("a.laz") == "a.laz"
     assert not Selection() and Selection(classes=[2])
+
+
+@pytest.mark.parametrize("command", ["planes", "lines", "report", "source"])
+def test_every_selection_is_worded_by_the_selection(command, scene_tiles, tmp_path):
+    """Regression (issue #26): the lines summary, the planes/edges/corners message, the
+    source's message and the report's labels each worded a selection their own way."""
+    from click.testing import CliRunner
+
+    from lidarqa.cli.main import cli
+    from lidarqa.report._context import selection_label
+
+    _, paths = scene_tiles
+    folder = paths[0].parent
+    sel = Selection(classes=[6], source_id=[999])
+    if command == "report":
+        assert selection_label("block", [6], 999) == sel.label("block")
+        return
+    if command == "source":
+        with pytest.raises(NothingToMeasureError) as err:
+            open_source(paths, classes=[6], source_id=[999]).read()
+        assert str(err.value).endswith(f"has no points with {sel.describe()}")
+        return
+    args = {"planes": ["planes", folder, "-o", tmp_path / "p.csv", "--source-id", "999"],
+            "lines": ["lines", folder, folder, "--test-source-id", "999"]}[command]
+    r = CliRunner().invoke(cli, ["-q", *map(str, args), "--classes", "6", "--workers", "1"])
+    assert r.exit_code == 1, r.output
+    said = {"planes": f"{folder}: 0 point(s) with {sel.describe()}; at least 3 are needed",
+            "lines": f"test {sel.label(str(folder))}: no edges found"}[command]
+    assert said in r.output, r.output

@@ -19,9 +19,9 @@ import click
 from ._common import Steps, echo, finish, settings
 
 __all__ = ["bad_lines", "catalog_engine", "catalog_options", "catalog_options_given",
-           "echo_run", "failed_exit", "finish_run", "job_options",
+           "catalog_settings", "echo_run", "failed_exit", "finish_run", "job_options",
            "open_catalog_source", "option_given", "pop_catalog_options", "reproducible_vectors",
-           "run_job", "run_summary", "sigterm_as_interrupt", "wants_catalog"]
+           "run_job", "run_settings", "run_summary", "sigterm_as_interrupt", "wants_catalog"]
 
 
 @contextlib.contextmanager
@@ -155,18 +155,38 @@ def run_job(job: Callable[..., Any], source: Any, cat_opts: dict[str, Any], on_c
         return job(source, *args, **kwargs, **(job_options(cat_opts, eng) if on_catalog else {}))
 
 
+def catalog_settings(cat_opts: dict[str, Any], chunk_size: float | None,
+                     buffer: float | None) -> dict[str, Any]:
+    """The catalog settings of a --json record, the same keys for every command.
+
+    `chunk_size` and `buffer` are the ones the job ran with (its default or the
+    user's), ``workers`` and ``scheduler`` the user's (None: the default).
+    """
+    return {"chunk_size": chunk_size, "buffer": buffer, "workers": cat_opts.get("workers"),
+            "scheduler": cat_opts.get("scheduler")}
+
+
+def run_settings(run: Any, cat_opts: dict[str, Any]) -> dict[str, Any]:
+    """:func:`catalog_settings` of a job's `run`: its chunk grid's side and buffer."""
+    c = run.chunks[0] if run.chunks else None
+    return catalog_settings(cat_opts, c.size if c else cat_opts.get("chunk_size"),
+                            (c.buffered[2] - c.core[2]) if c else cat_opts.get("buffer"))
+
+
 def finish_run(command: str, run: Any, on_catalog: bool, *, inputs: dict[str, Any],
                parameters: dict[str, Any], results: dict[str, Any],
-               record: bool = False) -> None:
+               cat_opts: dict[str, Any], record: bool = False) -> None:
     """Write the --json record of a job's `run` (None: no job); on a catalog its chunks too.
 
     On a catalog (or with `record`) the chunk counts are echoed first, the record gets
-    the run's summary (``results["catalog"]``) and a failed chunk fails the command
-    after the record.
+    the catalog settings the run used (:func:`run_settings`, in ``parameters``) and the
+    run's summary (``results["catalog"]``), and a failed chunk fails the command after
+    the record.
     """
     if run is not None and on_catalog:
         echo_run(run)
     if run is not None and (on_catalog or record):
+        parameters = {**parameters, **run_settings(run, cat_opts)}
         results["catalog"] = run_summary(run)
     finish(command, inputs=inputs, parameters=parameters, results=results)
     if run is not None:

@@ -270,10 +270,6 @@ def checkpoints(
     results = report.to_dict()
     results["warnings"] = notes + results["warnings"]
     results["units"] = "m"
-    catalog_params = {}
-    if on_catalog:
-        catalog_params = {k: cat_opts.get(k) for k in ("chunk_size", "buffer", "workers",
-                                                       "scheduler")}
     _summary(results, vertical)
     finish_run(
         "checkpoints",
@@ -294,9 +290,9 @@ def checkpoints(
             "checkpoint_rmse_v": checkpoint_rmse_v,
             "output": output,
             "crs": crs_name(crs_used),
-            **catalog_params,
         },
         results=results,
+        cat_opts=cat_opts,
     )
 
 

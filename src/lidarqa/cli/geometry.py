@@ -69,6 +69,7 @@ def _run(kind: str, paths: tuple[str, ...], output: str, classes: Any, source_id
     from ..io.crs import crs_name, require_metric_xy
     from ..io.vector import metric_lengths, write_points, write_segments
     from ..tiling.jobs_api import catalog_features
+    from ..tiling.source import Selection
 
     cat = pop_catalog_options(opts)
     on_catalog = wants_catalog(paths, cat)
@@ -83,11 +84,9 @@ def _run(kind: str, paths: tuple[str, ...], output: str, classes: Any, source_id
     extra: dict[str, Any] = run.extra  # the job's details
     f, s = run.value, extra["summary"]
     if s["n_points"] < 3:
-        what = [f"classes {','.join(map(str, classes))}"] if classes else []
-        what += [f"source ids {','.join(map(str, source_id))}"] if source_id else []
-        sel = (" with " + " and ".join(what)) if what else ""
-        raise InvalidPointsError(f"{source.label}: {s['n_points']} point(s){sel}; at least 3 "
-                                 "are needed")
+        what = Selection.of(classes, source_id).describe()
+        raise InvalidPointsError(f"{source.label}: {s['n_points']} point(s)"
+                                 + (f" with {what}" if what else "") + "; at least 3 are needed")
     with Steps()(f"Writing {output}"), reproducible_vectors():
         write = write_segments if kind == "edges" else write_points
         write(f, output, overwrite=settings().overwrite, layer=kind)
@@ -132,15 +131,11 @@ def _run(kind: str, paths: tuple[str, ...], output: str, classes: Any, source_id
                     "per_chunk": dict(sorted(per_chunk.items()))})
     echo(said + (f" ({', '.join(f'{k}: {v}' for k, v in left.items())})" if left else "")
          + f" -> {output}")
-    c = run.chunks[0] if run.chunks else None
-    finish_run(kind, run, on_catalog, record=True,
+    finish_run(kind, run, on_catalog, record=True, cat_opts=cat,
                inputs={"paths": list(paths), **({} if on_catalog else {"path": paths[0]}),
                        "classes": classes, "source_id": source_id,
                        "n_points_selected": s["n_points"], "crs": crs_name(source.crs)},
                parameters={**s["parameters"], **extra["segment_options"], **extra["options"],
-                           "chunk_size": c.size if c else None,
-                           "buffer": (c.buffered[2] - c.core[2]) if c else None,
-                           "workers": cat.get("workers"), "scheduler": cat.get("scheduler"),
                            "rule": "anchor-in-core (corner point, edge midpoint, plane centroid)"},
                results=results)
 
@@ -201,7 +196,6 @@ def edges(paths: tuple[str, ...], output: str, classes: list[int] | None,
     """
     from .._validate import check_positive, check_range
 
-    _check_suffix(output)
     if near_dist is not None:
         check_positive(near_dist, "--near-dist")
     check_range(min_angle, "--min-angle", 0.0, 90.0)
@@ -232,7 +226,6 @@ def corners(paths: tuple[str, ...], output: str, classes: list[int] | None,
     """
     from .._validate import check_positive, check_range
 
-    _check_suffix(output)
     check_range(min_det, "--min-det", 0.0, 1.0)
     check_range(min_angle, "--min-angle", 0.0, 90.0)
     check_positive(max_dist, "--max-dist")

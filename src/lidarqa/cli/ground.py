@@ -6,7 +6,13 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
-from ._catalog import catalog_options, open_catalog_source, sigterm_as_interrupt, wants_catalog
+from ._catalog import (
+    catalog_options,
+    catalog_settings,
+    open_catalog_source,
+    sigterm_as_interrupt,
+    wants_catalog,
+)
 from ._common import (
     INT_LIST,
     Steps,
@@ -213,11 +219,8 @@ def ground(
     if wants_catalog(paths, cat_opts):
         from ..tiling.ground import ground_catalog
 
+        prepare_outputs(inputs=tuple(paths))  # the --json path (OUTDIR: ground_catalog)
         s = settings()
-        if s.json_path:
-            from ..io import check_output
-
-            check_output(s.json_path, overwrite=s.overwrite)
         catalog = open_catalog_source(paths, cat_opts, crs=given_crs,
                                       z_to_metres=False).catalog
         with sigterm_as_interrupt():
@@ -245,10 +248,7 @@ def ground(
             inputs={"paths": list(paths), "output": output},
             parameters={
                 **{k: v for k, v in job.items() if k != "evaluate"},
-                "chunk_size": cres.chunk_size,
-                "buffer": cres.buffer,
-                "workers": cat_opts["workers"],
-                "scheduler": cat_opts["scheduler"],
+                **catalog_settings(cat_opts, cres.chunk_size, cres.buffer),
                 **cres.parameters.get("filter", {}),
                 **({"auto": cres.parameters["auto"]} if "auto" in cres.parameters else {}),
             },

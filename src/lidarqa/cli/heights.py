@@ -26,7 +26,6 @@ from ._catalog import (
     finish_run,
     job_options,
     open_catalog_source,
-    option_given,
     reproducible_vectors,
     wants_catalog,
 )
@@ -354,16 +353,13 @@ def heights(
             "reference points lie inside the cloud, in the same CRS?"
         )
     if output is not None:
-        from ..io.vector import write_points
-        with steps("Writing " + output), reproducible_vectors():
-            rows = _output_rows(
-                report.map_points, report.map_points.xy, report.reference_xyz,
-                {"model_height": report.tin.height, "model_sigma": report.tin.sigma,
-                 "dh": report.dh, "sigma_dh": report.sigma_dh, "w": report.w_values,
-                 "outlier": report.outlier, "inside": report.inside},
-                _ids(mp.ids, ref.ids), native or mp.crs or ref.crs,
-                (*_MAP_FIELDS, "radius", "distance", "failed", "reason"))
-            write_points(rows, output, overwrite=settings().overwrite, layer="heights")
+        _write_output(steps, output, _output_rows(
+            report.map_points, report.map_points.xy, report.reference_xyz,
+            {"model_height": report.tin.height, "model_sigma": report.tin.sigma,
+             "dh": report.dh, "sigma_dh": report.sigma_dh, "w": report.w_values,
+             "outlier": report.outlier, "inside": report.inside},
+            _ids(mp.ids, ref.ids), native or mp.crs or ref.crs,
+            (*_MAP_FIELDS, "radius", "distance", "failed", "reason")))
     res = report.to_dict()
     from ..report.analyses.heights import heights_tables
 
@@ -379,10 +375,16 @@ def heights(
         crs=crs,
         sigma_strip_source=sigma_strip_source,
     )
-    if on_catalog:
-        params.update({k: v for k, v in cat_opts.items() if option_given(v)})
-    finish_run("heights", run, on_catalog, parameters=params, results=res,
+    finish_run("heights", run, on_catalog, parameters=params, results=res, cat_opts=cat_opts,
                inputs={"cloud": cloud, "map": map_path, "reference": reference, "output": output})
+
+
+def _write_output(steps: Any, output: str, rows: Any) -> None:
+    """Write the --output of either path, the same bytes run to run (fixed GeoPackage time)."""
+    from ..io.vector import write_points
+
+    with steps("Writing " + output), reproducible_vectors():
+        write_points(rows, output, overwrite=settings().overwrite, layer="heights")
 
 
 def _is_polygon_map(path: str) -> bool:
@@ -427,16 +429,12 @@ def _heights_by_levels(
     rec, comp, ref_xyz = run.value, extra["comparison"], extra["reference_xyz"]
     mp = rec.map_points
     if output is not None:
-        from ..io.vector import write_points
-
-        rows = _output_rows(
+        _write_output(steps, output, _output_rows(
             mp, mp.xy_laser, ref_xyz,
             {"model_height": comp.height, "model_sigma": comp.sigma, "dh": comp.comparison.dh,
              "sigma_dh": comp.comparison.sigma_dh, "w": comp.w.w, "outlier": comp.w.outlier},
             _ids(np.arange(len(mp)), ref.ids), run.extra["crs"] or ref.crs,
-            (*_MAP_FIELDS, "failed", "reason"), road=np.concatenate([mp.road, comp.road]))
-        with steps("Writing " + output):
-            write_points(rows, output, overwrite=settings().overwrite, layer="heights")
+            (*_MAP_FIELDS, "failed", "reason"), road=np.concatenate([mp.road, comp.road])))
     res_roads = rec.to_dict()
     res = comp.to_dict()
     from ..report.analyses.heights import heights_tables

@@ -147,13 +147,14 @@ def lines(
     """
     from ..accuracy.lines import match_segments
     from ..accuracy.lines_io import read_pairs
+    from ..tiling.source import Selection
 
     given = input_crs(crs)
     inputs = tuple(x for x in (test, model, ground_truth) if x)
     prepare_outputs(matrix, pairs_out, inputs=inputs)
     steps = Steps()
-    test_label = test + _selection(classes, test_source_id)
-    model_label = model + _selection(classes, model_source_id)
+    test_label = Selection.of(classes, test_source_id).label(test)
+    model_label = Selection.of(classes, model_source_id).label(model)
     t = _side_segments("test", test, test_label, classes, test_source_id, given, steps, cat_opts)
     m = _side_segments("model", model, model_label, classes, model_source_id, given, steps,
                        cat_opts)
@@ -241,16 +242,6 @@ def _side_segments(side: str, path: str, label: str, classes: Any, source_id: An
     with steps(f"Reading {side} " + label) as progress:
         return heights_in_metres(load_segments(path, classes=classes, source_id=source_id,
                                                crs=given, progress=progress))
-
-
-def _selection(classes: list[int] | None, source_id: list[int] | None) -> str:
-    """`` [classes 6, source id 706]`` for the summary, or empty for the whole input."""
-    parts = []
-    if classes:
-        parts.append("classes " + ",".join(map(str, classes)))
-    if source_id:
-        parts.append("source id " + ",".join(map(str, source_id)))
-    return f" [{'; '.join(parts)}]" if parts else ""
 
 
 def _write_matrix(r: Any, path: Any) -> None:
@@ -413,10 +404,8 @@ def repeatability(
         finish_run("repeatability", run, True, inputs={"files": list(files)},
                parameters={"by_source_id": True, "source_id": source_id, "classes": classes,
                            **match_options, **extra["segment_options"],
-                           **extra["edge_options"],
-                           **{k: cat_opts.get(k) for k in ("chunk_size", "buffer", "workers",
-                                                           "scheduler")}},
-               results={"pairs": run.value, "strips": strips})
+                           **extra["edge_options"]},
+               results={"pairs": run.value, "strips": strips}, cat_opts=cat_opts)
         return
     if catalog_options_given(cat_opts):
         raise OptionError("catalog options apply to repeatability --by-source-id only")

@@ -17,12 +17,19 @@ from ._catalog import (
     catalog_options_given,
     finish_run,
     open_catalog_source,
-    option_given,
     pop_catalog_options,
     run_job,
     wants_catalog,
 )
-from ._common import Steps, classes_option, common_options, echo, echo_tables, settings
+from ._common import (
+    Steps,
+    classes_option,
+    common_options,
+    echo,
+    echo_tables,
+    prepare_outputs,
+    settings,
+)
 
 
 def _csv(rows: list[dict[str, Any]]) -> str:
@@ -130,7 +137,7 @@ def swaths(
     catalog option): the strips are then compared over the whole block, chunk by
     chunk, with the figures of one in-memory run.
     """
-    from .._atomic import atomic_path, check_output
+    from .._atomic import atomic_path
     from ..errors import InvalidPointsError, OutputExistsError, WriteError
     from ..io.crs import ensure_same_crs, parse_crs
     from ..io.raster import write_geotiff
@@ -150,8 +157,7 @@ def swaths(
     resolved = {os.path.realpath(f) for f in files}
     if os.path.realpath(out) in resolved:
         raise WriteError(f"output {out} is also an input")
-    if s.json_path:
-        check_output(s.json_path, overwrite=s.overwrite)
+    prepare_outputs(inputs=tuple(files))  # the --json path
     cat_opts = pop_catalog_options(cat)
     # several named files without catalog options: one strip per file, in memory (as before);
     # a folder, a glob, a .vpc or any catalog option: the whole block, chunk by chunk
@@ -258,9 +264,9 @@ def swaths(
             classes=classes,
             all_returns=all_returns,
             crs=crs_option,
-            **({k: v for k, v in cat_opts.items() if option_given(v)}),
         ),
         results=results,
+        cat_opts=cat_opts,
     )
 
 

@@ -316,12 +316,10 @@ def _freeze(value: Any) -> Any:
 
 
 def selection_label(cloud: str, classes: Any, source_id: Any) -> str:
-    parts = [cloud]
-    if source_id is not None:
-        parts.append("strip " + "+".join(str(s) for s in np.atleast_1d(source_id)))
-    if classes is not None:
-        parts.append("class " + "+".join(str(c) for c in np.atleast_1d(classes)))
-    return ", ".join(parts)
+    """The label of `cloud`'s points of `classes` and `source_id` (:meth:`Selection.label`)."""
+    from ..tiling.source import Selection
+
+    return Selection.of(classes, source_id).label(cloud)
 
 
 def write_vector(

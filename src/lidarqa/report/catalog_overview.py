@@ -136,8 +136,8 @@ def catalog_section(run: Any, *, title: str = "Catalog") -> dict[str, Any]:
     cat = run.catalog
     rows = run.chunk_status()
     status = {r["chunk"]: r["status"] for r in rows}
-    counts = {k: sum(1 for r in rows if r["status"] == k) for k in ("ok", "retried", "failed",
-                                                                   "skipped")}
+    summary = run.to_dict()  # the counts of the --json record (CatalogRun.to_dict)
+    counts = summary["chunk_status"]
     tiles = [(_stem(t.path), t.bounds) for t in cat.tiles]
     chunks = [(c.id, c.core) for c in run.chunks]
     strips = run.extra.get("strip_chunks") if isinstance(run.extra, dict) else None
@@ -153,13 +153,13 @@ def catalog_section(run: Any, *, title: str = "Catalog") -> dict[str, Any]:
                       note=(f"{len(cat.tiles) - 200} more tiles" if len(cat.tiles) > 200 else ""))
     bad = list(getattr(cat, "bad", ()) or ())
     notes = [f"skipped bad tile {p}: {why}" for p, why in bad]
-    if counts["failed"]:
-        notes.append(f"{counts['failed']} chunk(s) failed; their area is missing from the "
-                     "figures: " + ", ".join(r["chunk"] for r in rows if r["status"] == "failed"))
+    if summary["failed_chunks"]:
+        notes.append(f"{len(summary['failed_chunks'])} chunk(s) failed; their area is missing "
+                     "from the figures: " + ", ".join(summary["failed_chunks"]))
     results = {
-        "n_tiles": len(cat.tiles), "n_points": int(cat.n_points), "bounds": list(cat.bounds),
-        "n_chunks": len(run.chunks), "chunk_status": counts,
-        "failed_chunks": [r["chunk"] for r in rows if r["status"] == "failed"],
+        "n_tiles": summary["n_tiles"], "n_points": int(cat.n_points), "bounds": list(cat.bounds),
+        "n_chunks": summary["n_chunks"], "chunk_status": counts,
+        "failed_chunks": summary["failed_chunks"],
         "bad_tiles": [{"path": str(p), "reason": str(why)} for p, why in bad],
     }
     headline = (f"{len(cat.tiles)} tiles, {int(cat.n_points):,} points, {len(run.chunks)} chunks: "

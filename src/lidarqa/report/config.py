@@ -136,7 +136,7 @@ def load_config(
         The ``.toml`` file. Relative input paths are resolved against its folder.
     library_params : callable, optional
         ``(kind, options) -> {name: default}`` giving the library parameters an
-        analysis accepts; by default :func:`lidarqa.report.analyses.library_params`.
+        analysis accepts; by default :func:`lidarqa.report._registry.library_params`.
     check_crs : bool, default True
         Read the inputs' headers and refuse differing CRSs.
     skip_unavailable : bool, default False

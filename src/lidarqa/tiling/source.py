@@ -78,6 +78,11 @@ class Selection:
         object.__setattr__(self, "classes", _ints(self.classes, "classes"))
         object.__setattr__(self, "source_id", _ints(self.source_id, "source_id"))
 
+    @classmethod
+    def of(cls, classes: IntsInput = None, source_id: IntsInput = None) -> Selection:
+        """The selection of `classes` and `source_id` (each one int, ints or None: all)."""
+        return cls(_ints(classes, "classes"), _ints(source_id, "source_id"))
+
     def __bool__(self) -> bool:
         return self.classes is not None or self.source_id is not None
 
@@ -105,13 +110,19 @@ class Selection:
         return keep
 
     def describe(self) -> str:
-        """``"classes 2, 6, source ids 706"`` (empty when every point is kept)."""
-        parts = []
-        if self.classes is not None:
-            parts.append("classes " + ", ".join(map(str, self.classes)))
-        if self.source_id is not None:
-            parts.append("source ids " + ", ".join(map(str, self.source_id)))
-        return ", ".join(parts)
+        """``"classes 2,6 and source ids 706"`` (empty when every point is kept).
+
+        The one wording of a selection in messages, summaries and report labels.
+        """
+        parts = [f"{what} {','.join(map(str, ids))}"
+                 for what, ids in (("classes", self.classes), ("source ids", self.source_id))
+                 if ids is not None]
+        return " and ".join(parts)
+
+    def label(self, name: str) -> str:
+        """``"name (classes 6 and source ids 706)"``, or `name` when every point is kept."""
+        what = self.describe()
+        return f"{name} ({what})" if what else name
 
     def to_dict(self) -> dict[str, object]:
         """The selection as a JSON-ready dict (classes, source ids; None when all kept)."""
@@ -256,8 +267,7 @@ class Source:
 
     def select(self, *, classes: IntsInput = None, source_id: IntsInput = None) -> Source:
         """The same tiles with another selection (e.g. one side of a comparison)."""
-        return replace(self, selection=Selection(_ints(classes, "classes"),
-                                                  _ints(source_id, "source_id")))
+        return replace(self, selection=Selection.of(classes, source_id))
 
     def to_dict(self) -> dict[str, object]:
         """The source as a JSON-ready dict (paths, tile count, CRS, height factor, selection)."""
@@ -484,7 +494,7 @@ def open_source(
     from ..io.pointcloud import PointCloud
     from .catalog import Catalog, open_catalog
 
-    sel = Selection(_ints(classes, "classes"), _ints(source_id, "source_id"))
+    sel = Selection.of(classes, source_id)
     if isinstance(paths, Source):
         src = paths
         return replace(src, selection=sel) if sel else src

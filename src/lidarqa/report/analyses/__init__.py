@@ -7,9 +7,10 @@ default title, through :func:`~lidarqa.report._registry.register`. The
 function takes the run context (loaded inputs, output folder, progress) and
 the validated config item, calls the library, and returns the ``results``
 dict for ``report.json``, the figures and tables for the HTML page and the
-output files it wrote. :func:`library_params` tells the config validator
-which library keyword arguments an analysis accepts (by introspecting the
-library function), so the config uses the same names as the API and the CLI.
+output files it wrote. :func:`~lidarqa.report._registry.library_params` tells
+the config validator which library keyword arguments an analysis accepts (by
+introspecting the library function), so the config uses the same names as the
+API and the CLI.
 
 Adding an analysis: write ``report/analyses/<kind>.py`` (see ``info.py`` for
 the smallest one). Every module of this package is imported here, and the
@@ -21,17 +22,6 @@ from __future__ import annotations
 import importlib
 import pkgutil
 
-from .._context import (
-    ParamDefaults,
-    RunContext,
-    SectionResult,
-    dataclass_defaults,
-    keyword_defaults,
-    selection_label,
-    sha256_file,
-)
-from .._registry import _PARAMS, ANALYSES, library_params, register
-
 #: the analysis modules of this package (importing one registers it); modules
 #: whose name starts with "_" are helpers and are not imported here
 BUILTIN = tuple(
@@ -40,16 +30,4 @@ BUILTIN = tuple(
 for _name in BUILTIN:
     importlib.import_module(f"{__name__}.{_name}")
 
-__all__ = [
-    "SectionResult",
-    "RunContext",
-    "ANALYSES",
-    "register",
-    "library_params",
-    "keyword_defaults",
-    "dataclass_defaults",
-    "ParamDefaults",
-    "selection_label",
-    "sha256_file",
-    "_PARAMS",
-]
+__all__ = ["BUILTIN"]

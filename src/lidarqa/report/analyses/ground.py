@@ -294,8 +294,8 @@ def _run_on_catalog(ctx: RunContext, item: AnalysisItem) -> SectionResult:
                     + (" The classified tiles and a .vpc of them are in the outputs."
                        if opts["write_cloud"] else "")],
     )
-    chunks = tuple(SimpleNamespace(id=c["id"], core=tuple(c["core"])) for c in res.chunks)
-    status = [{"chunk": c["id"], "status": "ok", "attempts": 1, "error": None}
-              for c in res.chunks]
-    run = SimpleNamespace(catalog=cat, chunks=chunks, extra={}, chunk_status=lambda: status)
-    return with_overview(out, run, f"{name}: chunks")
+    from ...tiling.apply import CatalogRun
+
+    chunks: Any = tuple(SimpleNamespace(id=c["id"], core=tuple(c["core"])) for c in res.chunks)
+    done: Any = tuple(SimpleNamespace(chunk=c, ok=True, error=None, attempts=1) for c in chunks)
+    return with_overview(out, CatalogRun(None, cat, chunks, done), f"{name}: chunks")
