@@ -3,9 +3,11 @@
 A synthetic block of tiles is generated with ``lidarqa.testing.write_block`` (one
 seeded scene per tile: terrain, buildings, trees, returns) into a temporary folder,
 then ``lidarqa ground BLOCK -o OUT`` runs with 1 worker (serial, in process) and with
-2 workers (a Dask LocalCluster), and the CSF wheel (``cloth-simulation-filter``) runs
-tile by tile with PDAL's ``filters.csf`` defaults (cloth resolution 1.0, rigidness 3,
-time step 0.65, class threshold 0.5, slope smoothing on, 500 iterations).
+2 workers (this process and a Dask LocalCluster of one), and the CSF wheel
+(``cloth-simulation-filter``) runs tile by tile as PDAL's ``filters.csf`` runs it by
+default (last and single returns, noise left out, cloth resolution 1.0, rigidness 3,
+time step 0.65, class threshold 0.5, slope smoothing on, 500 iterations:
+``_peers.csf_ground``).
 
 Run:  /work/venv/bin/python benchmarks/catalog_scale.py                # 50 tiles x 2 M points
       /work/venv/bin/python benchmarks/catalog_scale.py --small        # 8 tiles x 250 k points
@@ -32,8 +34,6 @@ import tempfile
 import threading
 import time
 from pathlib import Path
-
-import numpy as np
 
 
 def _env() -> dict[str, str]:
@@ -156,9 +156,10 @@ class _quiet_stdout:
 
 
 def run_csf(paths: list) -> dict:
+    """The CSF wheel tile by tile at PDAL's ``filters.csf`` defaults (``_peers.csf_ground``)."""
     import resource
 
-    import CSF
+    from _peers import csf_ground
 
     import lidarqa
 
@@ -167,19 +168,8 @@ def run_csf(paths: list) -> dict:
     c0 = time.process_time()
     for path in paths:
         cloud = lidarqa.read(path)
-        csf = CSF.CSF()
-        csf.params.bSloopSmooth = True
-        csf.params.cloth_resolution = 1.0
-        csf.params.rigidness = 3
-        csf.params.time_step = 0.65
-        csf.params.class_threshold = 0.5
-        csf.params.interations = 500
-        csf.setPointCloud(cloud.xyz - cloud.xyz.min(axis=0))
-        g, ng = CSF.VecInt(), CSF.VecInt()
         with _quiet_stdout():
-            csf.do_filtering(g, ng, exportCloth=False)
-        ground = np.zeros(len(cloud), dtype=bool)
-        ground[np.asarray(g, dtype=np.int64)] = True
+            csf_ground(cloud)
         n += len(cloud)
     return {
         "wall_s": time.perf_counter() - t0,
