@@ -3,7 +3,7 @@
 A synthetic block of tiles is generated with ``lidarqa.testing.write_block`` (one
 seeded scene per tile: terrain, buildings, trees, returns) into a temporary folder,
 then ``lidarqa ground BLOCK -o OUT`` runs with 1 worker (serial, in process) and with
-2 workers (a Dask LocalCluster), and the CSF wheel
+2 workers (this process and a Dask LocalCluster of one), and the CSF wheel
 (``cloth-simulation-filter``) runs tile by tile as PDAL's ``filters.csf`` runs it by
 default (last and single returns, noise left out, cloth resolution 1.0, rigidness 3,
 time step 0.65, class threshold 0.5, slope smoothing on, 500 iterations:
@@ -14,10 +14,10 @@ Run:  /work/venv/bin/python benchmarks/catalog_scale.py                # 50 tile
       [--tiles N] [--points P] [--density D] [--workers 1,2] [--no-csf] [--keep DIR]
 
 Peak RSS is sampled (psutil, every 0.2 s) for every process of a run; "worker" is the
-largest peak of any process of the run: the CLI process (which runs the chunks when serial,
-and the automatic parameters' sample and a one-chunk job always) and the Dask workers.
-Targets (issue #12): peak RSS per worker <= 2 GB whatever the block size, 2-worker wall
-time <= 0.55 x the 1-worker time. Timings on a shared machine are noisy:
+largest peak of any single process doing chunk work: the CLI process (which runs chunks
+too: of N local workers it is one) and the Dask worker processes. Targets (issue #12):
+peak RSS per worker <= 2 GB whatever the block size, 2-worker wall time <= 0.55 x the
+1-worker time. Timings on a shared machine are noisy:
 the CPU column shows how much CPU the run actually got.
 """
 
@@ -124,7 +124,8 @@ def run_ground(block: Path, out: Path, workers: int, chunk_size: float | None) -
     res = json.loads(doc.read_text())["results"]
     peaks = dict(sampler.peaks)
     main = peaks.pop(p.pid, 0.0)
-    # the CLI process runs chunks when serial (and the sample always), the workers otherwise
+    # every process runs chunks: the CLI process (serial, or one of the local workers
+    # beside the Dask worker processes) and the worker processes
     worker_peak = max([main, *peaks.values()])
     return {
         "workers": workers,

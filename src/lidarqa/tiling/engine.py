@@ -7,9 +7,11 @@ assembled from the outcomes is the same for 1, 2 or N workers.
 
 Modes (``Engine(scheduler=...)``):
 
-- ``None`` (default): a ``dask.distributed.LocalCluster`` with ``workers`` processes
+- ``None`` (default): a ``dask.distributed.LocalCluster``: ``workers`` processes
   (default: one per CPU core), one thread each, each with a memory limit
-  (``memory_limit``, default: the machine's memory divided among the workers).
+  (``memory_limit``, default: the machine's memory divided among the workers). Of
+  two or more workers, this process is one: it starts on the first chunk while the
+  others start (it has imported everything and holds the tiles it sampled).
 - ``"serial"``: no Dask, every chunk in this process, one after the other (debugging,
   small jobs, or when Dask is not installed).
 - ``"tcp://host:port"``: connect to a running scheduler (``dask scheduler`` +
@@ -24,9 +26,11 @@ chunks are not affected. ``skip_failed=False`` (the default) then raises a
 
 from __future__ import annotations
 
+import contextlib
 import os
+import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from functools import partial
 from typing import TYPE_CHECKING, Any, Generic, TypeVar, cast
@@ -131,11 +135,40 @@ class Engine:
         self.memory_limit = memory_limit
         self.client: Any = None
         self.cluster: Any = None
+        self._starting = threading.Lock()
+        self._starter: threading.Thread | None = None
+        self._start_error: BaseException | None = None
 
     @property
     def serial(self) -> bool:
         """True when chunks run one after the other in this process."""
         return self.scheduler == "serial"
+
+    @property
+    def head_works(self) -> bool:
+        """True when this process is one of the workers (a LocalCluster of two or more).
+
+        Of N workers, N - 1 are processes of the LocalCluster and this process is the
+        N-th: it runs items as soon as a job starts, while the others import and load
+        their kernels. With ``workers=1`` the one worker is a process of its own.
+        """
+        return self.scheduler is None and self._n_local() >= 2
+
+    def _n_local(self) -> int:
+        return self.workers or (os.cpu_count() or 1)
+
+    @property
+    def n_workers(self) -> int:
+        """How many items run at once (1 when serial; this process counts when it works)."""
+        if self.serial:
+            return 1
+        if self.client is not None:
+            try:
+                n = len(self.client.scheduler_info().get("workers", {}))
+            except Exception:
+                n = 1
+            return max(n + int(self.head_works), 1)
+        return self._n_local()
 
     @property
     def dashboard_link(self) -> str | None:
@@ -148,20 +181,38 @@ class Engine:
             return None
         return link or None
 
-    @property
-    def n_workers(self) -> int:
-        """How many chunks run at once (1 when serial)."""
-        if self.serial:
-            return 1
-        if self.client is not None:
+    def start_soon(self) -> None:
+        """Start the LocalCluster in a thread, while this process goes on (when the head works).
+
+        For the serial work a job does before its chunks (reading a sample, choosing the
+        parameters): the worker processes import and start on the core this process
+        leaves idle. :meth:`start` waits for it; an error is raised there.
+        """
+        if not self.head_works or self.client is not None or self._starter is not None:
+            return
+
+        def start() -> None:
             try:
-                return max(len(self.client.scheduler_info().get("workers", {})), 1)
-            except Exception:
-                return 1
-        return self.workers or (os.cpu_count() or 1)
+                self.start()
+            except BaseException as exc:
+                self._start_error = exc
+
+        self._starter = threading.Thread(target=start, name="lidarqa-cluster-start", daemon=True)
+        self._starter.start()
 
     def start(self) -> Engine:
         """Start the dask cluster (nothing to do when serial or already started); returns self."""
+        starter = self._starter
+        if starter is not None and starter is not threading.current_thread():
+            starter.join()
+            self._starter = None
+            if self._start_error is not None:
+                error, self._start_error = self._start_error, None
+                raise error
+        with self._starting:
+            return self._start()
+
+    def _start(self) -> Engine:
         if self.serial or self.client is not None:
             return self
         distributed = _dask()
@@ -175,7 +226,7 @@ class Engine:
             return self
         import dask
 
-        n = self.workers or (os.cpu_count() or 1)
+        n = self._n_local() - 1 if self.head_works else self._n_local()
         with dask.config.set({
             "distributed.worker.daemon": False,
             # glibc's own allocation thresholds in the workers, as in a serial run. Dask's
@@ -205,6 +256,9 @@ class Engine:
 
     def close(self) -> None:
         """Shut the dask client and cluster down (when this engine started them)."""
+        if self._starter is not None:
+            self._starter.join()
+            self._starter = None
         if self.client is not None:
             try:
                 self.client.close()
@@ -325,6 +379,11 @@ class _Progress:
         self._p.start()
         self._task = self._p.add_task(description, total=total)
 
+    def link(self, link: str | None) -> None:
+        """Show the Dask dashboard's address once the cluster is up."""
+        if self._p is not None and link:
+            self._p.console.print(f"Dask dashboard: {link}")
+
     def advance(self) -> None:
         if self._p is not None:
             self._p.advance(self._task)
@@ -407,43 +466,44 @@ def run_chunks(
     own = engine is None
     engine = engine or Engine("serial")
     outcomes: dict[int, ChunkOutcome] = {}
+    attempts: dict[int, int] = {}
 
-    def record(i: int, oc: ChunkOutcome) -> None:
+    def settle(i: int, ok: bool, value: Any) -> bool:
+        attempts[i] = attempts.get(i, 0) + 1
+        if not ok and attempts[i] <= retries:
+            return True
+        oc = (
+            ChunkOutcome(chunks[i], True, value, None, attempts[i])
+            if ok
+            else ChunkOutcome(chunks[i], False, None, _error_text(value), attempts[i])
+        )
         if on_outcome is not None:
             on_outcome(oc)
         if not keep_results and oc.result is not None:
             oc = ChunkOutcome(oc.chunk, oc.ok, None, oc.error, oc.attempts, oc.skipped)
         outcomes[i] = oc
+        return False
 
-    here = engine.runs_here(len(chunks))
+    token = f"{os.getpid()}-{time.monotonic_ns()}"
+    cat_future: list[Any] = []  # the catalog, sent to every worker once
+
+    def submit(i: int) -> Any:
+        if not cat_future:
+            cat_future.append(engine.client.scatter(catalog, broadcast=True, hash=False))
+        return engine.client.submit(
+            runner,
+            cat_future[0],
+            chunks[i],
+            task,
+            key=f"lidarqa-chunk-{chunks[i].id}-{token}-{attempts.get(i, 0) + 1}",
+            pure=False,
+        )
+
     try:
-        if not here:
-            engine.start()
-        bar = _Progress(len(chunks), progress, description, engine.dashboard_link)
-        try:
-            if here:
-                for i in order:
-                    attempts = 0
-                    while True:
-                        attempts += 1
-                        try:
-                            res = runner(catalog, chunks[i], task)
-                        except (KeyboardInterrupt, SystemExit):
-                            raise
-                        except Exception as exc:
-                            if attempts <= retries:
-                                continue
-                            record(
-                                i, ChunkOutcome(chunks[i], False, None, _error_text(exc), attempts)
-                            )
-                            break
-                        record(i, ChunkOutcome(chunks[i], True, res, None, attempts))
-                        break
-                    bar.advance()
-            else:
-                _run_dask(engine, catalog, chunks, order, task, retries, record, bar, runner)
-        finally:
-            bar.close()
+        _drive(engine, order, lambda i: runner(catalog, chunks[i], task), submit, settle,
+               progress=progress, description=description)
+        if engine.client is not None and getattr(task, "tile_fields", None) is not None:
+            _free_worker_caches(engine.client)
     finally:
         if own:
             engine.close()
@@ -461,56 +521,156 @@ def run_chunks(
     return result
 
 
-def _run_dask(engine, catalog, chunks, order, task, retries, record, bar, runner=run_task) -> None:
-    distributed = _dask()
-    client = engine.client
-    cat_future = client.scatter(catalog, broadcast=True, hash=False)
-    token = f"{os.getpid()}-{time.monotonic_ns()}"
-    attempts: dict[int, int] = {}
-    fut_index: dict[Any, int] = {}
-
-    def submit(i: int) -> Any:
-        attempts[i] = attempts.get(i, 0) + 1
-        fut = client.submit(
-            runner,
-            cat_future,
-            chunks[i],
-            task,
-            key=f"lidarqa-chunk-{chunks[i].id}-{token}-{attempts[i]}",
-            pure=False,
-        )
-        fut_index[fut] = i
-        return fut
-
-    ac = distributed.as_completed([submit(i) for i in order])
+def _attempt(call: Callable[[int], Any], i: int) -> tuple[bool, Any]:
     try:
-        for fut in ac:
-            i = fut_index.pop(fut)
-            if fut.status == "finished":
-                try:
-                    res = fut.result()
-                except Exception as exc:  # lost while fetching
-                    err = _error_text(exc)
-                else:
-                    record(i, ChunkOutcome(chunks[i], True, res, None, attempts[i]))
-                    fut.release()
-                    bar.advance()
-                    continue
-            else:
-                fexc = fut.exception()
-                err = _error_text(fexc) if fexc is not None else fut.status
-            fut.release()
-            if attempts[i] <= retries:
-                ac.add(submit(i))
-                continue
-            record(i, ChunkOutcome(chunks[i], False, None, err, attempts[i]))
-            bar.advance()
-    except BaseException:
-        for fut in list(fut_index):
-            fut.cancel()
+        return True, call(i)
+    except (KeyboardInterrupt, SystemExit):
         raise
-    if getattr(task, "tile_fields", None) is not None:
-        _free_worker_caches(client)
+    except Exception as exc:
+        return False, exc
+
+
+def _landed(fut: Any) -> tuple[bool, Any]:
+    """A finished Dask future as ``(ok, result or exception)``."""
+    if fut.status == "finished":
+        try:
+            return True, fut.result()
+        except Exception as exc:  # lost while fetching
+            return False, exc
+    error = fut.exception() if fut.status == "error" else None
+    return False, error if error is not None else TilingError(f"the task was {fut.status}")
+
+
+def _drive(
+    engine: Engine,
+    order: Sequence[int],
+    call: Callable[[int], Any],
+    submit: Callable[[int], Any],
+    settle: Callable[[int, bool, Any], bool],
+    *,
+    progress: bool,
+    description: str,
+) -> None:
+    """Run every item of `order`: here, on the Dask workers, or both (the head works).
+
+    ``call(i)`` runs item i in this process; ``submit(i)`` sends it to the cluster and
+    returns its future; ``settle(i, ok, result_or_exception)`` records an attempt and
+    returns True when the item must run again (a retry). Items are taken in `order`.
+
+    When this process is one of the workers (:attr:`Engine.head_works`) the cluster
+    starts in a thread while this process already runs the first items, and each
+    worker process holds at most two items at a time (one when fewer remain): the
+    rest stay here, where whoever is free takes the next.
+    """
+    from collections import deque
+
+    pending = deque(order)
+    remaining = set(order)
+    bar = _Progress(len(remaining), progress, description, engine.dashboard_link)
+    cond = threading.Condition(threading.RLock())
+    flying: dict[Any, int] = {}
+    failed: list[BaseException] = []
+    window = [0]  # items the worker processes may hold (0 until the cluster is up)
+    here = engine.runs_here(len(remaining))
+    head = here or engine.head_works
+
+    def settled(i: int, ok: bool, value: Any) -> None:  # under `cond`
+        if settle(i, ok, value):
+            pending.appendleft(i)
+        else:
+            remaining.discard(i)
+            bar.advance()
+        cond.notify_all()
+
+    def room() -> int:
+        # a worker process holds a second item (queued behind its first, so that it never
+        # waits for this process to hand it one) only while every process can still get
+        # two: near the end an item queued on a worker would leave this process idle
+        n = window[0]
+        return n if not engine.head_works or len(pending) >= n + 2 else n // 2
+
+    def feed() -> None:
+        with cond:
+            while pending and not failed and len(flying) < room():
+                i = pending.popleft()
+                fut = submit(i)
+                flying[fut] = i
+                fut.add_done_callback(landed)  # run in Dask's callback thread
+
+    def landed(fut: Any) -> None:
+        try:
+            with cond:
+                i = flying.pop(fut, None)
+                if i is None:  # cancelled
+                    return
+                ok, value = _landed(fut)
+                fut.release()
+                settled(i, ok, value)
+            feed()
+        except BaseException as exc:
+            with cond:
+                failed.append(exc)
+                cond.notify_all()
+
+    def start() -> None:
+        try:
+            fresh = engine.client is None
+            engine.start()
+            if fresh:
+                bar.link(engine.dashboard_link)
+            with cond:
+                window[0] = 2 * (engine._n_local() - 1) if engine.head_works else len(order)
+            feed()
+        except BaseException as exc:
+            with cond:
+                failed.append(exc)
+                cond.notify_all()
+
+    starter = threading.Thread(target=start, name="lidarqa-cluster-start", daemon=True)
+    try:
+        if here:
+            pass
+        elif engine.head_works:
+            starter.start()
+        else:
+            start()
+        with _one_thread() if head and not here else contextlib.nullcontext():
+            while True:
+                with cond:
+                    while not failed and remaining and not (head and pending):
+                        cond.wait(0.5)
+                    if failed:
+                        raise failed[0]
+                    if not remaining:
+                        break
+                    i = pending.popleft()
+                ok, value = _attempt(call, i)
+                with cond:
+                    settled(i, ok, value)
+    except BaseException:
+        with cond:
+            for fut in list(flying):
+                fut.cancel()
+            flying.clear()
+        raise
+    finally:
+        if starter.is_alive():
+            starter.join()
+        bar.close()
+
+
+@contextlib.contextmanager
+def _one_thread() -> Iterator[None]:
+    """Compiled kernels run on one thread in this process, as in each worker process."""
+    import numba
+
+    before = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        yield
+    finally:
+        numba.set_num_threads(before)
+
 
 
 def _free_worker_caches(client: Any) -> None:
@@ -603,48 +763,24 @@ def run_tasks(
     own = engine is None
     engine = engine or Engine("serial")
     results: list[Any] = [None] * len(items)
-    here = engine.runs_here(len(items))
+    token = f"{os.getpid()}-{time.monotonic_ns()}"
+
+    def settle(i: int, ok: bool, value: Any) -> bool:
+        if not ok:
+            if isinstance(value, TilingError):
+                raise value
+            raise TilingError(f"{names[i]}: {_error_text(value)}") from value
+        results[i] = value
+        return False
+
+    def submit(i: int) -> Any:
+        return engine.client.submit(
+            func, *items[i], key=f"lidarqa-task-{i}-{token}", pure=False
+        )
+
     try:
-        if not here:
-            engine.start()
-        bar = _Progress(len(items), progress, description, engine.dashboard_link)
-        try:
-            if here:
-                for i, item in enumerate(items):
-                    try:
-                        results[i] = func(*item)
-                    except (KeyboardInterrupt, SystemExit, TilingError):
-                        raise
-                    except Exception as exc:
-                        raise TilingError(f"{names[i]}: {_error_text(exc)}") from exc
-                    bar.advance()
-            else:
-                distributed = _dask()
-                token = f"{os.getpid()}-{time.monotonic_ns()}"
-                futs = {
-                    engine.client.submit(
-                        func, *item, key=f"lidarqa-task-{i}-{token}", pure=False
-                    ): i
-                    for i, item in enumerate(items)
-                }
-                try:
-                    for fut in distributed.as_completed(list(futs)):
-                        i = futs[fut]
-                        if fut.status != "finished":
-                            fexc = fut.exception() if fut.status == "error" else None
-                            if isinstance(fexc, TilingError):
-                                raise fexc
-                            why = _error_text(fexc) if fexc is not None else fut.status
-                            raise TilingError(f"{names[i]}: {why}")
-                        results[i] = fut.result()
-                        fut.release()
-                        bar.advance()
-                except BaseException:
-                    for fut in futs:
-                        fut.cancel()
-                    raise
-        finally:
-            bar.close()
+        _drive(engine, range(len(items)), lambda i: func(*items[i]), submit, settle,
+               progress=progress, description=description)
     finally:
         if own:
             engine.close()

@@ -650,150 +650,155 @@ def ground_catalog(
             f"preset must be one of auto, {', '.join(PRESETS)}, got {preset!r}"
         )
     catalog = sources if isinstance(sources, Catalog) else open_catalog(sources, skip_bad=skip_bad)
-    full_params = dict(params)
-    sample = None
-    # the filter works in metres (classify_ground scales each chunk by its CRS): the
-    # sample it is measured on too, and its seed cell and buffer are laid in the tiles' units
-    from ..io.crs import metre_factors
-
-    fh, fv = metre_factors(catalog.crs)
-    in_metres = fh == 1.0 and fv == 1.0
-
-    def metric_sample() -> tuple[np.ndarray, dict[str, np.ndarray]]:
-        xyz, fields = _catalog_sample(
-            catalog,
-            last_returns_only=bool(last_returns_only),
-            exclude_classes=tuple(exclude_classes or ()),
-        )
-        return (xyz if in_metres else xyz * np.array([fh, fh, fv])), fields
-
-    auto = None
-    measures = None
-    if preset == "auto":
-        # measured once on a sample of whole tiles, then fixed for every chunk
-        sample = metric_sample()
-        chosen, measures, regime = catalog_auto_parameters(
-            catalog, method, sensor=sensor, sample=sample
-        )
-        auto = {"regime": regime, "measured": measures.to_dict(), "chosen": dict(chosen)}
-        full_params = with_given(chosen, full_params)
-        preset = None
-    # validate the parameters once, here, before any work
-    from ..ground import PTD, SegmentPTD
-
-    cls_type = SegmentPTD if method == "segment-ptd" else PTD
+    own = engine is None
+    if engine is None:  # made before anything is written: bad options fail here
+        serial = scheduler is None and workers == 1
+        engine = Engine("serial") if serial else Engine(scheduler, workers=workers)
+        w, h = (catalog.bounds[2] - catalog.bounds[0], catalog.bounds[3] - catalog.bounds[1])
+        if catalog.n_points > GROUND_TARGET_POINTS or max(w, h) > (chunk_size or np.inf):
+            # two chunks at least: the workers start while this process reads the sample
+            engine.start_soon()
     try:
-        filt = cls_type(**{**(PRESETS[preset][method] if preset else {}), **full_params})
-    except TypeError as exc:
-        raise OptionError(f"invalid parameter for method {method!r}: {exc}") from None
-    if buffer is None:
-        canopy = measures is not None and measures.multi_return_share >= CANOPY_MULTI_RETURN
-        buffer = ground_buffer(catalog, cell_size=float(filt.cell_size) / fh, canopy=bool(canopy))
-    if isinstance(filt, SegmentPTD):  # method segment-ptd
-        if sample is None and not in_metres:
-            sample = metric_sample()
-        # one surface-growing radius for the whole catalog, as one in-memory run would
-        # estimate it, instead of one per chunk (see catalog_grow_radius); the same for
-        # the terrain pass's radius, estimated on its own cells
-        def radius(density: float) -> float:
-            return catalog_grow_radius(
+        full_params = dict(params)
+        sample = None
+        # the filter works in metres (classify_ground scales each chunk by its CRS): the
+        # sample it is measured on too, its seed cell and buffer are laid in the tiles' units
+        from ..io.crs import metre_factors
+
+        fh, fv = metre_factors(catalog.crs)
+        in_metres = fh == 1.0 and fv == 1.0
+
+        def metric_sample() -> tuple[np.ndarray, dict[str, np.ndarray]]:
+            xyz, fields = _catalog_sample(
                 catalog,
                 last_returns_only=bool(last_returns_only),
                 exclude_classes=tuple(exclude_classes or ()),
-                factor=float(filt.grow_radius_factor),
-                sample=None if sample is None else sample[0],
-                filter_density=density,
             )
+            return (xyz if in_metres else xyz * np.array([fh, fh, fv])), fields
 
-        terrain = 0 < filt.terrain_density < filt.filter_density
-        if (terrain and filt.terrain_grow_radius is None and filt.grow_radius is None):
-            full_params["terrain_grow_radius"] = radius(float(filt.terrain_density))
-        if filt.grow_radius is None:
-            full_params["grow_radius"] = radius(float(filt.filter_density))
-    # Seed cells are laid from the south-west corner of the filter's input: snap every
-    # buffered box to the seed grid of the whole catalog (see make_chunks).
-    bx, by = catalog.bounds[:2]
-    if origin is None:
-        origin = (0.0, 0.0)
-        if chunk_size is None:
-            chunk_size, origin = _ground_grid(
-                catalog, buffer=float(buffer), cell=float(filt.cell_size) / fh
+        auto = None
+        measures = None
+        if preset == "auto":
+            # measured once on a sample of whole tiles, then fixed for every chunk
+            sample = metric_sample()
+            chosen, measures, regime = catalog_auto_parameters(
+                catalog, method, sensor=sensor, sample=sample
             )
-    chunks = make_chunks(
-        catalog,
-        chunk_size=chunk_size,
-        buffer=buffer,
-        origin=origin,
-        snap=(bx, by, float(filt.cell_size) / fh),
-        target_points=GROUND_TARGET_POINTS,
-    )
-    if not chunks:
-        raise TilingError("the catalog holds no point")
-    task = GroundTask(
-        method=method,
-        last_returns_only=bool(last_returns_only),
-        exclude_classes=tuple(int(c) for c in (exclude_classes or ())),
-        preset=preset,
-        params=tuple(sorted(full_params.items())),
-        evaluate=bool(evaluate),
-        ignore_classes=tuple(int(c) for c in (ignore_classes or ())),
-    )
-    out_dir = Path(output_dir)
-    if out_dir.exists() and not out_dir.is_dir():
-        raise OptionError(f"output {out_dir} exists and is not a folder")
-    outputs = _output_names(catalog, out_dir)
-    inputs = {str(Path(t.path).resolve()) for t in catalog.tiles}
-    for o in outputs:
-        if str(o.resolve()) in inputs:
-            raise OptionError(f"output {o} is also an input; lidarqa never modifies its inputs")
-    vpc_path = out_dir / (vpc_name or f"{out_dir.resolve().name or 'ground'}.vpc")
-    existing = [o for o in [*outputs, vpc_path] if o.exists()]
-    if existing and not (overwrite or resume):
-        raise OutputExistsError(
-            f"output {existing[0]} exists"
-            + (f" (and {len(existing) - 1} more)" if len(existing) > 1 else "")
-            + "; pass --overwrite (overwrite=True) to replace, or --resume to finish a run"
-        )
-    own = engine is None
-    if engine is None:  # made (not started) before anything is written: bad options fail here
-        # one chunk (a catalog that fits one) gains nothing from a cluster but its start-up
-        serial = scheduler is None and (workers == 1 or (workers is None and len(chunks) == 1))
-        engine = Engine("serial") if serial else Engine(scheduler, workers=workers)
-    made_dir = not out_dir.exists()
-    out_dir.mkdir(parents=True, exist_ok=True)
-    work = out_dir / WORK_DIR
-    fp = _fingerprint(catalog, chunks, task)
-    fp_text = json.dumps(fp, sort_keys=True)
-    done: dict[str, ChunkGround] = {}
-    if work.exists():
-        same = False
+            auto = {"regime": regime, "measured": measures.to_dict(), "chosen": dict(chosen)}
+            full_params = with_given(chosen, full_params)
+            preset = None
+        # validate the parameters once, here, before any work
+        from ..ground import PTD, SegmentPTD
+
+        cls_type = SegmentPTD if method == "segment-ptd" else PTD
         try:
-            same = (work / "run.json").read_text(encoding="utf-8") == fp_text
-        except OSError:
-            same = False
-        if resume and same:
-            for c in chunks:
-                r = _load_chunk(work, c.id)
-                if r is not None:
-                    done[c.id] = r
-        else:
-            if resume and not same:
-                warnings.warn(
-                    "the work folder is from a run with other settings; starting over",
-                    stacklevel=2,
+            filt = cls_type(**{**(PRESETS[preset][method] if preset else {}), **full_params})
+        except TypeError as exc:
+            raise OptionError(f"invalid parameter for method {method!r}: {exc}") from None
+        if buffer is None:
+            canopy = measures is not None and measures.multi_return_share >= CANOPY_MULTI_RETURN
+            buffer = ground_buffer(
+                catalog, cell_size=float(filt.cell_size) / fh, canopy=bool(canopy)
+            )
+        if isinstance(filt, SegmentPTD):  # method segment-ptd
+            if sample is None and not in_metres:
+                sample = metric_sample()
+            # one surface-growing radius for the whole catalog, as one in-memory run would
+            # estimate it, instead of one per chunk (see catalog_grow_radius); the same for
+            # the terrain pass's radius, estimated on its own cells
+            def radius(density: float) -> float:
+                return catalog_grow_radius(
+                    catalog,
+                    last_returns_only=bool(last_returns_only),
+                    exclude_classes=tuple(exclude_classes or ()),
+                    factor=float(filt.grow_radius_factor),
+                    sample=None if sample is None else sample[0],
+                    filter_density=density,
                 )
-            shutil.rmtree(work)
-    work.mkdir(exist_ok=True)
-    (work / "run.json").write_text(fp_text, encoding="utf-8")
-    todo = [c for c in chunks if c.id not in done]
-    messages: set[str] = set()
 
-    def save(oc: Any) -> None:
-        if oc.ok:
-            _save_chunk(work, oc.result)
-            messages.update(oc.result.warnings)
+            terrain = 0 < filt.terrain_density < filt.filter_density
+            if (terrain and filt.terrain_grow_radius is None and filt.grow_radius is None):
+                full_params["terrain_grow_radius"] = radius(float(filt.terrain_density))
+            if filt.grow_radius is None:
+                full_params["grow_radius"] = radius(float(filt.filter_density))
+        # Seed cells are laid from the south-west corner of the filter's input: snap every
+        # buffered box to the seed grid of the whole catalog (see make_chunks).
+        bx, by = catalog.bounds[:2]
+        if origin is None:
+            origin = (0.0, 0.0)
+            if chunk_size is None:
+                chunk_size, origin = _ground_grid(
+                    catalog, buffer=float(buffer), cell=float(filt.cell_size) / fh
+                )
+        chunks = make_chunks(
+            catalog,
+            chunk_size=chunk_size,
+            buffer=buffer,
+            origin=origin,
+            snap=(bx, by, float(filt.cell_size) / fh),
+            target_points=GROUND_TARGET_POINTS,
+        )
+        if not chunks:
+            raise TilingError("the catalog holds no point")
+        task = GroundTask(
+            method=method,
+            last_returns_only=bool(last_returns_only),
+            exclude_classes=tuple(int(c) for c in (exclude_classes or ())),
+            preset=preset,
+            params=tuple(sorted(full_params.items())),
+            evaluate=bool(evaluate),
+            ignore_classes=tuple(int(c) for c in (ignore_classes or ())),
+        )
+        out_dir = Path(output_dir)
+        if out_dir.exists() and not out_dir.is_dir():
+            raise OptionError(f"output {out_dir} exists and is not a folder")
+        outputs = _output_names(catalog, out_dir)
+        inputs = {str(Path(t.path).resolve()) for t in catalog.tiles}
+        for o in outputs:
+            if str(o.resolve()) in inputs:
+                raise OptionError(f"output {o} is also an input; lidarqa never modifies its inputs")
+        vpc_path = out_dir / (vpc_name or f"{out_dir.resolve().name or 'ground'}.vpc")
+        existing = [o for o in [*outputs, vpc_path] if o.exists()]
+        if existing and not (overwrite or resume):
+            raise OutputExistsError(
+                f"output {existing[0]} exists"
+                + (f" (and {len(existing) - 1} more)" if len(existing) > 1 else "")
+                + "; pass --overwrite (overwrite=True) to replace, or --resume to finish a run"
+            )
+        made_dir = not out_dir.exists()
+        out_dir.mkdir(parents=True, exist_ok=True)
+        work = out_dir / WORK_DIR
+        fp = _fingerprint(catalog, chunks, task)
+        fp_text = json.dumps(fp, sort_keys=True)
+        done: dict[str, ChunkGround] = {}
+        if work.exists():
+            same = False
+            try:
+                same = (work / "run.json").read_text(encoding="utf-8") == fp_text
+            except OSError:
+                same = False
+            if resume and same:
+                for c in chunks:
+                    r = _load_chunk(work, c.id)
+                    if r is not None:
+                        done[c.id] = r
+            else:
+                if resume and not same:
+                    warnings.warn(
+                        "the work folder is from a run with other settings; starting over",
+                        stacklevel=2,
+                    )
+                shutil.rmtree(work)
+        work.mkdir(exist_ok=True)
+        (work / "run.json").write_text(fp_text, encoding="utf-8")
+        todo = [c for c in chunks if c.id not in done]
+        messages: set[str] = set()
 
-    try:
+        def save(oc: Any) -> None:
+            if oc.ok:
+                _save_chunk(work, oc.result)
+                messages.update(oc.result.warnings)
+
         try:
             outcomes = run_chunks(
                 catalog,
