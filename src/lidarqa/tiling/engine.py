@@ -570,7 +570,7 @@ def _drive(
     cond = threading.Condition(threading.RLock())
     flying: dict[Any, int] = {}
     failed: list[BaseException] = []
-    window = [0]  # items the worker processes may hold (0 until the cluster is up)
+    window = 0  # items the worker processes may hold (0 until the cluster is up)
     here = engine.runs_here(len(remaining))
     head = here or engine.head_works
 
@@ -586,7 +586,7 @@ def _drive(
         # a worker process holds a second item (queued behind its first, so that it never
         # waits for this process to hand it one) only while every process can still get
         # two: near the end an item queued on a worker would leave this process idle
-        n = window[0]
+        n = window
         return n if not engine.head_works or len(pending) >= n + 2 else n // 2
 
     def feed() -> None:
@@ -613,13 +613,14 @@ def _drive(
                 cond.notify_all()
 
     def start() -> None:
+        nonlocal window
         try:
             fresh = engine.client is None
             engine.start()
             if fresh:
                 bar.link(engine.dashboard_link)
             with cond:
-                window[0] = 2 * (engine._n_local() - 1) if engine.head_works else len(order)
+                window = 2 * (engine._n_local() - 1) if engine.head_works else len(order)
             feed()
         except BaseException as exc:
             with cond:
@@ -628,11 +629,9 @@ def _drive(
 
     starter = threading.Thread(target=start, name="lidarqa-cluster-start", daemon=True)
     try:
-        if here:
-            pass
-        elif engine.head_works:
-            starter.start()
-        else:
+        if engine.head_works and not here:
+            starter.start()  # this process works meanwhile
+        elif not here:
             start()
         with _one_thread() if head and not here else contextlib.nullcontext():
             while True:
