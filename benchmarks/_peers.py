@@ -2,7 +2,26 @@
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
+
+
+def timed_env(**extra: str) -> dict[str, str]:
+    """The environment of a timed process: this one's, with Python's bytecode caches.
+
+    ``PYTHONPYCACHEPREFIX`` (set in development to keep the checkout free of
+    ``__pycache__``) makes Python look for every module's bytecode under that prefix,
+    the standard library's and the installed packages' included. Where nothing is
+    written there (``PYTHONDONTWRITEBYTECODE``), each process compiles all of them from
+    source again: importing lidarqa's filter took 2.1 s instead of 0.7 s on the 2-core
+    machine, and every Dask worker process paid it too. A user's installed packages have
+    their bytecode, so the timed processes run without the prefix. `extra` variables are
+    set on top.
+    """
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPYCACHEPREFIX"}
+    env.update(extra)
+    return env
 
 
 def csf_ground(cloud, *, cloth: float = 1.0, smooth: bool = True) -> np.ndarray:

@@ -39,7 +39,9 @@ from pathlib import Path
 
 
 def _env() -> dict[str, str]:
-    env = dict(os.environ)
+    from _peers import timed_env
+
+    env = timed_env()
     src = str(Path(__file__).resolve().parents[1] / "src")
     env["PYTHONPATH"] = os.pathsep.join(p for p in (src, env.get("PYTHONPATH")) if p)
     return env

@@ -126,6 +126,8 @@ def make_2m(path: Path) -> None:
 
 
 def main() -> None:
+    from _peers import timed_env
+
     ap = argparse.ArgumentParser()
     ap.add_argument("--one", nargs=4, metavar=("METHOD", "SRC", "OUT", "CLOTH"))
     ap.add_argument("--methods", default="segment-ptd,csf,csf05")
@@ -169,7 +171,7 @@ def main() -> None:
                     [sys.executable, __file__, "--one", m, src, str(out), str(cloth)],
                     capture_output=True,
                     text=True,
-                    env=os.environ.copy(),
+                    env=timed_env(),
                 )
                 if p.returncode != 0:
                     print(f"{name:<22}{m:<16} FAILED: {p.stderr.strip().splitlines()[-1:]}")

@@ -10,7 +10,6 @@ library per process, as in ``benchmarks/catalog_scale.py``.
 
 from __future__ import annotations
 
-import os
 import subprocess
 import sys
 import time
@@ -20,7 +19,9 @@ import psutil
 
 def main() -> None:
     block, out, workers, *extra = sys.argv[1:]
-    env = dict(os.environ)
+    from _peers import timed_env
+
+    env = timed_env()
     for var in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS",
                 "RAYON_NUM_THREADS"):
         env[var] = "1"
