@@ -78,6 +78,21 @@ def test_overview_map_shows_the_status_colours():
     assert not _has_colour(clean, STATUS_COLOURS["retried"])
 
 
+def test_overview_map_gives_resumed_chunks_their_own_style_and_legend(monkeypatch):
+    """Regression (issue #26): a resumed chunk was drawn white, as a chunk not run, unlisted."""
+    import lidarqa.report.plots as plots
+
+    figures, png_of = [], plots._png
+    monkeypatch.setattr(plots, "_png", lambda fig: figures.append(fig) or png_of(fig))
+    run = _fake_run(failed=(), retried=(), resumed=("c0002_r0000", "c0003_r0000"))
+    png = catalog_section(run)["figures"][0].png
+    assert _has_colour(png, STATUS_COLOURS["resumed"])
+    assert STATUS_COLOURS["resumed"] not in (STATUS_COLOURS[s] for s in STATUS_COLOURS
+                                             if s != "resumed")
+    legend = [t.get_text() for t in figures[0].axes[0].get_legend().get_texts()]
+    assert legend[:2] == ["chunk ok", "chunk resumed (from an earlier run)"]
+
+
 def test_overview_map_draws_strips():
     tiles = [("t", (0.0, 0.0, 100.0, 100.0))]
     chunks = [(f"c{i}", (i * 50.0, 0.0, i * 50.0 + 50, 50.0)) for i in range(2)]

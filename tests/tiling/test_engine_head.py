@@ -2,13 +2,18 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
+import signal
+import sys
+import time
 
 import pytest
 
 from lidarqa.errors import TilingError
 from lidarqa.testing.tasks import fails_at, pid_after
-from lidarqa.tiling.engine import Engine, run_tasks
+from lidarqa.tiling import open_catalog
+from lidarqa.tiling.engine import Engine, run_tasks, run_tiles
 
 pytest.importorskip("distributed")
 
@@ -45,3 +50,63 @@ def test_a_failure_here_or_there_names_its_item():
     names = [f"tile{i}" for i in range(8)]
     with Engine(workers=2) as eng, pytest.raises(TilingError, match="tile4: ValueError: item 4"):
         run_tasks(fails_at, items, engine=eng, names=names)
+
+
+# --- a task whose code the workers cannot import ---------------------------------------
+
+
+def _here_only(i, seconds=0.5):
+    """A task of this module, which the Dask workers cannot import (see `unloadable`)."""
+    time.sleep(seconds)
+    return i
+
+
+@pytest.fixture
+def unloadable(monkeypatch):
+    """`_here_only` as a function of a module only this process has.
+
+    Under the ``pytest`` command the workers cannot import this test module anyway; under
+    ``python -m pytest`` the working directory (and so ``tests``) is on their path too: the
+    task names a module that no worker has, whatever ran the tests.
+    """
+    monkeypatch.setitem(sys.modules, "lidarqa_tests_only", sys.modules[__name__])
+    monkeypatch.setattr(_here_only, "__module__", "lidarqa_tests_only")
+    return _here_only
+
+
+@contextlib.contextmanager
+def _deadline(seconds: int):
+    """Fail (instead of hanging the test run) when the block is still running after `seconds`."""
+
+    def expired(*_):
+        pytest.fail(f"still running after {seconds} s: the job hangs")
+
+    before = signal.signal(signal.SIGALRM, expired)
+    signal.alarm(seconds)
+    try:
+        yield
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, before)
+
+
+def test_a_task_the_workers_cannot_load_fails_the_job_naming_the_item(unloadable):
+    names = [f"tile{i}" for i in range(8)]
+    with _deadline(60), Engine(workers=2) as eng:
+        eng.start()  # the worker process is up: it surely gets items while this one works
+        t0 = time.monotonic()
+        with pytest.raises(TilingError, match=r"tile\d: a Dask worker cannot load the task "
+                           r"\(ModuleNotFoundError: No module named 'lidarqa_tests_only'\)"):
+            run_tasks(unloadable, [(i,) for i in range(8)], engine=eng, names=names)
+        # at once: this process had not worked through the items before the job failed
+        assert time.monotonic() - t0 < 8 * 0.5
+
+
+def test_a_chunk_task_the_workers_cannot_load_fails_the_job(scene_tiles, unloadable):
+    _, paths = scene_tiles
+    catalog = open_catalog([str(p) for p in paths])
+    with _deadline(60), Engine(workers=2) as eng:
+        eng.start()
+        # run_tiles keeps going past a tile that fails; one the workers cannot load is fatal
+        with pytest.raises(TilingError, match=r"\.laz: a Dask worker cannot load the task"):
+            run_tiles(catalog, unloadable, engine=eng, progress=False)

@@ -8,6 +8,7 @@ from typing import Any
 
 import click
 import numpy as np
+from click.core import ParameterSource
 
 from ..accuracy.heights import (
     CURVATURE,
@@ -279,7 +280,10 @@ def heights(
     (as by ``lidarqa roads``): each polygon gets the laser points of its own
     height level, and each reference point is tested against the level it
     lies on, so a point on a road under a bridge is not compared with the deck
-    (--correlation, --eq8, --posterior and --largest-segment apply to point maps).
+    (--correlation, --eq8, --posterior and --largest-segment apply to point maps
+    only; the roads are reconstructed in one piece, in this process:
+    --chunk-size, --buffer, --workers, --scheduler and --resume serve
+    --sigma-strip auto only).
 
     CLOUD may be a catalog (a folder, a glob, a .vpc): each map point is
     fitted, and each reference point interpolated, in the chunk whose core
@@ -294,6 +298,15 @@ def heights(
     if output is not None and Path(output).suffix.lower() not in OUT_SUFFIXES:
         raise OptionError(f"--output must end in {', '.join(OUT_SUFFIXES)}; got {output!r}")
     given = input_crs(crs)
+    polygons = _is_polygon_map(map_path)
+    source_of = click.get_current_context().get_parameter_source
+    point_only = [o for o, on in (
+        ("--correlation", source_of("correlation") not in (None, ParameterSource.DEFAULT)),
+        ("--eq8", eq8_diagonal), ("--posterior", posterior),
+        ("--largest-segment", largest_segment)) if on and polygons]
+    if point_only:
+        raise OptionError(f"{', '.join(point_only)}: for a point MAP only ({map_path} holds road "
+                          "polygons)")
     prepare_outputs(output, inputs=(cloud, map_path, reference))
     steps = Steps()
     # one job for a file (one region: the in-memory run) and a catalog; heights in metres
@@ -317,11 +330,12 @@ def heights(
             sigma_strip=sigma_strip, sigma_ref=sigma_ref, curvature=curvature, alpha=alpha,
             estimate_offset=estimate_offset,
         )
-        if _is_polygon_map(map_path):
+        if polygons:  # the catalog options served the E4 job, if any; else the roads take them
             return _heights_by_levels(
                 steps, source.select(classes=classes, source_id=source_id), cloud, map_path,
                 _read_reference(reference, given), reference, output, classes=classes,
-                source_id=source_id, spacing=spacing, **common,
+                source_id=source_id, spacing=spacing,
+                run_opts=run_opts if sigma_strip_source == "given" else {}, **common,
             )  # fmt: skip
         with steps("Reading map and reference points"):
             mp = read_map_points(map_path, spacing=spacing, crs=given)
@@ -414,9 +428,13 @@ def _heights_by_levels(
     alpha: float,
     sigma_ref: float,
     estimate_offset: bool,
+    run_opts: dict[str, Any],
     **opts: Any,
 ) -> None:
-    """``lidarqa heights`` with road polygons: test each reference point on its own level."""
+    """``lidarqa heights`` with road polygons: test each reference point on its own level.
+
+    `run_opts` are the catalog options (the roads job refuses those it cannot honour).
+    """
     from ..tiling.jobs_api import catalog_roads
 
     with steps(f"Reconstructing the roads of {map_path} from {cloud}, testing "
@@ -424,7 +442,7 @@ def _heights_by_levels(
         run = catalog_roads(source, map_path, reference=ref, classes=classes,
                             source_id=source_id, options=dict(opts, spacing=spacing),
                             compare_options=dict(sigma_ref=sigma_ref, alpha=alpha,
-                                                 estimate_offset=estimate_offset))
+                                                 estimate_offset=estimate_offset), **run_opts)
     extra: dict[str, Any] = run.extra
     rec, comp, ref_xyz = run.value, extra["comparison"], extra["reference_xyz"]
     mp = rec.map_points

@@ -5,7 +5,7 @@ with the catalog, the chunks and each chunk's outcome. This module turns that
 into what a reader of the report needs to trust the figures:
 
 * an overview map (top view): the tiles as outlines with their names, the
-  chunk grid coloured by status (ok, retried, failed, skipped) and, when the
+  chunk grid coloured by status (ok, retried, failed, skipped, resumed) and, when the
   job knows them, the flight strips as the outline of the chunks where each
   strip was found;
 * a per-chunk status table (failed and retried chunks first, with the error),
@@ -33,6 +33,7 @@ STATUS_COLOURS = {
     "retried": "#ffcc80",
     "failed": "#ef5350",
     "skipped": "#e0e0e0",
+    "resumed": "#a9bcd0",  # kept from an earlier run (--resume); hatched as well
     "not run": "#ffffff",
 }
 _STRIP_COLOURS = ["#1f77b4", "#9467bd", "#17becf", "#bcbd22", "#e377c2", "#8c564b", "#7f7f7f"]
@@ -59,7 +60,7 @@ def plot_catalog_overview(
     tiles : sequence of (name, (xmin, ymin, xmax, ymax, ...))
         Tile names and header bounds.
     chunks : sequence of (chunk id, core (xmin, ymin, xmax, ymax))
-    status : mapping chunk id -> "ok" | "retried" | "failed" | "skipped"
+    status : mapping chunk id -> "ok" | "retried" | "failed" | "skipped" | "resumed"
         Chunks absent from it are drawn as "not run".
     strips : mapping strip id -> chunk ids, optional
         Where each flight strip was found; drawn as the outline of those chunks.
@@ -80,7 +81,7 @@ def plot_catalog_overview(
         st = status.get(cid, "not run")
         ax.add_patch(Rectangle((c[0] - x0, c[1] - y0), c[2] - c[0], c[3] - c[1],
                                facecolor=STATUS_COLOURS.get(st, "#ffffff"), edgecolor="#9e9e9e",
-                               linewidth=0.5, zorder=1))
+                               hatch="//" if st == "resumed" else None, linewidth=0.5, zorder=1))
         if st in ("failed", "retried") and len(chunks) <= 400:
             ax.text(0.5 * (c[0] + c[2]) - x0, 0.5 * (c[1] + c[3]) - y0, cid, ha="center",
                     va="center", fontsize=6, zorder=4)
@@ -90,8 +91,10 @@ def plot_catalog_overview(
         if len(tiles) <= 60:
             ax.text(b[0] - x0 + 0.02 * (b[2] - b[0]), b[3] - y0 - 0.02 * (b[3] - b[1]), name,
                     ha="left", va="top", fontsize=6, color="#212121", zorder=4)
-    handles = [Patch(facecolor=STATUS_COLOURS[s], edgecolor="#9e9e9e", label=f"chunk {s}")
-               for s in ("ok", "retried", "failed", "skipped")
+    handles = [Patch(facecolor=STATUS_COLOURS[s], edgecolor="#9e9e9e",
+                     hatch="//" if s == "resumed" else None,
+                     label=f"chunk {s}" + (" (from an earlier run)" if s == "resumed" else ""))
+               for s in ("ok", "retried", "failed", "skipped", "resumed")
                if s in set(status.values())]
     handles.append(Patch(fill=False, edgecolor="#212121", label="tile"))
     for k, (sid, ids) in enumerate(sorted((strips or {}).items(), key=lambda kv: str(kv[0]))):

@@ -1,7 +1,7 @@
 """Tiny picklable tasks for tests of the engine (they travel to Dask workers by reference).
 
-A function defined in a test module would travel by reference to a module the workers
-cannot import (the tests are not installed): the worker fails to read the task.
+A function defined in a test module travels by reference to a module the workers cannot
+import (the tests are not installed): the worker cannot load the task and the job fails.
 """
 
 from __future__ import annotations

@@ -22,6 +22,12 @@ A chunk that raises is retried ``retries`` times (a worker lost mid-chunk counts
 one failure); when it still fails its outcome says so, with the error, and the other
 chunks are not affected. ``skip_failed=False`` (the default) then raises a
 :class:`ChunkFailedError` naming the failed chunks once every chunk has finished.
+
+A task travels to a Dask worker pickled, and the worker loads it as the first step of
+running it: a worker that cannot load it (its code is not importable there) fails the
+job at once with a :class:`TilingError` naming the item. (Dask itself would load the
+task while reading the scheduler's message: the worker then loses its connection and
+the task is neither run nor failed, so the job waits forever.)
 """
 
 from __future__ import annotations
@@ -340,6 +346,31 @@ def run_tile_task(catalog: Tiles, ref: TileRef, task: Callable[[TileInfo], R]) -
     return task(catalog.tiles[ref.index])
 
 
+class _NotLoaded(TilingError):
+    """A Dask worker could not load a task (raised there; fatal to the job here)."""
+
+
+def _pickled(*parts: object) -> bytes:
+    """``(func, *tail)`` as a worker loads them in :func:`_loaded` (cloudpickle, as Dask)."""
+    import cloudpickle
+
+    return cast(bytes, cloudpickle.dumps(parts))
+
+
+def _loaded(blob: bytes, *args: Any) -> Any:
+    """What a Dask worker runs: ``func(*args, *tail)`` of the pickled ``(func, *tail)``."""
+    import pickle
+
+    try:
+        func, *tail = pickle.loads(blob)
+    except Exception as exc:
+        raise _NotLoaded(
+            f"a Dask worker cannot load the task ({_error_text(exc)}): its code must be "
+            "importable on every worker"
+        ) from None
+    return func(*args, *tail)
+
+
 def _error_text(exc: BaseException) -> str:
     text = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
     return f"{type(exc).__name__}: {text}"[:300] if text else type(exc).__name__
@@ -485,23 +516,24 @@ def run_chunks(
         return False
 
     token = f"{os.getpid()}-{time.monotonic_ns()}"
-    cat_future: list[Any] = []  # the catalog, sent to every worker once
+    sent: list[Any] = []  # the catalog (sent to every worker once) and the pickled task
 
     def submit(i: int) -> Any:
-        if not cat_future:
-            cat_future.append(engine.client.scatter(catalog, broadcast=True, hash=False))
+        if not sent:
+            sent.append(engine.client.scatter(catalog, broadcast=True, hash=False))
+            sent.append(_pickled(runner, task))
         return engine.client.submit(
-            runner,
-            cat_future[0],
+            _loaded,
+            sent[1],
+            sent[0],
             chunks[i],
-            task,
             key=f"lidarqa-chunk-{chunks[i].id}-{token}-{attempts.get(i, 0) + 1}",
             pure=False,
         )
 
     try:
         _drive(engine, order, lambda i: runner(catalog, chunks[i], task), submit, settle,
-               progress=progress, description=description)
+               progress=progress, description=description, name=lambda i: chunks[i].id)
         if engine.client is not None and getattr(task, "tile_fields", None) is not None:
             _free_worker_caches(engine.client)
     finally:
@@ -550,12 +582,14 @@ def _drive(
     *,
     progress: bool,
     description: str,
+    name: Callable[[int], str],
 ) -> None:
     """Run every item of `order`: here, on the Dask workers, or both (the head works).
 
     ``call(i)`` runs item i in this process; ``submit(i)`` sends it to the cluster and
     returns its future; ``settle(i, ok, result_or_exception)`` records an attempt and
     returns True when the item must run again (a retry). Items are taken in `order`.
+    A worker that cannot load an item's task fails the job, naming it by ``name(i)``.
 
     When this process is one of the workers (:attr:`Engine.head_works`) the cluster
     starts in a thread while this process already runs the first items, and each
@@ -605,6 +639,8 @@ def _drive(
                     return
                 ok, value = _landed(fut)
                 fut.release()
+                if isinstance(value, _NotLoaded):
+                    raise TilingError(f"{name(i)}: {value}")
                 settled(i, ok, value)
             feed()
         except BaseException as exc:
@@ -774,12 +810,12 @@ def run_tasks(
 
     def submit(i: int) -> Any:
         return engine.client.submit(
-            func, *items[i], key=f"lidarqa-task-{i}-{token}", pure=False
+            _loaded, _pickled(func, *items[i]), key=f"lidarqa-task-{i}-{token}", pure=False
         )
 
     try:
         _drive(engine, range(len(items)), lambda i: func(*items[i]), submit, settle,
-               progress=progress, description=description)
+               progress=progress, description=description, name=names.__getitem__)
     finally:
         if own:
             engine.close()

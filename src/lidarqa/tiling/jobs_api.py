@@ -351,7 +351,9 @@ def catalog_roads(
     compare_options : dict, optional
         ``sigma_ref``, ``alpha``, ``estimate_offset``.
     **common
-        ``crs``, ``skip_bad`` (the roads are one region: no chunk or engine options).
+        ``crs``, ``skip_bad``. The roads are one region, in this process: ``chunk_size``,
+        ``buffer``, ``resume`` and an `engine` of 2 or more workers or a scheduler address
+        are refused (:class:`~lidarqa.errors.OptionError`); the other run options do nothing.
 
     Returns
     -------
@@ -364,10 +366,16 @@ def catalog_roads(
     from ..io.crs import check_map_crs, parse_crs
 
     open_opts, chunk_opts, run_opts = _split(dict(common))
-    if chunk_opts["chunk_size"] is not None or chunk_opts["buffer"] is not None or run_opts.get(
-            "engine") is not None:
-        raise OptionError("roads are reconstructed in one piece: no --chunk-size, --buffer or "
-                          "engine")
+    eng = run_opts.get("engine")
+    scheduler = eng is not None and eng.scheduler not in (None, "serial")
+    refused = [o for o, on in (
+        ("--chunk-size", chunk_opts["chunk_size"] is not None),
+        ("--buffer", chunk_opts["buffer"] is not None),
+        ("--workers", eng is not None and not scheduler and (eng.workers or 1) > 1),
+        ("--scheduler", scheduler), ("--resume", run_opts.get("resume"))) if on]
+    if refused:
+        raise OptionError(f"roads are reconstructed in one piece, in this process: "
+                          f"{', '.join(refused)} cannot be used")
     catalog = open_sources(sources, classes=classes or None, source_id=source_id or None,
                            **open_opts)
     cloud = catalog.read(require_points=False)
