@@ -277,7 +277,12 @@ class SegmentPTD(TINParameters):
         façade segment is an object). Points of segments flagged as façades by
         `orientation_thr` alone (not scattered) stay out of the densification, and at
         the end, after the below pass, those within `facade_distance` m (vertically)
-        of the final ground surface become ground. At airborne spacings surface
+        of the final ground surface become ground, and so do the points below that
+        surface of a façade segment it passes through (one with a point within the
+        distance): the below pass, for a bank whose foot the terrain's TIN spans over
+        (a concave slope under houses built into it). Below the surface alone is not
+        enough: a wall at the edge of a data gap lies under the long facets that
+        bridge the gap, without touching them. At airborne spacings surface
         growing also links the two levels of a steep bank or retaining wall into one
         near-vertical segment; this keeps its terrain without letting a wall's points
         steer the TIN. The ALS preset, and so the automatic parameters of sparse
@@ -1432,12 +1437,16 @@ def _segment_ptd(
         if oi.size:
             h = _height_above_ground(xyz, ground, oi, thin_cell, virtual)
             ground[oi[h < -par.below_distance]] = True
-    # 8b. façade points on trial: within facade_distance of the final ground surface
+    # 8b. façade points on trial: within facade_distance of the final ground surface, and
+    # below it in a segment the surface passes through (the below pass, on a steep bank)
     if par.facade_distance > 0 and facade.any() and ground.any():
         fi = np.flatnonzero(cand & (lab >= 0) & facade[lab_c] & ~ground)
         if fi.size:
             h = _height_above_ground(xyz, ground, fi, thin_cell, virtual)
-            ground[fi[np.abs(h) <= par.facade_distance]] = True
+            near = np.abs(h) <= par.facade_distance
+            crossed = np.zeros(n_seg, dtype=bool)
+            crossed[lab[fi[near]]] = True
+            ground[fi[near | ((h < -par.below_distance) & crossed[lab[fi]])]] = True
     # 8c. final roof check against the final ground: raised segments, gable pairs
     if par.roof_ratio > 0 and par.raised_step > 0 and is_ground_seg.any():
         roof = _roof_check(xyz, lab, seg_pt, ground, is_ground_seg, n_seg, par)
