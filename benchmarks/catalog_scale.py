@@ -167,10 +167,9 @@ def run_csf(paths: list, out: Path) -> dict:
     """The CSF wheel per tile, at PDAL's defaults (``_peers.csf_ground``): read, filter, write."""
     import resource
 
-    from _peers import csf_ground
+    from _peers import csf_ground, relabel
 
     import lidarqa
-    from lidarqa.ground import relabel_classification
 
     out.mkdir(parents=True, exist_ok=True)
     n = 0
@@ -180,9 +179,7 @@ def run_csf(paths: list, out: Path) -> dict:
         cloud = lidarqa.read(path)
         with _quiet_stdout():
             ground = csf_ground(cloud)
-        cloud.fields["classification"] = relabel_classification(
-            cloud.fields["classification"], ground
-        )
+        cloud.fields["classification"] = relabel(cloud.fields["classification"], ground)
         lidarqa.write(cloud, out / Path(path).name, overwrite=True)
         n += len(cloud)
     return {

@@ -91,10 +91,10 @@ def one(method: str, src: str, out: str, cloth: float = 0.5) -> dict:
                 warnings.simplefilter("ignore")
                 ground = classify_ground(cloud, method=name, preset=preset or "auto").ground_mask
         t3 = time.perf_counter()
-        from lidarqa.ground import relabel_classification
+        from _peers import relabel
 
         cls = cloud.fields.get("classification", np.zeros(len(cloud), dtype=np.uint8))
-        cloud.fields["classification"] = relabel_classification(cls, ground)
+        cloud.fields["classification"] = relabel(cls, ground)
         lidarqa.write(cloud, out.replace(".laz", f"-{k}.laz"), overwrite=True)
         t4 = time.perf_counter()
         times["read_s"] += t2 - t1
