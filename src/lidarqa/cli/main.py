@@ -359,6 +359,9 @@ def main(argv: list[str] | None = None) -> None:
     """Console-script entry point."""
     global _STANDALONE
     _STANDALONE = True
+    from .._malloc import tune_process
+
+    tune_process()
     cli.main(args=argv, prog_name="lidarqa")
 
 

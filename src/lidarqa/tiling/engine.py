@@ -240,7 +240,8 @@ class Engine:
             # so every array a chunk allocates is mapped, unmapped and its pages faulted in
             # again for the next: 4x the page faults and 16 % more CPU for the ground filter
             # (measured on 2 M points), more again with two workers sharing memory bandwidth
-            "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
+            "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": os.environ.get(
+                "MALLOC_TRIM_THRESHOLD_"),  # the CLI's (lidarqa._malloc), else glibc's
             # the dashboard's statistical profiler samples each worker's task thread every
             # 10 ms (it takes the GIL to walk the stack); nobody reads it behind the CLI
             "distributed.worker.profile.enabled": False,
