@@ -38,9 +38,11 @@ the default (``auto``) runs.
 from __future__ import annotations
 
 import argparse
+import atexit
 import json
 import os
 import resource
+import shutil
 import statistics
 import subprocess
 import sys
@@ -142,6 +144,7 @@ def main() -> None:
         print(json.dumps(one(a.one[0], a.one[1], a.one[2], float(a.one[3]))))
         return
     tmp = Path(tempfile.mkdtemp(prefix="lidarqa-ground-speed-"))
+    atexit.register(shutil.rmtree, tmp, ignore_errors=True)  # the scene and the outputs
     datasets: list[tuple[str, str, float]] = []
     only = (a.only or "fsite5,2m").split(",")
     if SHARED.exists() and ("fsite5" in only or "sites" in only):
