@@ -47,3 +47,18 @@ def test_the_console_script_applies_it(monkeypatch: pytest.MonkeyPatch) -> None:
         cli_main.main(["--version"])
     assert exc.value.code == 0
     assert calls == [1]
+
+
+def test_local_workers_get_the_processes_thresholds(monkeypatch: pytest.MonkeyPatch) -> None:
+    # the thresholds reach the LocalCluster workers through the environment (Dask's own
+    # MALLOC_TRIM_THRESHOLD_=65536 is not imposed, nor a user's value removed)
+    pytest.importorskip("distributed")
+    from lidarqa.tiling.engine import Engine
+
+    monkeypatch.setenv("MALLOC_TRIM_THRESHOLD_", "123456")
+    monkeypatch.setenv("MALLOC_MMAP_THRESHOLD_", "654321")
+    names = ("MALLOC_TRIM_THRESHOLD_", "MALLOC_MMAP_THRESHOLD_")
+    with Engine(workers=2) as eng:
+        eng.start()
+        got = eng.client.run(lambda: [os.environ.get(k) for k in names])
+    assert list(got.values()) == [["123456", "654321"]]
