@@ -110,3 +110,21 @@ def test_a_chunk_task_the_workers_cannot_load_fails_the_job(scene_tiles, unloada
         # run_tiles keeps going past a tile that fails; one the workers cannot load is fatal
         with pytest.raises(TilingError, match=r"\.laz: a Dask worker cannot load the task"):
             run_tiles(catalog, unloadable, engine=eng, progress=False)
+
+
+def test_a_scheduler_whose_workers_run_another_lidarqa_is_refused(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # the workers of a --scheduler cluster must run this lidarqa: checked once, at connect
+    distributed = pytest.importorskip("distributed")
+    import lidarqa
+    from lidarqa.errors import TilingError
+    from lidarqa.tiling.engine import Engine
+
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
+                                  dashboard_address=":0", host="127.0.0.1") as cluster:
+        with Engine(cluster.scheduler_address) as eng:  # same version: connects
+            assert eng.client is not None
+        monkeypatch.setattr(lidarqa, "__version__", "0.0.0+other")
+        with pytest.raises(TilingError, match=r"run lidarqa .* and this process 0\.0\.0\+other"):
+            Engine(cluster.scheduler_address).start()

@@ -229,6 +229,7 @@ class Engine:
                 raise TilingError(
                     f"cannot connect to the Dask scheduler {self.scheduler}: {exc}"
                 ) from exc
+            self._check_workers()
             return self
         import dask
 
@@ -260,6 +261,32 @@ class Engine:
             )
         self.client = distributed.Client(self.cluster)
         return self
+
+    def _check_workers(self) -> None:
+        """The workers of a ``--scheduler`` cluster run this version of lidarqa.
+
+        A worker that cannot import lidarqa cannot load any task (the job would wait
+        forever: see the module docstring), and another version may give other results.
+        Workers that join later are not checked.
+        """
+        from .. import __version__
+
+        assert self.client is not None
+        try:  # a lambda travels by value: it loads where lidarqa does not
+            got = self.client.run(lambda: __import__("lidarqa").__version__)
+        except Exception as exc:
+            self.close()
+            raise TilingError(
+                f"the Dask workers of {self.scheduler} cannot import lidarqa "
+                f"({_error_text(exc)}): install lidarqa {__version__} where they run"
+            ) from None
+        other = sorted({str(v) for v in got.values()} - {__version__})
+        if other:
+            self.close()
+            raise TilingError(
+                f"the Dask workers of {self.scheduler} run lidarqa {', '.join(other)} and this "
+                f"process {__version__}: install the same version where they run"
+            )
 
     def close(self) -> None:
         """Shut the dask client and cluster down (when this engine started them)."""
