@@ -9,7 +9,7 @@ import pytest
 
 from lidarqa.tiling import open_catalog
 from lidarqa.tiling.chunks import make_chunks
-from lidarqa.tiling.reader import read_chunk, tile_cache
+from lidarqa.tiling.reader import read_chunk, shared_tiles, tile_cache
 
 FIELDS = ("return_number", "number_of_returns", "classification")
 
@@ -113,3 +113,126 @@ def test_a_worker_keeps_its_tiles_across_chunks(scene_tiles, monkeypatch):
         _same(a, c, FIELDS)
     assert reader._worker_cache is None
     assert reader._active() is None  # nothing left active in this thread
+
+
+def _counting_reader(monkeypatch) -> list[str]:
+    import lidarqa.io.las as las
+
+    opened: list[str] = []
+    real = las.LasReader
+
+    class Counting(real):
+        def __init__(self, path, *a, **k):
+            opened.append(str(path))
+            super().__init__(path, *a, **k)
+
+    monkeypatch.setattr(las, "LasReader", Counting)
+    return opened
+
+
+def test_processes_share_the_tiles_they_decompress(scene_tiles, tmp_path, monkeypatch):
+    # two local workers of one job (shared_tiles): the second maps what the first saved,
+    # decompresses nothing, and reads the same points
+    from lidarqa.tiling import reader
+    from lidarqa.tiling.engine import run_task
+
+    spill = tmp_path / "spill"
+    spill.mkdir()
+
+    class Task:
+        tile_fields = FIELDS
+        tile_spill = str(spill)
+
+        def __call__(self, data):
+            return data
+
+    _, paths = scene_tiles
+    cat = open_catalog(paths)
+    chunks = make_chunks(cat, chunk_size=40.0, buffer=25.0)
+    plain = [read_chunk(cat, c) for c in chunks]
+    opened = _counting_reader(monkeypatch)
+    try:
+        first = [run_task(cat, c, Task()) for c in chunks]
+        assert len(opened) == len(paths)
+        assert len([p for p in spill.iterdir() if p.is_dir()]) == len(paths)
+        assert not list(spill.glob("*.claim"))
+        reader.clear_worker_tile_cache()  # another process: nothing in its memory
+        second = [run_task(cat, c, Task()) for c in chunks]
+        assert len(opened) == len(paths)  # mapped, not decompressed again
+    finally:
+        reader.clear_worker_tile_cache()
+    for a, b, c in zip(plain, first, second, strict=True):
+        _same(a, b, FIELDS)
+        _same(a, c, FIELDS)
+
+
+def test_shared_tiles_folder_goes_with_the_block(scene_tiles, tmp_path):
+
+    _, paths = scene_tiles
+    cat = open_catalog(paths)
+    chunk = make_chunks(cat, chunk_size=200.0, buffer=0.0)[0]
+    plain = read_chunk(cat, chunk)
+    folder = tmp_path / "shared"
+    with tile_cache(fields=FIELDS), shared_tiles(folder):
+        data = read_chunk(cat, chunk)
+        assert len(list(folder.iterdir())) == len(paths)
+    _same(plain, data, FIELDS)
+    assert not folder.exists()
+
+
+def test_a_tile_being_decompressed_elsewhere_is_taken_last(scene_tiles, tmp_path, monkeypatch):
+    # tile 0 is claimed by another live process: the chunk decompresses the others first,
+    # then maps tile 0 once that process has saved it; a claim whose process is gone is
+    # taken over
+    import os
+    import subprocess
+    import sys
+    import threading
+
+    from lidarqa.tiling import reader
+
+    _, paths = scene_tiles
+    cat = open_catalog(paths)
+    chunk = make_chunks(cat, chunk_size=200.0, buffer=0.0)[0]
+    plain = read_chunk(cat, chunk)
+    folder = tmp_path / "shared"
+    order: list[str] = []
+    real = reader._decompress
+
+    def recording(path, fields):
+        order.append(path)
+        return real(path, fields)
+
+    monkeypatch.setattr(reader, "_decompress", recording)
+    first = cat.tiles[chunk.tiles[0]].path
+    with tile_cache(fields=FIELDS), shared_tiles(folder):
+        cache = reader._active()
+        name = reader._spill_name(cache, reader._tile_key(first, cache))
+        with open(name + ".claim", "w") as f:
+            f.write(str(os.getppid()))  # alive, not this process
+        assert reader._whole_tile(first, cache, wait=False) is None
+
+        def other_process() -> None:
+            while len(order) < len(chunk.tiles) - 1:
+                threading.Event().wait(0.01)
+            reader._save(name, real(first, FIELDS))
+            os.unlink(name + ".claim")
+
+        t = threading.Thread(target=other_process)
+        t.start()
+        data = read_chunk(cat, chunk)
+        t.join()
+        assert first not in order and len(order) == len(chunk.tiles) - 1
+        assert isinstance(reader._whole_tile(first, cache)[0], np.memmap)
+    _same(plain, data, FIELDS)
+
+    gone = subprocess.Popen([sys.executable, "-c", "pass"])
+    gone.wait()
+    order.clear()
+    with tile_cache(fields=FIELDS), shared_tiles(folder):
+        cache = reader._active()
+        name = reader._spill_name(cache, reader._tile_key(first, cache))
+        with open(name + ".claim", "w") as f:
+            f.write(str(gone.pid))
+        assert reader._whole_tile(first, cache, wait=False) is not None
+        assert order == [first]

@@ -341,8 +341,9 @@ def run_task(catalog: Tiles, chunk: Chunk, task: Callable[[ChunkData], R]) -> R:
     if fields is None:
         return task(reader(chunk))
     # a task that reads a few dimensions: the worker keeps its tiles decompressed
-    # across chunks (a serial run's own cache, if one is active, is used instead)
-    with worker_tile_cache(fields):
+    # across chunks (a serial run's own cache, if one is active, is used instead), and
+    # shares them with the other processes of its machine when the task names a folder
+    with worker_tile_cache(fields, spill=getattr(task, "tile_spill", None)):
         data = reader(chunk)
     return task(data)
 

@@ -36,7 +36,7 @@ import os
 import shutil
 import warnings
 from collections.abc import Iterable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar
 
@@ -44,7 +44,7 @@ import numpy as np
 
 from .._arrays import colmin
 from ..errors import OptionError, OutputExistsError, TilingError
-from .reader import tile_cache
+from .reader import shared_tiles, tile_cache
 
 if TYPE_CHECKING:
     from ..ground.auto import CloudMeasures
@@ -98,6 +98,9 @@ class GroundTask:
     #: the dimensions a chunk is read with: a worker keeps its tiles decompressed with
     #: these only, across its chunks (:func:`~lidarqa.tiling.reader.worker_tile_cache`)
     tile_fields: ClassVar[tuple[str, ...]] = _CHUNK_FIELDS
+    #: the folder where the processes of this machine share decompressed tiles
+    #: (:func:`~lidarqa.tiling.reader.shared_tiles`); None: each decompresses its own
+    tile_spill: str | None = None
 
     def to_dict(self) -> dict[str, object]:
         """The task's parameters as a JSON-ready dict."""
@@ -799,20 +802,24 @@ def ground_catalog(
                 _save_chunk(work, oc.result)
                 messages.update(oc.result.warnings)
 
+        # the local processes share the tiles they decompress: without it each would
+        # decompress nearly every tile, as every chunk's buffer reaches its neighbours
+        spill = str(work / "tiles") if engine.head_works and len(todo) > 1 else None
         try:
-            outcomes = run_chunks(
-                catalog,
-                todo,
-                task,
-                engine=engine,
-                progress=progress,
-                retries=retries,
-                skip_failed=True,
-                on_outcome=save,
-                keep_results=False,
-                description="Ground",
-                order_seed=order_seed,
-            )
+            with shared_tiles(spill):
+                outcomes = run_chunks(
+                    catalog,
+                    todo,
+                    replace(task, tile_spill=spill),
+                    engine=engine,
+                    progress=progress,
+                    retries=retries,
+                    skip_failed=True,
+                    on_outcome=save,
+                    keep_results=False,
+                    description="Ground",
+                    order_seed=order_seed,
+                )
         except BaseException:
             # nothing to resume (no chunk finished): leave nothing behind at the output path
             if not any(work.glob("*.npz")):

@@ -17,12 +17,22 @@ it takes the strip from memory. Neighbouring chunks each read the tiles under th
 buffers, so without it a block of eight tiles in six chunks decompressed 28 tiles.
 The cache changes what is decompressed, never which points a chunk gets. A Dask worker
 keeps one of its own across the chunks it runs (:func:`worker_tile_cache`).
+
+The processes of one machine (this one and its LocalCluster workers) can also share
+what they decompress (:func:`shared_tiles`): the first process that needs a tile
+claims it, decompresses it and saves its arrays in a folder of the job; the others map
+those files instead of decompressing the tile again, and a chunk takes first the tiles
+nobody else is decompressing. Without it, two workers on a block of eight tiles each
+decompressed nearly every tile (every chunk's buffer reaches its neighbours).
 """
 
 from __future__ import annotations
 
+import hashlib
 import os
+import shutil
 import threading
+import time
 from collections import OrderedDict
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
@@ -44,6 +54,7 @@ __all__ = [
     "worker_tile_cache",
     "clear_worker_tile_cache",
     "TILE_CACHE_BYTES",
+    "shared_tiles",
 ]
 
 #: Points read from a file at a time while streaming.
@@ -56,9 +67,13 @@ _TOL = 1e-6  # m
 class _TileCache:
     """Decompressed tiles (xyz and some fields), least recently used first out."""
 
-    def __init__(self, max_bytes: int, fields: tuple[str, ...] | None) -> None:
+    def __init__(
+        self, max_bytes: int, fields: tuple[str, ...] | None, spill: str | None = None
+    ) -> None:
         self.max_bytes = int(max_bytes)
         self.fields = fields
+        #: a folder shared with the other processes of this machine (see shared_tiles)
+        self.spill = spill
         self.entries: OrderedDict[tuple, tuple[np.ndarray, dict[str, np.ndarray]]] = (
             OrderedDict()
         )
@@ -73,7 +88,10 @@ class _TileCache:
             return hit
 
     def put(self, key: tuple, value: tuple[np.ndarray, dict[str, np.ndarray]]) -> None:
-        size = value[0].nbytes + sum(v.nbytes for v in value[1].values())
+        # arrays mapped from the shared folder cost the page cache, not this process
+        size = sum(
+            0 if isinstance(a, np.memmap) else a.nbytes for a in (value[0], *value[1].values())
+        )
         if size > self.max_bytes:
             return
         with self.lock:
@@ -122,8 +140,35 @@ def tile_cache(
 
 
 @contextmanager
+def shared_tiles(folder: str | os.PathLike[str] | None) -> Iterator[None]:
+    """Share the tiles decompressed in this block with the other processes of this machine.
+
+    Within an active :func:`tile_cache`, every tile this process decompresses is saved
+    under `folder` (one sub-folder of ``.npy`` files per tile), and a tile another
+    process saved there is mapped instead of decompressed. The local workers of the
+    same job get the folder with their task (see :func:`worker_tile_cache`). `folder`
+    (created if missing) is removed at the end of the block; None shares nothing.
+    """
+    cache = _active()
+    if folder is None or cache is None or cache.max_bytes <= 0:
+        yield
+        return
+    os.makedirs(folder, exist_ok=True)
+    saved = cache.spill
+    cache.spill = os.fspath(folder)
+    try:
+        yield
+    finally:
+        cache.spill = saved
+        with cache.lock:  # mapped arrays of the folder go with it
+            for k in [k for k, v in cache.entries.items() if isinstance(v[0], np.memmap)]:
+                del cache.entries[k]
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+@contextmanager
 def worker_tile_cache(
-    fields: Sequence[str], max_bytes: int = TILE_CACHE_BYTES
+    fields: Sequence[str], max_bytes: int = TILE_CACHE_BYTES, spill: str | None = None
 ) -> Iterator[None]:
     """The process's lasting tile cache for `fields`, active in this thread for the block.
 
@@ -132,7 +177,8 @@ def worker_tile_cache(
     worker runs takes the tiles it shares with this one from memory, as a serial run
     does within :func:`tile_cache`. Inside an active :func:`tile_cache` (the serial
     engine) that cache is used instead. :func:`clear_worker_tile_cache` frees it at the
-    end of the job.
+    end of the job. `spill`: the job's shared folder (:func:`shared_tiles`), for the
+    workers of a LocalCluster on this machine.
     """
     global _worker_cache
     if _active() is not None:
@@ -140,8 +186,13 @@ def worker_tile_cache(
         return
     key = tuple(fields)
     cache = _worker_cache
-    if cache is None or cache.fields != key or cache.max_bytes != int(max_bytes):
-        cache = _worker_cache = _TileCache(max_bytes, key)
+    if (
+        cache is None
+        or cache.fields != key
+        or cache.max_bytes != int(max_bytes)
+        or cache.spill != spill
+    ):
+        cache = _worker_cache = _TileCache(max_bytes, key, spill)
     _local.cache = cache
     try:
         yield
@@ -155,38 +206,184 @@ def clear_worker_tile_cache() -> None:
     _worker_cache = None
 
 
-def _whole_tile(
-    path: str, cache: _TileCache
+def _tile_key(path: str, cache: _TileCache) -> tuple:
+    st = os.stat(path)
+    return (os.path.realpath(path), st.st_size, st.st_mtime_ns, cache.fields)
+
+
+def _decompress(
+    path: str, fields: tuple[str, ...] | None
 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    """Every point of tile `path` (xyz, the cache's fields), from the cache or decompressed."""
+    """Every point of tile `path` (xyz and `fields`), decompressed, read-only."""
     from ..io.las import LasReader
 
-    st = os.stat(path)
-    key = (os.path.realpath(path), st.st_size, st.st_mtime_ns, cache.fields)
-    hit = cache.get(key)
-    if hit is not None:
-        return hit
     parts_xyz: list[np.ndarray] = []
     parts_fields: dict[str, list[np.ndarray]] = {}
     with LasReader(path) as r:
-        for piece in r.chunks(READ_STEP, fields=cache.fields):
+        for piece in r.chunks(READ_STEP, fields=fields):
             parts_xyz.append(piece.xyz)
             for k, v in piece.fields.items():
                 parts_fields.setdefault(k, []).append(v)
     if parts_xyz:
         xyz = np.concatenate(parts_xyz) if len(parts_xyz) > 1 else parts_xyz[0]
         # copies: a view would keep the file's whole point records alive in the cache
-        fields = {
+        out = {
             k: (np.concatenate(v) if len(v) > 1 else np.array(v[0]))
             for k, v in parts_fields.items()
         }
     else:
-        xyz, fields = np.empty((0, 3)), {}
+        xyz, out = np.empty((0, 3)), {}
     xyz.flags.writeable = False
-    for v in fields.values():
+    for v in out.values():
         v.flags.writeable = False
-    cache.put(key, (xyz, fields))
+    return xyz, out
+
+
+# --- sharing decompressed tiles between the processes of one machine ---------------------
+# A tile's arrays live in SPILL/<hash>/ (xyz.npy and one .npy per field), renamed into
+# place when complete. SPILL/<hash>.claim (created exclusively, holding the pid) says
+# which process is decompressing it; a claim whose process is gone is taken over.
+
+_WAIT = 0.01  # s between looks at a tile another process is decompressing
+
+
+def _spill_name(cache: _TileCache, key: tuple) -> str:
+    assert cache.spill is not None
+    return os.path.join(cache.spill, hashlib.sha1(repr(key).encode()).hexdigest()[:24])
+
+
+def _mapped(folder: str) -> tuple[np.ndarray, dict[str, np.ndarray]] | None:
+    """The arrays saved in `folder`, mapped read-only; None if not (yet) there."""
+    try:
+        names = os.listdir(folder)
+        xyz = np.load(os.path.join(folder, "xyz.npy"), mmap_mode="r")
+        fields = {
+            n[:-4]: np.load(os.path.join(folder, n), mmap_mode="r")
+            for n in sorted(names)
+            if n.endswith(".npy") and n != "xyz.npy"
+        }
+    except (OSError, ValueError):
+        return None
     return xyz, fields
+
+
+def _claim(name: str) -> bool:
+    """Claim the tile `name` for this process; False when another live process holds it."""
+    for _ in range(2):
+        try:
+            fd = os.open(name + ".claim", os.O_CREAT | os.O_EXCL | os.O_WRONLY)
+        except FileExistsError:
+            try:
+                with open(name + ".claim", encoding="ascii") as f:
+                    pid = int(f.read() or 0)
+            except (OSError, ValueError):
+                return False  # being written or just released: look again later
+            if pid and not _alive(pid):
+                try:
+                    os.unlink(name + ".claim")  # its process is gone: take it over
+                except OSError:
+                    pass
+                continue
+            return False
+        except OSError:
+            return False  # no room, no rights: decompress without sharing
+        with os.fdopen(fd, "w", encoding="ascii") as f:
+            f.write(str(os.getpid()))
+        return True
+    return False
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:
+        return True
+    return True
+
+
+def _save(name: str, value: tuple[np.ndarray, dict[str, np.ndarray]]) -> bool:
+    """Save a tile's arrays as `name` (atomic: a folder renamed into place)."""
+    tmp = f"{name}.{os.getpid()}.tmp"
+    try:
+        os.makedirs(tmp, exist_ok=True)
+        np.save(os.path.join(tmp, "xyz.npy"), value[0])
+        for k, v in value[1].items():
+            np.save(os.path.join(tmp, f"{k}.npy"), v)
+        os.rename(tmp, name)
+        return True
+    except OSError:
+        shutil.rmtree(tmp, ignore_errors=True)
+        return False
+
+
+def _shared_tile(
+    path: str, key: tuple, cache: _TileCache, wait: bool
+) -> tuple[np.ndarray, dict[str, np.ndarray]] | None:
+    """Tile `path` through the shared folder: mapped, or decompressed here and saved.
+
+    None when another process is decompressing it and not `wait`.
+    """
+    name = _spill_name(cache, key)
+    while True:
+        if os.path.isdir(name):
+            hit = _mapped(name)
+            if hit is not None:
+                return hit
+        if _claim(name):
+            try:
+                if os.path.isdir(name):  # saved between our look and our claim
+                    hit = _mapped(name)
+                    if hit is not None:
+                        return hit
+                value = _decompress(path, cache.fields)
+                if _save(name, value):
+                    return _mapped(name) or value
+                return value
+            finally:
+                try:
+                    os.unlink(name + ".claim")
+                except OSError:
+                    pass
+        if not wait:
+            return None
+        time.sleep(_WAIT)
+
+
+def _whole_tile(
+    path: str, cache: _TileCache, *, wait: bool = True
+) -> tuple[np.ndarray, dict[str, np.ndarray]] | None:
+    """Every point of tile `path` (xyz, the cache's fields), from the cache or decompressed.
+
+    With a shared folder and not `wait`: None while another process decompresses it.
+    """
+    key = _tile_key(path, cache)
+    hit = cache.get(key)
+    if hit is not None:
+        return hit
+    if cache.spill is not None:
+        value = _shared_tile(path, key, cache, wait)
+        if value is None:
+            return None
+    else:
+        value = _decompress(path, cache.fields)
+    cache.put(key, value)
+    return value
+
+
+def _prefetch(paths: Sequence[str]) -> None:
+    """Bring the tiles of a chunk into the active cache, the ones nobody is busy with first.
+
+    Only with a shared folder: a tile that another process is decompressing is taken
+    after the others, by then most often mapped from its saved arrays.
+    """
+    cache = _active()
+    if cache is None or cache.spill is None or cache.max_bytes <= 0:
+        return
+    later = [p for p in paths if _whole_tile(p, cache, wait=False) is None]
+    for p in later:
+        _whole_tile(p, cache)
 
 
 @dataclass(eq=False)
@@ -242,7 +439,7 @@ def cached_tile(path: str) -> tuple[np.ndarray, dict[str, np.ndarray]] | None:
     cache = _active()
     if cache is None or cache.max_bytes <= 0:
         return None
-    return _whole_tile(path, cache)
+    return _whole_tile(path, cache)  # it waits: never None
 
 
 def _read_tile_box(
@@ -259,7 +456,9 @@ def _read_tile_box(
         return cloud.xyz, (cloud.fields if len(idx) else None), idx
     cache = _active()
     if cache is not None and cache.max_bytes > 0:
-        txyz, tfields = _whole_tile(path, cache)
+        whole_tile = _whole_tile(path, cache)
+        assert whole_tile is not None  # it waits for the tile
+        txyz, tfields = whole_tile
         if len(txyz) == 0:
             return np.empty((0, 3)), None, np.empty(0, dtype=np.int64)
         if whole:  # copies: the cached arrays stay as read
@@ -319,6 +518,7 @@ def read_chunk(catalog: Catalog, chunk: Chunk) -> ChunkData:
     from ..io import PointCloud
 
     box = chunk.buffered
+    _prefetch([catalog.tiles[t].path for t in chunk.tiles if not catalog.tiles[t].is_copc])
     xyzs, idxs, tids, fieldsets = [], [], [], []
     for t in chunk.tiles:
         tile = catalog.tiles[t]
