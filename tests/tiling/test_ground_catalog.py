@@ -243,3 +243,33 @@ def test_a_one_chunk_catalog_starts_no_cluster_to_write(scene_tiles, tmp_path, m
     res = ground_catalog(paths, tmp_path / "one", chunk_size=1000.0, workers=2)
     assert res.n_chunks == 1
     assert [len(lidarqa.read(o)) for o in res.outputs] == [len(lidarqa.read(p)) for p in paths]
+
+
+def test_tiles_are_written_while_the_last_chunks_run(scene_tiles, tmp_path, monkeypatch):
+    # two local workers, chunks inside the 60 m tiles: this process holds its first chunk
+    # until the worker process has written a tile whose chunks are all done (it waits at
+    # most 60 s, which fails the test when the writes wait for every chunk); the outputs
+    # are those of a serial run
+    pytest.importorskip("distributed")
+    import time
+
+    _, paths = scene_tiles
+    opts = {"chunk_size": 30.0, "origin": (1000.0, 2000.0), "buffer": 10.0, "cell_size": 20.0}
+    serial = ground_catalog(paths, tmp_path / "serial", workers=1, **opts)
+    out = tmp_path / "two"
+    real = GroundTask.__call__
+    seen: list[bool] = []
+
+    def held(self, data):
+        if not seen:
+            deadline = time.monotonic() + 60.0
+            while not list(out.glob("*.laz")) and time.monotonic() < deadline:
+                time.sleep(0.05)
+            seen.append(bool(list(out.glob("*.laz"))))
+        return real(self, data)
+
+    monkeypatch.setattr(GroundTask, "__call__", held)
+    two = ground_catalog(paths, out, workers=2, **opts)
+    assert seen == [True]
+    assert _digests(two.outputs) == _digests(serial.outputs)
+    assert not (out / WORK_DIR).exists()

@@ -796,11 +796,46 @@ def ground_catalog(
         (work / "run.json").write_text(fp_text, encoding="utf-8")
         todo = [c for c in chunks if c.id not in done]
         messages: set[str] = set()
+        per_tile: dict[int, list[str]] = {}
+        for c in chunks:
+            for t in c.tiles:
+                per_tile.setdefault(t, []).append(c.id)
+
+        def write_args(k: int, ids: Iterable[str] | None = None) -> tuple:
+            tile = catalog.tiles[k]
+            ids = per_tile.get(k, []) if ids is None else sorted(ids)
+            return (tile.path, str(outputs[k]), k, tile.n_points, str(work), ids)
+
+        # A tile is written as soon as the chunks holding its points are done, on the
+        # cluster's workers, while the last chunks still run: a worker process that has no
+        # chunk left writes tiles instead of waiting for the others (not in a serial run,
+        # where the order changes nothing)
+        def holds(c: Any, k: int) -> bool:  # chunk c's core may hold points of tile k
+            x0, y0, x1, y1 = catalog.tiles[k].bounds2d
+            tol = 1e-6 * max(1.0, abs(x0), abs(y0), abs(x1), abs(y1))
+            return not (
+                c.core[0] > x1 + tol or c.core[2] < x0 - tol
+                or c.core[1] > y1 + tol or c.core[3] < y0 - tol
+            )
+
+        # (a write that finds a chunk missing fails and is done again after all chunks)
+        holding = {k: {c.id for c in chunks if k in c.tiles and holds(c, k)} for k in per_tile}
+        waiting = {k: ids - set(done) for k, ids in holding.items()}
+        early: dict[int, Any] = {}
 
         def save(oc: Any) -> None:
-            if oc.ok:
-                _save_chunk(work, oc.result)
-                messages.update(oc.result.warnings)
+            if not oc.ok:
+                return
+            _save_chunk(work, oc.result)
+            messages.update(oc.result.warnings)
+            client = engine.client
+            for k in oc.chunk.tiles:
+                waiting[k].discard(oc.chunk.id)
+                if not waiting[k] and client is not None and k not in early:
+                    early[k] = client.submit(
+                        _assemble_tile, *write_args(k, holding[k]), pure=False,
+                        key=f"lidarqa-write-{k}-{os.getpid()}-{id(early)}",
+                    )
 
         # the local processes share the tiles they decompress: without it each would
         # decompress nearly every tile, as every chunk's buffer reaches its neighbours
@@ -820,25 +855,38 @@ def ground_catalog(
                     description="Ground",
                     order_seed=order_seed,
                 )
-        except BaseException:
+            failed = tuple((o.chunk.id, o.error or "failed") for o in outcomes if not o.ok)
+            if failed:
+                from .engine import ChunkFailedError
+
+                raise ChunkFailedError(
+                    f"{len(failed)} of {len(chunks)} chunk(s) failed (run again with --resume "
+                    "to retry only those): " + "; ".join(f"{c}: {e}" for c, e in failed[:5]),
+                    list(outcomes),
+                )
+            written: dict[int, int] = {}
+            for k, fut in early.items():
+                try:
+                    written[k] = int(fut.result())
+                except Exception:  # noqa: S112 - written again below, where errors surface
+                    continue
+        except BaseException as exc:
+            # no output of a job that failed: a tile written early goes too (once its write
+            # has ended; an interruption does not wait for it)
+            for k, fut in early.items():
+                if isinstance(exc, Exception):
+                    try:
+                        fut.result()
+                    except Exception:  # noqa: S110 - nothing written
+                        pass
+                fut.cancel()
+                if fut.status == "finished":
+                    outputs[k].unlink(missing_ok=True)
             # nothing to resume (no chunk finished): leave nothing behind at the output path
             if not any(work.glob("*.npz")):
                 shutil.rmtree(out_dir if made_dir else work, ignore_errors=True)
             raise
-        failed = tuple((o.chunk.id, o.error or "failed") for o in outcomes if not o.ok)
-        if failed:
-            from .engine import ChunkFailedError
-
-            raise ChunkFailedError(
-                f"{len(failed)} of {len(chunks)} chunk(s) failed (run again with --resume to "
-                "retry only those): " + "; ".join(f"{c}: {e}" for c, e in failed[:5]),
-                list(outcomes),
-            )
         # --- final pass: one output tile per input tile, on the workers too -------------------
-        per_tile: dict[int, list[str]] = {}
-        for c in chunks:
-            for t in c.tiles:
-                per_tile.setdefault(t, []).append(c.id)
         counts = np.zeros(4, dtype=np.int64)
         have_counts = False
         for c in chunks:
@@ -849,17 +897,15 @@ def ground_catalog(
         # a LocalCluster that the chunks did not start (one chunk: a catalog of a few
         # million points) would cost more to start than these writes take
         writer = engine if engine.scheduler or engine.client else Engine("serial")
-        n_ground = sum(
+        rest = [k for k in range(len(catalog.tiles)) if k not in written]
+        n_ground = sum(written.values()) + sum(
             run_tasks(
                 _assemble_tile,
-                [
-                    (tile.path, str(outputs[k]), k, tile.n_points, str(work), per_tile.get(k, []))
-                    for k, tile in enumerate(catalog.tiles)
-                ],
+                [write_args(k) for k in rest],
                 engine=writer,
                 progress=progress,
                 description="Writing tiles",
-                names=[str(t.path) for t in catalog.tiles],
+                names=[str(catalog.tiles[k].path) for k in rest],
             )
         )
     finally:
