@@ -61,7 +61,7 @@ def main() -> None:
             for b in range(int(wall) + 1)
         )
         span = f"start {s[0][0]:5.1f} end {s[-1][0]:5.1f} cpu {s[-1][1]:5.1f}"
-        print(f"{pid:>7} {span}  {names[pid]}")
+        print(f"{pid:>7} {span}  {names.get(pid, '?')}")
         print("        " + line)
     print(f"total CPU (sampled) {total:.1f} s")
 

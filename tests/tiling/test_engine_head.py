@@ -128,3 +128,77 @@ def test_a_scheduler_whose_workers_run_another_lidarqa_is_refused(
         monkeypatch.setattr(lidarqa, "__version__", "0.0.0+other")
         with pytest.raises(TilingError, match=r"run lidarqa .* and this process 0\.0\.0\+other"):
             Engine(cluster.scheduler_address).start()
+
+
+def test_the_head_does_other_work_while_the_workers_finish():
+    # _drive with a stand-in cluster of one worker whose items take 1 s: this process runs
+    # its items, then, with none left and the worker still busy, calls idle() (here: two
+    # pieces of work, then none) instead of waiting; every item is settled once
+    from concurrent.futures import ThreadPoolExecutor
+
+    from lidarqa.tiling.engine import _drive
+
+    pool = ThreadPoolExecutor(1)
+
+    class Future:
+        def __init__(self, inner):
+            self.inner = inner
+
+        @property
+        def status(self):
+            return "finished" if self.inner.done() else "pending"
+
+        def result(self):
+            return self.inner.result()
+
+        def add_done_callback(self, fn):
+            self.inner.add_done_callback(lambda _: fn(self))
+
+        def release(self):
+            pass
+
+        def cancel(self):
+            self.inner.cancel()
+
+    class Cluster:
+        scheduler = None
+        serial = False
+        head_works = True
+        client = object()
+        dashboard_link = None
+
+        def runs_here(self, n):
+            return False
+
+        def start(self):
+            return self
+
+        def _n_local(self):
+            return 2
+
+    def on_worker(i):
+        time.sleep(1.0)
+        return ("worker", i)
+
+    settled: dict[int, object] = {}
+    pieces: list[float] = []
+    t0 = time.monotonic()
+
+    def idle():
+        if len(pieces) == 2:
+            return False
+        pieces.append(time.monotonic() - t0)
+        return True
+
+    def settle(i, ok, value):
+        assert ok and i not in settled
+        settled[i] = value
+        return False
+
+    _drive(Cluster(), list(range(4)), lambda i: ("here", i),
+           lambda i: Future(pool.submit(on_worker, i)), settle, progress=False,
+           description="x", name=str, idle=idle)
+    pool.shutdown()
+    assert sorted(settled) == [0, 1, 2, 3]
+    assert {v[0] for v in settled.values()} == {"here", "worker"}
+    assert len(pieces) == 2 and max(pieces) < 0.9  # while the worker's item ran

@@ -468,6 +468,7 @@ def run_chunks(
     description: str = "Chunks",
     order_seed: int | None = None,
     runner: Callable[..., R] = run_task,
+    idle: Callable[[], bool] | None = None,
 ) -> list[ChunkOutcome[C, R]]:
     """Run ``task(read_chunk(catalog, chunk))`` on every chunk.
 
@@ -498,6 +499,12 @@ def run_chunks(
     runner : callable, default :func:`run_task`
         What a worker runs for one item: ``runner(catalog, item, task)``.
         :func:`run_tiles` passes :func:`run_tile_task` (whole tiles, no chunk read).
+    idle : callable, optional
+        What this process does, when it runs chunks beside the workers, while it has
+        no chunk left to take and the workers still run theirs: ``idle()`` does one
+        piece of other work and returns True, or returns False when it has none (it is
+        asked again when a chunk ends). The ground job writes the tiles whose chunks
+        are done.
 
     Returns
     -------
@@ -562,7 +569,8 @@ def run_chunks(
 
     try:
         _drive(engine, order, lambda i: runner(catalog, chunks[i], task), submit, settle,
-               progress=progress, description=description, name=lambda i: chunks[i].id)
+               progress=progress, description=description, name=lambda i: chunks[i].id,
+               idle=idle)
         if engine.client is not None and getattr(task, "tile_fields", None) is not None:
             _free_worker_caches(engine.client)
     finally:
@@ -612,6 +620,7 @@ def _drive(
     progress: bool,
     description: str,
     name: Callable[[int], str],
+    idle: Callable[[], bool] | None = None,
 ) -> None:
     """Run every item of `order`: here, on the Dask workers, or both (the head works).
 
@@ -623,7 +632,8 @@ def _drive(
     When this process is one of the workers (:attr:`Engine.head_works`) the cluster
     starts in a thread while this process already runs the first items, and each
     worker process holds at most two items at a time (one when fewer remain): the
-    rest stay here, where whoever is free takes the next.
+    rest stay here, where whoever is free takes the next. While none is left here and
+    the workers still run theirs, this process calls ``idle()`` (see :func:`run_chunks`).
     """
     from collections import deque
 
@@ -699,15 +709,24 @@ def _drive(
         elif not here:
             start()
         with _one_thread() if head and not here else contextlib.nullcontext():
+            busy = idle is not None and head
             while True:
                 with cond:
-                    while not failed and remaining and not (head and pending):
+                    while not failed and remaining and not (head and pending) and not busy:
                         cond.wait(0.5)
+                        busy = idle is not None and head
                     if failed:
                         raise failed[0]
                     if not remaining:
                         break
-                    i = pending.popleft()
+                    if not (head and pending):  # other work meanwhile
+                        i = -1
+                    else:
+                        i = pending.popleft()
+                if i < 0:
+                    assert idle is not None
+                    busy = idle()
+                    continue
                 ok, value = _attempt(call, i)
                 with cond:
                     settled(i, ok, value)

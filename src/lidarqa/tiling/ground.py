@@ -34,6 +34,7 @@ import json
 import math
 import os
 import shutil
+import threading
 import warnings
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field, replace
@@ -806,10 +807,10 @@ def ground_catalog(
             ids = per_tile.get(k, []) if ids is None else sorted(ids)
             return (tile.path, str(outputs[k]), k, tile.n_points, str(work), ids)
 
-        # A tile is written as soon as the chunks holding its points are done, on the
-        # cluster's workers, while the last chunks still run: a worker process that has no
-        # chunk left writes tiles instead of waiting for the others (not in a serial run,
-        # where the order changes nothing)
+        # A tile can be written as soon as the chunks holding its points are done. On a
+        # cluster, a worker process that has no chunk left writes such tiles, one at a time
+        # (behind any chunk it holds), instead of waiting idle for the last chunks; the
+        # other tiles are written after the chunks by every process
         def holds(c: Any, k: int) -> bool:  # chunk c's core may hold points of tile k
             x0, y0, x1, y1 = catalog.tiles[k].bounds2d
             tol = 1e-6 * max(1.0, abs(x0), abs(y0), abs(x1), abs(y1))
@@ -821,21 +822,49 @@ def ground_catalog(
         # (a write that finds a chunk missing fails and is done again after all chunks)
         holding = {k: {c.id for c in chunks if k in c.tiles and holds(c, k)} for k in per_tile}
         waiting = {k: ids - set(done) for k, ids in holding.items()}
+        ready: list[int] = []
         early: dict[int, Any] = {}
+        writes = threading.RLock()
+        chunks_done = False
+
+        def write_next(_: Any = None) -> None:
+            with writes:
+                client = engine.client
+                if (chunks_done or not ready or client is None
+                        or any(not f.done() for f in early.values())):
+                    return
+                k = ready.pop(0)
+                early[k] = fut = client.submit(
+                    _assemble_tile, *write_args(k, holding[k]), pure=False, priority=-10,
+                    key=f"lidarqa-write-{k}-{os.getpid()}-{id(early)}",
+                )
+            fut.add_done_callback(write_next)
+
+        here: dict[int, int | None] = {}
+
+        def write_here() -> bool:  # this process, idle while the workers finish chunks
+            with writes:
+                if chunks_done or not ready:
+                    return False
+                k = ready.pop(0)
+                here[k] = None
+            try:
+                here[k] = _assemble_tile(*write_args(k, holding[k]))
+            except Exception:  # noqa: S110 - written again after the chunks
+                pass
+            return True
 
         def save(oc: Any) -> None:
             if not oc.ok:
                 return
             _save_chunk(work, oc.result)
             messages.update(oc.result.warnings)
-            client = engine.client
-            for k in oc.chunk.tiles:
-                waiting[k].discard(oc.chunk.id)
-                if not waiting[k] and client is not None and k not in early:
-                    early[k] = client.submit(
-                        _assemble_tile, *write_args(k, holding[k]), pure=False,
-                        key=f"lidarqa-write-{k}-{os.getpid()}-{id(early)}",
-                    )
+            with writes:
+                for k in oc.chunk.tiles:
+                    waiting[k].discard(oc.chunk.id)
+                    if not waiting[k] and k not in early and k not in ready:
+                        ready.append(k)
+            write_next()
 
         # the local processes share the tiles they decompress: without it each would
         # decompress nearly every tile, as every chunk's buffer reaches its neighbours
@@ -854,6 +883,7 @@ def ground_catalog(
                     keep_results=False,
                     description="Ground",
                     order_seed=order_seed,
+                    idle=write_here,
                 )
             failed = tuple((o.chunk.id, o.error or "failed") for o in outcomes if not o.ok)
             if failed:
@@ -864,15 +894,15 @@ def ground_catalog(
                     "to retry only those): " + "; ".join(f"{c}: {e}" for c, e in failed[:5]),
                     list(outcomes),
                 )
-            written: dict[int, int] = {}
-            for k, fut in early.items():
-                try:
-                    written[k] = int(fut.result())
-                except Exception:  # noqa: S112 - written again below, where errors surface
-                    continue
+            with writes:
+                chunks_done = True
         except BaseException as exc:
+            with writes:
+                chunks_done = True
             # no output of a job that failed: a tile written early goes too (once its write
             # has ended; an interruption does not wait for it)
+            for k in here:
+                outputs[k].unlink(missing_ok=True)
             for k, fut in early.items():
                 if isinstance(exc, Exception):
                     try:
@@ -897,8 +927,8 @@ def ground_catalog(
         # a LocalCluster that the chunks did not start (one chunk: a catalog of a few
         # million points) would cost more to start than these writes take
         writer = engine if engine.scheduler or engine.client else Engine("serial")
-        rest = [k for k in range(len(catalog.tiles)) if k not in written]
-        n_ground = sum(written.values()) + sum(
+        rest = [k for k in range(len(catalog.tiles)) if k not in early and k not in here]
+        n_ground = sum(
             run_tasks(
                 _assemble_tile,
                 [write_args(k) for k in rest],
@@ -907,6 +937,16 @@ def ground_catalog(
                 description="Writing tiles",
                 names=[str(catalog.tiles[k].path) for k in rest],
             )
+        )
+        n_ground += sum(n for n in here.values() if n is not None)
+        again = [k for k, n in here.items() if n is None]
+        for k, fut in early.items():
+            try:
+                n_ground += int(fut.result())
+            except Exception:  # noqa: PERF203 - written again here, where errors surface
+                again.append(k)
+        n_ground += sum(
+            _assemble_tile(*write_args(k)) for k in again
         )
     finally:
         if own and engine is not None:
