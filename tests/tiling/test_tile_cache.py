@@ -236,3 +236,24 @@ def test_a_tile_being_decompressed_elsewhere_is_taken_last(scene_tiles, tmp_path
             f.write(str(gone.pid))
         assert reader._whole_tile(first, cache, wait=False) is not None
         assert order == [first]
+
+
+def test_shared_tiles_offers_what_this_process_already_holds(scene_tiles, tmp_path, monkeypatch):
+    # the tiles this process decompressed before sharing started (the automatic
+    # parameters' sample) are saved for the workers: another process's cache maps them
+    from lidarqa.tiling import reader
+
+    _, paths = scene_tiles
+    cat = open_catalog(paths)
+    chunk = make_chunks(cat, chunk_size=200.0, buffer=0.0)[0]
+    folder = tmp_path / "shared"
+    with tile_cache(fields=FIELDS):
+        read_chunk(cat, chunk)
+        with shared_tiles(folder):
+            assert len([p for p in folder.iterdir() if p.is_dir()]) == len(paths)
+            opened = _counting_reader(monkeypatch)
+            other = reader._TileCache(reader.TILE_CACHE_BYTES, FIELDS, str(folder))
+            for p in paths:
+                xyz, _ = reader._whole_tile(str(p), other)
+                assert isinstance(xyz, np.memmap)
+            assert opened == []

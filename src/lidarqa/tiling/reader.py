@@ -28,6 +28,7 @@ decompressed nearly every tile (every chunk's buffer reaches its neighbours).
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import shutil
@@ -156,6 +157,17 @@ def shared_tiles(folder: str | os.PathLike[str] | None) -> Iterator[None]:
     os.makedirs(folder, exist_ok=True)
     saved = cache.spill
     cache.spill = os.fspath(folder)
+    with cache.lock:
+        held = [(k, v) for k, v in cache.entries.items() if not isinstance(v[0], np.memmap)]
+    for key, value in held:  # what this process already decompressed (its sample)
+        name = _spill_name(cache, key)
+        if _claim(name):
+            try:
+                if not os.path.isdir(name):
+                    _save(name, value)
+            finally:
+                with contextlib.suppress(OSError):
+                    os.unlink(name + ".claim")
     try:
         yield
     finally:
@@ -342,10 +354,8 @@ def _shared_tile(
                     return _mapped(name) or value
                 return value
             finally:
-                try:
+                with contextlib.suppress(OSError):
                     os.unlink(name + ".claim")
-                except OSError:
-                    pass
         if not wait:
             return None
         time.sleep(_WAIT)
