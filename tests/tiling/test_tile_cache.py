@@ -78,7 +78,6 @@ def test_default_ground_grid_has_the_fewest_chunks(scene_tiles, monkeypatch):
 def test_a_worker_keeps_its_tiles_across_chunks(scene_tiles, monkeypatch):
     # what a Dask worker does per chunk (run_task with a task that declares its fields):
     # the second chunk over the same tiles decompresses nothing, the points are the same
-    import lidarqa.io.las as las
     from lidarqa.tiling import reader
     from lidarqa.tiling.engine import run_task
 
@@ -91,16 +90,8 @@ def test_a_worker_keeps_its_tiles_across_chunks(scene_tiles, monkeypatch):
     _, paths = scene_tiles
     cat = open_catalog(paths)
     chunks = make_chunks(cat, chunk_size=40.0, buffer=25.0)
-    opened: list[str] = []
-    real = las.LasReader
-
-    class Counting(real):
-        def __init__(self, path, *a, **k):
-            opened.append(str(path))
-            super().__init__(path, *a, **k)
-
     plain = [read_chunk(cat, c) for c in chunks]
-    monkeypatch.setattr(las, "LasReader", Counting)
+    opened = _counting_reader(monkeypatch)
     try:
         first = [run_task(cat, c, Task()) for c in chunks]
         n_first = len(opened)
