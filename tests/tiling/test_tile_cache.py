@@ -9,7 +9,7 @@ import pytest
 
 from lidarqa.tiling import open_catalog
 from lidarqa.tiling.chunks import make_chunks
-from lidarqa.tiling.reader import read_chunk, shared_tiles, tile_cache
+from lidarqa.tiling.reader import read_chunk, shared_tiles, tile_cache, unshare_tile
 
 FIELDS = ("return_number", "number_of_returns", "classification")
 
@@ -167,6 +167,9 @@ def test_shared_tiles_folder_goes_with_the_block(scene_tiles, tmp_path):
     with tile_cache(fields=FIELDS), shared_tiles(folder):
         data = read_chunk(cat, chunk)
         assert len(list(folder.iterdir())) == len(paths)
+        unshare_tile(str(paths[0]))  # no chunk needs it any more
+        assert len(list(folder.iterdir())) == len(paths) - 1
+        _same(plain, read_chunk(cat, chunk), FIELDS)  # decompressed again if asked
     _same(plain, data, FIELDS)
     assert not folder.exists()
 

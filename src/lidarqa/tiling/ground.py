@@ -45,7 +45,7 @@ import numpy as np
 
 from .._arrays import colmin
 from ..errors import OptionError, OutputExistsError, TilingError
-from .reader import shared_tiles, tile_cache
+from .reader import shared_tiles, tile_cache, unshare_tile
 
 if TYPE_CHECKING:
     from ..ground.auto import CloudMeasures
@@ -822,6 +822,7 @@ def ground_catalog(
         # (a write that finds a chunk missing fails and is done again after all chunks)
         holding = {k: {c.id for c in chunks if k in c.tiles and holds(c, k)} for k in per_tile}
         waiting = {k: ids - set(done) for k, ids in holding.items()}
+        reading = {k: set(ids) - set(done) for k, ids in per_tile.items()}
         ready: list[int] = []
         early: dict[int, Any] = {}
         writes = threading.RLock()
@@ -861,6 +862,9 @@ def ground_catalog(
             messages.update(oc.result.warnings)
             with writes:
                 for k in oc.chunk.tiles:
+                    reading[k].discard(oc.chunk.id)
+                    if not reading[k]:  # no chunk left reads it: its shared copy goes
+                        unshare_tile(catalog.tiles[k].path)
                     waiting[k].discard(oc.chunk.id)
                     if not waiting[k] and k not in early and k not in ready:
                         ready.append(k)

@@ -56,6 +56,7 @@ __all__ = [
     "clear_worker_tile_cache",
     "TILE_CACHE_BYTES",
     "shared_tiles",
+    "unshare_tile",
 ]
 
 #: Points read from a file at a time while streaming.
@@ -176,6 +177,22 @@ def shared_tiles(folder: str | os.PathLike[str] | None) -> Iterator[None]:
             for k in [k for k, v in cache.entries.items() if isinstance(v[0], np.memmap)]:
                 del cache.entries[k]
         shutil.rmtree(folder, ignore_errors=True)
+
+
+def unshare_tile(path: str) -> None:
+    """Remove tile `path` from the folder of :func:`shared_tiles` (no chunk needs it any more).
+
+    The folder then holds the tiles under the chunks in progress only, not the catalog's.
+    """
+    cache = _active()
+    if cache is None or cache.spill is None:
+        return
+    key = _tile_key(path, cache)
+    with cache.lock:
+        hit = cache.entries.get(key)
+        if hit is not None and isinstance(hit[0], np.memmap):
+            del cache.entries[key]
+    shutil.rmtree(_spill_name(cache, key), ignore_errors=True)
 
 
 @contextmanager
