@@ -183,7 +183,9 @@ class SegmentPTD(TINParameters):
         whose nearest already-accepted ground point of another segment lies within
         `raised_radius` m in XY) are more than `raised_step` m above that point and
         steeper than `raised_angle` degrees from it: roofs and bridges whose low
-        edge touches the terrain. Curbs (a few decimetres) are not steps.
+        edge touches the terrain. Curbs (a few decimetres) are not steps. When it
+        rejects a segment, the unsegmented points (judged in the last sweep against
+        a TIN that held it) are judged again against the ground that remains.
     raised_angle : float, default 45.0
     raised_ratio : float, default 0.5
     raised_radius : float, default 3.0
@@ -1414,6 +1416,28 @@ def _segment_ptd(
             vetoed |= raised
             is_ground_seg &= ~raised
             ground &= ~((lab >= 0) & raised[lab_c])
+        # 6b. the unsegmented points were judged in the last sweep against a TIN that held
+        # the segments just rejected (a roof lets its unsegmented eaves and wall tops pass):
+        # judge them again, point-wise, against the TIN of the ground that remains
+        if par.unsegmented == "point_ptd" and vetoed.any():
+            base = ground & ~unseg_ground
+            in_tin = np.zeros(n, dtype=bool)
+            in_tin[_thin(xyz, np.flatnonzero(base), thin_cell)] = True
+            st = DensifyState(ground=base.copy(), in_tin=in_tin, open_=unseg_pt & ~base, added=[])
+            tin = densify(
+                xyz,
+                st,
+                virtual,
+                crit,
+                max_iter=int(par.max_iter),
+                min_gain_frac=float(par.min_gain_frac),
+                final_tin=par.final_distance > 0,
+            )
+            if par.final_distance > 0 and tin is not None:
+                final_pass(xyz, st, tin, par.final_distance)
+            unseg_ground = st.ground & ~base & unseg_pt
+            n_pp = int(unseg_ground.sum())
+            ground = base | unseg_ground
     # 7. connection pass: large rejected segments joining the ground smoothly
     if par.connect_min_size > 0:
         big = ~obj & ~vetoed & (seg_size >= par.connect_min_size)
