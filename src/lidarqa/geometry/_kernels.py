@@ -142,40 +142,6 @@ def splitmix64(state):
 
 
 @njit(cache=True, nogil=True)
-def grid_neighbours(pts, q, r2, cx, cy, cz, nyz, nz, cell_keys, cell_start, order, out):
-    """Indices of points within sqrt(r2) of pts[q] (excluding q) into out; returns count."""
-    m = 0
-    ix = cx[q]
-    iy = cy[q]
-    iz = cz[q]
-    px = pts[q, 0]
-    py = pts[q, 1]
-    pz = pts[q, 2]
-    ncell = cell_keys.shape[0]
-    z0 = max(iz - 1, 0)
-    z1 = min(iz + 1, nz - 1)
-    for dx in range(-1, 2):
-        for dy in range(-1, 2):
-            # the (up to) three cells of a column have consecutive keys: one binary
-            # search, then walk the sorted keys (same cells, same order as 27 searches)
-            col = (ix + dx) * nyz + (iy + dy) * nz
-            c = np.searchsorted(cell_keys, col + z0)
-            while c < ncell and cell_keys[c] <= col + z1:
-                for a in range(cell_start[c], cell_start[c + 1]):
-                    j = order[a]
-                    if j == q:
-                        continue
-                    ddx = pts[j, 0] - px
-                    ddy = pts[j, 1] - py
-                    ddz = pts[j, 2] - pz
-                    if ddx * ddx + ddy * ddy + ddz * ddz <= r2:
-                        out[m] = j
-                        m += 1
-                c += 1
-    return m
-
-
-@njit(cache=True, nogil=True)
 def grid_count(pts, queries, r2, cx, cy, cz, nyz, nz, cell_keys, cell_start, order):
     """Number of points within sqrt(r2) of each point `queries` (itself included).
 
@@ -431,7 +397,6 @@ def surface_growing_kernel(pts, trial_order, knn, knn_k, method, seed_dist, min_
     cand = np.empty(knn_k, dtype=np.int64)
     tmp = np.empty(knn_k, dtype=np.int64)
     flag = np.zeros(knn_k, dtype=np.bool_)
-    nbr = np.empty(27 * max_cell + 1, dtype=np.int64)
     next_label = 0
     for t in range(n):
         i = trial_order[t]
@@ -485,37 +450,56 @@ def surface_growing_kernel(pts, trial_order, knn, knn_k, method, seed_dist, min_
                 szz += z * z
         last_fit = tail
         head = 0
+        ncell = cell_keys.shape[0]
         while head < tail:
             q = queue[head]
             head += 1
-            k = grid_neighbours(pts, q, grow_r2, cx, cy, cz, nyz, nz_cells, cell_keys, cell_start,
-                                order, nbr)
-            for a in range(k):
-                j = nbr[a]
-                if labels[j] != -1:
-                    continue
-                x = pts[j, 0] - ox
-                y = pts[j, 1] - oy
-                z = pts[j, 2] - oz
-                d = pnx * (x - pmx) + pny * (y - pmy) + pnz * (z - pmz)
-                if abs(d) > grow_dist:
-                    continue
-                labels[j] = lab
-                queue[tail] = j
-                tail += 1
-                sx += x
-                sy += y
-                sz += z
-                sxx += x * x
-                sxy += x * y
-                sxz += x * z
-                syy += y * y
-                syz += y * z
-                szz += z * z
-                if tail >= last_fit * (1.0 + refit_growth):
-                    pnx, pny, pnz, pmx, pmy, pmz = normal_from_moments(
-                        float(tail), sx, sy, sz, sxx, sxy, sxz, syy, syz, szz)
-                    last_fit = tail
+            # the points within the growing radius of q, in grid order (x, y column,
+            # z, then the order in the cell), each tested as it comes: a labelled point
+            # (q included) is passed over before its distance is computed (most are,
+            # behind the growing front)
+            qx = pts[q, 0]
+            qy = pts[q, 1]
+            qz = pts[q, 2]
+            z0 = max(cz[q] - 1, 0)
+            z1 = min(cz[q] + 1, nz_cells - 1)
+            for ddx in range(-1, 2):
+                for ddy in range(-1, 2):
+                    col = (cx[q] + ddx) * nyz + (cy[q] + ddy) * nz_cells
+                    c = np.searchsorted(cell_keys, col + z0)
+                    while c < ncell and cell_keys[c] <= col + z1:
+                        for e in range(cell_start[c], cell_start[c + 1]):
+                            j = order[e]
+                            if labels[j] != -1:  # q itself included
+                                continue
+                            ex = pts[j, 0] - qx
+                            ey = pts[j, 1] - qy
+                            ez = pts[j, 2] - qz
+                            if ex * ex + ey * ey + ez * ez > grow_r2:
+                                continue
+                            x = pts[j, 0] - ox
+                            y = pts[j, 1] - oy
+                            z = pts[j, 2] - oz
+                            d = pnx * (x - pmx) + pny * (y - pmy) + pnz * (z - pmz)
+                            if abs(d) > grow_dist:
+                                continue
+                            labels[j] = lab
+                            queue[tail] = j
+                            tail += 1
+                            sx += x
+                            sy += y
+                            sz += z
+                            sxx += x * x
+                            sxy += x * y
+                            sxz += x * z
+                            syy += y * y
+                            syz += y * z
+                            szz += z * z
+                            if tail >= last_fit * (1.0 + refit_growth):
+                                pnx, pny, pnz, pmx, pmy, pmz = normal_from_moments(
+                                    float(tail), sx, sy, sz, sxx, sxy, sxz, syy, syz, szz)
+                                last_fit = tail
+                        c += 1
         if tail < min_segment_size:
             for a in range(tail):
                 labels[queue[a]] = -1
@@ -529,9 +513,11 @@ def surface_growing_kernel(pts, trial_order, knn, knn_k, method, seed_dist, min_
 
 @njit(cache=True, nogil=True)
 def _box_gap(f, side, d, eps):
-    """Lower bound (m) of the distance along one axis from a point at `f` in its cell
-    (of side `side`) to the cell `d` (-1, 0, +1) cells away; `eps` covers the rounding
-    of the cell index."""
+    """Lower bound (m) along one axis from a point at `f` in its cell to a cell `d` away.
+
+    `side` is the cell side; only the sign of `d` counts (the caller adds the whole cells
+    between); `eps` covers the rounding of the cell index.
+    """
     if d < 0:
         g = f - eps
     elif d > 0:
@@ -550,8 +536,9 @@ def _knn_one(pts, i, k, rmax, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, 
     the points of the (2r+1)^3 cells around the point's cell, in gather order (x, y
     column, then z, then the order in the cell); it answers when its k-th distance is
     within r cells. The cells are visited ring by ring from the point's own, and a cell
-    that cannot hold a point within the k-th distance found so far is skipped (its points keep their
-    gather rank for ties): the answer is that of a search of every cell of the ring.
+    that cannot hold a point within the k-th distance found so far is skipped (its points
+    keep their gather rank for ties): the answer is that of a search of every cell of the
+    ring.
     `lo` and `side` are the grid's origin and cell side (for the cells' bounds).
     Returns True on success; False if more than `rmax` rings would be needed or a
     ring holds more than `max_cand` points.
