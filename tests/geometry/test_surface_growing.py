@@ -140,6 +140,29 @@ def test_grid_knn_matches_kdtree() -> None:
     assert (nn >= 0).all()
 
 
+def test_grid_knn_ties_by_index_match_a_brute_force_ranking() -> None:
+    """With `by_index`, each row is the k first points by (distance, index): the cells the
+    search skips (too far for the k-th distance found so far) change nothing, ties included."""
+    from lidarqa.geometry import _kernels as K
+
+    rng = np.random.default_rng(7)
+    # centimetre coordinates on a few levels: many exactly equal distances
+    ground = np.round(rng.uniform(0, 12, (2500, 2)), 1)
+    pts = np.column_stack([ground, rng.integers(0, 3, 2500) * 0.5])
+    canopy = np.round(rng.uniform([0, 0, 2], [12, 12, 15], (150, 3)), 1)  # sparse: ring 2, 3
+    pts = np.unique(np.vstack([pts, canopy]), axis=0)
+    pts = pts[rng.permutation(len(pts))] - 6.0
+    k = 12
+    nn = K.knn(pts, k, by_index=True)
+    d2 = ((pts[:, None, :] - pts[None, :, :]) ** 2).sum(axis=2)
+    idx = np.broadcast_to(np.arange(len(pts)), d2.shape)
+    ref = np.lexsort((idx, d2), axis=1)[:, :k]
+    np.testing.assert_array_equal(nn, ref)
+    plain = K.knn(pts, k)  # ties in the grid's order: the same distances
+    np.testing.assert_array_equal(np.take_along_axis(d2, plain, 1)[:, -1],
+                                  np.take_along_axis(d2, ref, 1)[:, -1])
+
+
 @settings(max_examples=30, deadline=None)
 @given(
     n=st.integers(1, 800),

@@ -363,3 +363,22 @@ def test_build_tin_is_the_delaunay_tin_and_falls_back_on_merged_vertices():
     idx2 = np.append(idx, 3000)
     merged = build_tin(xyz2, idx2, virt)
     assert merged.dt is not None and merged.n_real == idx2.size
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_spatial_order_is_a_stable_sort_by_morton_code_then_x_y(seed):
+    """The radix sort behind the TIN's walk order gives np.lexsort's permutation: Morton
+    code, then x, y, then the index (duplicates, signed zeros and piles of one cell)."""
+    from lidarqa._arrays import colmax, colmin
+    from lidarqa.ground._tin import _interleave, spatial_order
+
+    rng = np.random.default_rng(seed)
+    xy = np.round(rng.uniform(0, 50, (20000, 2)), 1)
+    pile = np.repeat(xy[:30], 40, axis=0) + rng.integers(0, 2, (1200, 2)) * 1e-9
+    xy = np.vstack([xy, xy[:5000], pile, [[0.0, -0.0], [-0.0, 0.0]]])
+    xy = xy[rng.permutation(len(xy))]
+    lo = colmin(xy)
+    span = float((colmax(xy) - lo).max())
+    q = np.minimum(((xy - lo) / span * 65535.0).astype(np.int64), 65535)
+    code = _interleave(q[:, 0]) | (_interleave(q[:, 1]) << 1)
+    np.testing.assert_array_equal(spatial_order(xy), np.lexsort((xy[:, 1], xy[:, 0], code)))

@@ -142,40 +142,6 @@ def splitmix64(state):
 
 
 @njit(cache=True, nogil=True)
-def grid_neighbours(pts, q, r2, cx, cy, cz, nyz, nz, cell_keys, cell_start, order, out):
-    """Indices of points within sqrt(r2) of pts[q] (excluding q) into out; returns count."""
-    m = 0
-    ix = cx[q]
-    iy = cy[q]
-    iz = cz[q]
-    px = pts[q, 0]
-    py = pts[q, 1]
-    pz = pts[q, 2]
-    ncell = cell_keys.shape[0]
-    z0 = max(iz - 1, 0)
-    z1 = min(iz + 1, nz - 1)
-    for dx in range(-1, 2):
-        for dy in range(-1, 2):
-            # the (up to) three cells of a column have consecutive keys: one binary
-            # search, then walk the sorted keys (same cells, same order as 27 searches)
-            col = (ix + dx) * nyz + (iy + dy) * nz
-            c = np.searchsorted(cell_keys, col + z0)
-            while c < ncell and cell_keys[c] <= col + z1:
-                for a in range(cell_start[c], cell_start[c + 1]):
-                    j = order[a]
-                    if j == q:
-                        continue
-                    ddx = pts[j, 0] - px
-                    ddy = pts[j, 1] - py
-                    ddz = pts[j, 2] - pz
-                    if ddx * ddx + ddy * ddy + ddz * ddz <= r2:
-                        out[m] = j
-                        m += 1
-                c += 1
-    return m
-
-
-@njit(cache=True, nogil=True)
 def grid_count(pts, queries, r2, cx, cy, cz, nyz, nz, cell_keys, cell_start, order):
     """Number of points within sqrt(r2) of each point `queries` (itself included).
 
@@ -208,6 +174,15 @@ def grid_count(pts, queries, r2, cx, cy, cz, nyz, nz, cell_keys, cell_start, ord
     return out
 
 
+def _grid_side(pts: np.ndarray, cell: float) -> float:
+    """The cell side (m) :func:`build_grid` lays for `cell`."""
+    # at most 2**20 cells along the widest side: a tiny cell (a user's 1e-300 m radius)
+    # would overflow the integer keys and put every point in one cell (a search over
+    # all pairs); a wider cell only adds candidates, the callers test the distance
+    span = float(np.max(colmax(pts) - colmin(pts))) if len(pts) else 0.0
+    return max(float(cell), span / 2.0**20, 1e-9)
+
+
 def build_grid(pts: np.ndarray, cell: float, offset: np.ndarray | None = None):
     """A hashed voxel grid of cell size `cell` (m) over `pts` (NumPy, vectorised).
 
@@ -219,11 +194,7 @@ def build_grid(pts: np.ndarray, cell: float, offset: np.ndarray | None = None):
     visits neighbours in the same order whatever else was read. Points of a cell
     are in their order in `pts`.
     """
-    # at most 2**20 cells along the widest side: a tiny cell (a user's 1e-300 m radius)
-    # would overflow the integer keys and put every point in one cell (a search over
-    # all pairs); a wider cell only adds candidates, the callers test the distance
-    span = float(np.max(colmax(pts) - colmin(pts))) if len(pts) else 0.0
-    cell = max(float(cell), span / 2.0**20, 1e-9)
+    cell = _grid_side(pts, cell)
     if offset is None:
         ijk = np.floor((pts - colmin(pts)) / cell).astype(np.int64)
     else:
@@ -426,7 +397,6 @@ def surface_growing_kernel(pts, trial_order, knn, knn_k, method, seed_dist, min_
     cand = np.empty(knn_k, dtype=np.int64)
     tmp = np.empty(knn_k, dtype=np.int64)
     flag = np.zeros(knn_k, dtype=np.bool_)
-    nbr = np.empty(27 * max_cell + 1, dtype=np.int64)
     next_label = 0
     for t in range(n):
         i = trial_order[t]
@@ -480,37 +450,56 @@ def surface_growing_kernel(pts, trial_order, knn, knn_k, method, seed_dist, min_
                 szz += z * z
         last_fit = tail
         head = 0
+        ncell = cell_keys.shape[0]
         while head < tail:
             q = queue[head]
             head += 1
-            k = grid_neighbours(pts, q, grow_r2, cx, cy, cz, nyz, nz_cells, cell_keys, cell_start,
-                                order, nbr)
-            for a in range(k):
-                j = nbr[a]
-                if labels[j] != -1:
-                    continue
-                x = pts[j, 0] - ox
-                y = pts[j, 1] - oy
-                z = pts[j, 2] - oz
-                d = pnx * (x - pmx) + pny * (y - pmy) + pnz * (z - pmz)
-                if abs(d) > grow_dist:
-                    continue
-                labels[j] = lab
-                queue[tail] = j
-                tail += 1
-                sx += x
-                sy += y
-                sz += z
-                sxx += x * x
-                sxy += x * y
-                sxz += x * z
-                syy += y * y
-                syz += y * z
-                szz += z * z
-                if tail >= last_fit * (1.0 + refit_growth):
-                    pnx, pny, pnz, pmx, pmy, pmz = normal_from_moments(
-                        float(tail), sx, sy, sz, sxx, sxy, sxz, syy, syz, szz)
-                    last_fit = tail
+            # the points within the growing radius of q, in grid order (x, y column,
+            # z, then the order in the cell), each tested as it comes: a labelled point
+            # (q included) is passed over before its distance is computed (most are,
+            # behind the growing front)
+            qx = pts[q, 0]
+            qy = pts[q, 1]
+            qz = pts[q, 2]
+            z0 = max(cz[q] - 1, 0)
+            z1 = min(cz[q] + 1, nz_cells - 1)
+            for ddx in range(-1, 2):
+                for ddy in range(-1, 2):
+                    col = (cx[q] + ddx) * nyz + (cy[q] + ddy) * nz_cells
+                    c = np.searchsorted(cell_keys, col + z0)
+                    while c < ncell and cell_keys[c] <= col + z1:
+                        for e in range(cell_start[c], cell_start[c + 1]):
+                            j = order[e]
+                            if labels[j] != -1:  # q itself included
+                                continue
+                            ex = pts[j, 0] - qx
+                            ey = pts[j, 1] - qy
+                            ez = pts[j, 2] - qz
+                            if ex * ex + ey * ey + ez * ez > grow_r2:
+                                continue
+                            x = pts[j, 0] - ox
+                            y = pts[j, 1] - oy
+                            z = pts[j, 2] - oz
+                            d = pnx * (x - pmx) + pny * (y - pmy) + pnz * (z - pmz)
+                            if abs(d) > grow_dist:
+                                continue
+                            labels[j] = lab
+                            queue[tail] = j
+                            tail += 1
+                            sx += x
+                            sy += y
+                            sz += z
+                            sxx += x * x
+                            sxy += x * y
+                            sxz += x * z
+                            syy += y * y
+                            syz += y * z
+                            szz += z * z
+                            if tail >= last_fit * (1.0 + refit_growth):
+                                pnx, pny, pnz, pmx, pmy, pmz = normal_from_moments(
+                                    float(tail), sx, sy, sz, sxx, sxy, sxz, syy, syz, szz)
+                                last_fit = tail
+                        c += 1
         if tail < min_segment_size:
             for a in range(tail):
                 labels[queue[a]] = -1
@@ -523,27 +512,66 @@ def surface_growing_kernel(pts, trial_order, knn, knn_k, method, seed_dist, min_
 
 
 @njit(cache=True, nogil=True)
-def _knn_one(pts, i, k, rmax, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, order, cand, dist,
-             out, r0=1, by_index=False):
+def _box_gap(f, side, d, eps):
+    """Lower bound (m) along one axis from a point at `f` in its cell to a cell `d` away.
+
+    `side` is the cell side; only the sign of `d` counts (the caller adds the whole cells
+    between); `eps` covers the rounding of the cell index.
+    """
+    if d < 0:
+        g = f - eps
+    elif d > 0:
+        g = side - f - eps
+    else:
+        return 0.0
+    return g if g > 0.0 else 0.0
+
+
+@njit(cache=True, nogil=True)
+def _knn_one(pts, i, k, rmax, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, order, max_cand,
+             out, lo, side, r0=1, by_index=False):
     """Exact k nearest neighbours of pts[i] (including i) by expanding cube rings.
 
-    Starts at ring `r0` (a caller that found ring 1 too small passes 2).
-    Returns True on success; False if more than `rmax` rings would be needed.
+    Starts at ring `r0` (a caller that found ring 1 too small passes 2). Ring r takes
+    the points of the (2r+1)^3 cells around the point's cell, in gather order (x, y
+    column, then z, then the order in the cell); it answers when its k-th distance is
+    within r cells. The cells are visited ring by ring from the point's own, and a cell
+    that cannot hold a point within the k-th distance found so far is skipped (its points
+    keep their gather rank for ties): the answer is that of a search of every cell of the
+    ring.
+    `lo` and `side` are the grid's origin and cell side (for the cells' bounds).
+    Returns True on success; False if more than `rmax` rings would be needed or a
+    ring holds more than `max_cand` points.
     """
     ncell = cell_keys.shape[0]
     px = pts[i, 0]
     py = pts[i, 1]
     pz = pts[i, 2]
-    best = np.empty(k)
+    fx = px - (lo[0] + (cx[i] - 1) * side)
+    fy = py - (lo[1] + (cy[i] - 1) * side)
+    fz = pz - (lo[2] + cz[i] * side)
+    eps = 1e-6 * side
+    nmax = (2 * rmax + 1) ** 3
+    c_id = np.empty(nmax, dtype=np.int64)  # cells of the ring, in gather order
+    c_off = np.empty(nmax, dtype=np.int64)  # gather rank of their first point
+    c_lb = np.empty(nmax)  # lower bound of their squared distance
+    c_ring = np.empty(nmax, dtype=np.int64)  # their ring (Chebyshev distance in cells)
+    bestd = np.empty(k)
+    besti = np.empty(k, dtype=np.int64)
+    bestt = np.empty(k, dtype=np.int64)
     for r in range(r0, rmax + 1):
         m = 0
+        nc = 0
         for dx in range(-r, r + 1):
+            gx = 0.0 if dx == 0 else max(_box_gap(fx, side, dx, eps) + (abs(dx) - 1) * side, 0.0)
             for dy in range(-r, r + 1):
                 jx = cx[i] + dx
                 jy = cy[i] + dy
                 # past the last row a key would wrap into the next x column (same cells twice)
                 if jx < 0 or jy < 0 or jy >= nyz // nz:
                     continue
+                gy = 0.0 if dy == 0 else max(_box_gap(fy, side, dy, eps) + (abs(dy) - 1) * side,
+                                             0.0)
                 base = jx * nyz + jy * nz
                 z0 = cz[i] - r
                 if z0 < 0:
@@ -556,75 +584,95 @@ def _knn_one(pts, i, k, rmax, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, 
                 # cells of one (x, y) column are contiguous in key order
                 c = np.searchsorted(cell_keys, base + z0)
                 while c < ncell and cell_keys[c] <= base + z1:
-                    for a in range(cell_start[c], cell_start[c + 1]):
-                        j = order[a]
-                        if m >= cand.shape[0]:
-                            return False
-                        cand[m] = j
-                        dist[m] = ((pts[j, 0] - px) ** 2 + (pts[j, 1] - py) ** 2
-                                   + (pts[j, 2] - pz) ** 2)
-                        m += 1
+                    dz = cell_keys[c] - base - cz[i]
+                    gz = 0.0 if dz == 0 else max(
+                        _box_gap(fz, side, dz, eps) + (abs(dz) - 1) * side, 0.0)
+                    c_id[nc] = c
+                    c_off[nc] = m
+                    c_lb[nc] = gx * gx + gy * gy + gz * gz
+                    c_ring[nc] = max(abs(dx), abs(dy), abs(dz))
+                    m += cell_start[c + 1] - cell_start[c]
+                    nc += 1
                     c += 1
-        if m >= k:
-            # the k-th smallest distance: the k best kept sorted by insertion (most
-            # candidates fail the first comparison), not a sort of all m
-            for a in range(k):
-                best[a] = np.inf
-            for a in range(m):
-                d = dist[a]
-                if d >= best[k - 1]:
+        if m > max_cand:
+            return False
+        if m < k:
+            continue
+        # inner cells first (ring by ring), then a cell only when it may hold a point
+        # nearer than the k-th distance found so far
+        nb = 0
+        for ring in range(r + 1):
+            for s in range(nc):
+                if c_ring[s] != ring or (nb == k and c_lb[s] > bestd[k - 1]):
                     continue
-                q = k - 1
-                while q > 0 and best[q - 1] > d:
-                    best[q] = best[q - 1]
-                    q -= 1
-                best[q] = d
-            kth = best[k - 1]
-            if kth <= (r * cell) ** 2 and not by_index:
-                c = 0
-                for a in range(m):  # strictly closer first, then ties in gather order
-                    if dist[a] < kth:
-                        out[c] = cand[a]
-                        c += 1
-                for a in range(m):
-                    if c >= k:
-                        break
-                    if dist[a] == kth:
-                        out[c] = cand[a]
-                        c += 1
+                c = c_id[s]
+                t = c_off[s]
+                for e in range(cell_start[c], cell_start[c + 1]):
+                    j = order[e]
+                    d = (pts[j, 0] - px) ** 2 + (pts[j, 1] - py) ** 2 + (pts[j, 2] - pz) ** 2
+                    tk = j if by_index else t
+                    t += 1
+                    if nb < k:
+                        q = nb
+                        nb += 1
+                    elif d < bestd[k - 1] or (d == bestd[k - 1] and tk < bestt[k - 1]):
+                        q = k - 1
+                    else:
+                        continue
+                    while q > 0 and (bestd[q - 1] > d or (bestd[q - 1] == d and bestt[q - 1] > tk)):
+                        bestd[q] = bestd[q - 1]
+                        besti[q] = besti[q - 1]
+                        bestt[q] = bestt[q - 1]
+                        q -= 1
+                    bestd[q] = d
+                    besti[q] = j
+                    bestt[q] = tk
+        kth = bestd[k - 1]
+        if kth <= (r * cell) ** 2:
+            if by_index:
+                # the k first by (distance, index): ties do not depend on the grid
+                for q in range(k):
+                    out[q] = besti[q]
                 return True
-            if kth <= (r * cell) ** 2:
-                # the k first by (distance, index), in that order (as knn_grid): ties do not
-                # depend on the grid
-                sel = np.empty(m, dtype=np.int64)
-                c = 0
-                for a in range(m):
-                    if dist[a] <= kth:
-                        sel[c] = a
-                        c += 1
-                for x in range(1, c):
-                    v = sel[x]
-                    y = x - 1
-                    while y >= 0 and (dist[sel[y]] > dist[v]
-                                      or (dist[sel[y]] == dist[v] and cand[sel[y]] > cand[v])):
-                        sel[y + 1] = sel[y]
-                        y -= 1
-                    sel[y + 1] = v
-                for t in range(k):
-                    out[t] = cand[sel[t]]
-                return True
+            # strictly closer points in gather order, then the ties at the k-th distance
+            # in gather order
+            c = 0
+            for q in range(k):
+                if bestd[q] < kth:
+                    c += 1
+            # the strictly closer ones by gather rank (insertion sort of <= k entries)
+            for q in range(1, c):
+                vt = bestt[q]
+                vi = besti[q]
+                b = q - 1
+                while b >= 0 and bestt[b] > vt:
+                    bestt[b + 1] = bestt[b]
+                    besti[b + 1] = besti[b]
+                    b -= 1
+                bestt[b + 1] = vt
+                besti[b + 1] = vi
+            for q in range(k):
+                out[q] = besti[q]
+            return True
     return False
 
 
 @njit(cache=True, nogil=True, parallel=True)
 def knn_grid(pts, k, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, order, rmax, max_cand,
-             n_chunks, by_index=False):
+             n_chunks, lo, side, by_index=False):
     """The k nearest neighbours of every point (N, k); rows that failed are all -1.
 
     Works cell by cell: the points of the 27 cells around a cell are gathered once
     into a contiguous buffer, and each point of the cell keeps its k nearest among
     them when the k-th distance is within one cell (exact); other points fall back
-    to expanding rings (:func:`_knn_one`).
+    to expanding rings (:func:`_knn_one`). Rows are ordered by distance, ties in
+    gather order (`by_index`: by index, which does not depend on the grid).
+
+    The distances to all candidates are computed in one pass; only those within a
+    guess of the k-th distance (the previous point's, a little wider) are ranked,
+    and the guess is widened to one cell when fewer than k fall within it: the rows
+    are those of a ranking of every candidate. `lo` and `side` are the grid's origin
+    and cell side (for :func:`_knn_one`).
     """
     n = pts.shape[0]
     out = np.full((n, k), -1, dtype=np.int64)
@@ -635,11 +683,13 @@ def knn_grid(pts, k, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, order, rm
     lim = cell * cell
     for bb in prange(nblocks):
         cand = np.empty(max_cand, dtype=np.int64)
-        cxyz = np.empty((max_cand, 3))
-        cand2 = np.empty(max_cand, dtype=np.int64)  # for the ring fallback (keeps cand intact)
+        qx = np.empty(max_cand)
+        qy = np.empty(max_cand)
+        qz = np.empty(max_cand)
         dist = np.empty(max_cand)
         bestd = np.empty(k)
         besti = np.empty(k, dtype=np.int64)
+        bestt = np.empty(k, dtype=np.int64)
         row = np.empty(k, dtype=np.int64)
         c1 = min(ncell, (bb + 1) * block)
         for c in range(bb * block, c1):
@@ -661,11 +711,12 @@ def knn_grid(pts, k, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, order, rm
                                 break
                             j = order[a]
                             cand[m] = j
-                            cxyz[m, 0] = pts[j, 0]
-                            cxyz[m, 1] = pts[j, 1]
-                            cxyz[m, 2] = pts[j, 2]
+                            qx[m] = pts[j, 0]
+                            qy[m] = pts[j, 1]
+                            qz[m] = pts[j, 2]
                             m += 1
                         c2 += 1
+            guess = 0.5 * lim
             for a in range(cell_start[c], cell_start[c + 1]):
                 i = order[a]
                 ok = False
@@ -673,37 +724,48 @@ def knn_grid(pts, k, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, order, rm
                     px = pts[i, 0]
                     py = pts[i, 1]
                     pz = pts[i, 2]
-                    nb = 0
                     for t in range(m):
-                        d = (cxyz[t, 0] - px) ** 2 + (cxyz[t, 1] - py) ** 2 + (cxyz[t, 2] - pz) ** 2
-                        # by_index: ordered by (distance, index), ties do not depend on the
-                        # grid; else ties in gather order
-                        j = cand[t]
-                        if nb < k:
-                            q = nb
-                            nb += 1
-                        elif d < bestd[k - 1] or (by_index and d == bestd[k - 1]
-                                                  and j < besti[k - 1]):
-                            q = k - 1
-                        else:
-                            continue
-                        while q > 0 and (bestd[q - 1] > d
-                                         or (by_index and bestd[q - 1] == d
-                                             and besti[q - 1] > j)):
-                            bestd[q] = bestd[q - 1]
-                            besti[q] = besti[q - 1]
-                            q -= 1
-                        bestd[q] = d
-                        besti[q] = cand[t]
-                    if bestd[k - 1] <= lim:
+                        dist[t] = (qx[t] - px) ** 2 + (qy[t] - py) ** 2 + (qz[t] - pz) ** 2
+                    g = min(guess, lim)
+                    while True:
+                        nb = 0
+                        for t in range(m):
+                            d = dist[t]
+                            if d > g:
+                                continue
+                            j = cand[t]
+                            tk = j if by_index else t
+                            if nb < k:
+                                q = nb
+                                nb += 1
+                            elif d < bestd[k - 1] or (d == bestd[k - 1] and tk < bestt[k - 1]):
+                                q = k - 1
+                            else:
+                                continue
+                            while q > 0 and (bestd[q - 1] > d
+                                             or (bestd[q - 1] == d and bestt[q - 1] > tk)):
+                                bestd[q] = bestd[q - 1]
+                                besti[q] = besti[q - 1]
+                                bestt[q] = bestt[q - 1]
+                                q -= 1
+                            bestd[q] = d
+                            besti[q] = j
+                            bestt[q] = tk
+                        # k within the guess: the k-th distance is within it, so every
+                        # point nearer (or tied) was ranked
+                        if nb >= k or g >= lim:
+                            break
+                        g = lim
+                    if nb >= k:  # then bestd[k - 1] <= g <= lim
                         for t in range(k):
                             out[i, t] = besti[t]
                         ok = True
+                        guess = 1.3 * bestd[k - 1]
                 if not ok:
                     # ring 1 is what was just gathered: when it did not overflow,
                     # the search goes on from ring 2
                     if _knn_one(pts, i, k, rmax, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start,
-                                order, cand2, dist, row, 1 if overflow else 2, by_index):
+                                order, max_cand, row, lo, side, 1 if overflow else 2, by_index):
                         for t in range(k):
                             out[i, t] = row[t]
     return out
@@ -739,7 +801,7 @@ def knn(pts: np.ndarray, k: int, *, by_index: bool = False) -> np.ndarray:
     cx, cy, cz, nyz, nz, cell_keys, cell_start, order, max_cell = g
     max_cand = int(min(max(343 * max_cell, k), 2_000_000))
     out = knn_grid(pts, k, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, order, 3, max_cand,
-                   8 * get_num_threads(), by_index)
+                   8 * get_num_threads(), colmin(pts), _grid_side(pts, cell), by_index)
     bad = np.flatnonzero(out[:, 0] < 0)
     if len(bad):
         from scipy.spatial import cKDTree

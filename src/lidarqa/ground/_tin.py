@@ -415,7 +415,8 @@ def spatial_order(xy: np.ndarray) -> np.ndarray:
     span = max(float((colmax(xy) - lo).max()), 1e-12)
     q = np.minimum(((xy - lo) / span * 65535.0).astype(np.int64), 65535)
     code = _interleave(q[:, 0]) | (_interleave(q[:, 1]) << 1)
-    return np.lexsort((xy[:, 1], xy[:, 0], code))
+    # = np.lexsort((xy[:, 1], xy[:, 0], code)), a third of its time on a million points
+    return _morton_sort(code, np.ascontiguousarray(xy[:, 0]), np.ascontiguousarray(xy[:, 1]))
 
 
 def _interleave(v: np.ndarray) -> np.ndarray:
@@ -428,6 +429,56 @@ def _interleave(v: np.ndarray) -> np.ndarray:
 
 
 # ---------------------------------------------------------------- compiled kernels
+
+
+@njit(cache=True, nogil=True)
+def _morton_sort(code, x, y):  # pragma: no cover - numba
+    """The permutation sorting by (`code`, `x`, `y`), ties by index: a stable sort.
+
+    `code` < 2**32: a stable radix sort of two 16-bit passes, then each run of equal
+    codes (one or two points, almost always) sorted by (x, y) in place (stable).
+    """
+    n = code.shape[0]
+    perm = np.arange(n)
+    key = code.copy()
+    perm2 = np.empty(n, dtype=np.int64)
+    key2 = np.empty(n, dtype=np.int64)
+    for shift in (0, 16):
+        cnt = np.zeros(65537, dtype=np.int64)
+        for i in range(n):
+            cnt[((key[i] >> shift) & 0xFFFF) + 1] += 1
+        for b in range(65536):
+            cnt[b + 1] += cnt[b]
+        for i in range(n):
+            b = (key[i] >> shift) & 0xFFFF
+            perm2[cnt[b]] = perm[i]
+            key2[cnt[b]] = key[i]
+            cnt[b] += 1
+        perm, perm2 = perm2, perm
+        key, key2 = key2, key
+    s = 0
+    while s < n:
+        e = s + 1
+        while e < n and key[e] == key[s]:
+            e += 1
+        if e - s > 16:
+            # by x first (stable, O(g log g)); the insertion pass then only fixes x-ties
+            xs = np.empty(e - s)
+            for i in range(s, e):
+                xs[i - s] = x[perm[i]]
+            o = np.argsort(xs, kind="mergesort")
+            tmp = perm[s:e].copy()
+            for i in range(e - s):
+                perm[s + i] = tmp[o[i]]
+        for i in range(s + 1, e):
+            v = perm[i]
+            j = i - 1
+            while j >= s and (x[v] < x[perm[j]] or (x[v] == x[perm[j]] and y[v] < y[perm[j]])):
+                perm[j + 1] = perm[j]
+                j -= 1
+            perm[j + 1] = v
+        s = e
+    return perm
 
 
 @njit(cache=True, nogil=True, parallel=True)
