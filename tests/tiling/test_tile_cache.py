@@ -251,3 +251,22 @@ def test_shared_tiles_offers_what_this_process_already_holds(scene_tiles, tmp_pa
                 xyz, _ = reader._whole_tile(str(p), other)
                 assert isinstance(xyz, np.memmap)
             assert opened == []
+
+
+def test_mapped_tiles_count_against_the_cache_bound(scene_tiles, tmp_path):
+    # the pages of a mapped tile stay resident while it is mapped: the bound applies to
+    # them as to decompressed ones (a worker's memory, as Dask sees it, stays bounded)
+    from lidarqa.tiling import reader
+
+    _, paths = scene_tiles
+    folder = tmp_path / "shared"
+    folder.mkdir()
+    first = reader._TileCache(reader.TILE_CACHE_BYTES, FIELDS, str(folder))
+    sizes = []
+    for p in paths:
+        xyz, fields = reader._whole_tile(str(p), first)
+        sizes.append(xyz.nbytes + sum(v.nbytes for v in fields.values()))
+    other = reader._TileCache(max(sizes) + 1, FIELDS, str(folder))
+    for p in paths:
+        assert isinstance(reader._whole_tile(str(p), other)[0], np.memmap)
+        assert other.nbytes <= other.max_bytes and len(other.entries) == 1

@@ -90,10 +90,9 @@ class _TileCache:
             return hit
 
     def put(self, key: tuple, value: tuple[np.ndarray, dict[str, np.ndarray]]) -> None:
-        # arrays mapped from the shared folder cost the page cache, not this process
-        size = sum(
-            0 if isinstance(a, np.memmap) else a.nbytes for a in (value[0], *value[1].values())
-        )
+        # arrays mapped from the shared folder count too: the pages a chunk touched stay
+        # in this process's resident memory (what Dask's memory limit watches) while mapped
+        size = value[0].nbytes + sum(v.nbytes for v in value[1].values())
         if size > self.max_bytes:
             return
         with self.lock:
