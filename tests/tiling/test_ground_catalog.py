@@ -273,3 +273,33 @@ def test_tiles_are_written_while_the_last_chunks_run(scene_tiles, tmp_path, monk
     assert seen == [True]
     assert _digests(two.outputs) == _digests(serial.outputs)
     assert not (out / WORK_DIR).exists()
+
+
+def test_a_serial_run_too_big_for_its_cache_decompresses_each_tile_once(
+    scene_tiles, tmp_path, monkeypatch
+):
+    # a catalog whose tiles do not fit in the tile cache (here: a cache of one tile): the
+    # serial run keeps what it decompresses in its work folder and maps it again, instead
+    # of decompressing a tile for every chunk that reads it; the outputs are the same
+    import lidarqa.tiling.ground as ground
+    from lidarqa.tiling import reader
+
+    _, paths = scene_tiles
+    opts = {"chunk_size": 30.0, "origin": (1000.0, 2000.0), "buffer": 10.0, "cell_size": 20.0}
+    plain = ground_catalog(paths, tmp_path / "plain", workers=1, **opts)
+    one_tile = max(lidarqa.read(p).xyz.nbytes for p in paths) * 2
+    monkeypatch.setattr(ground, "TILE_CACHE_BYTES", one_tile)
+    seen: list[str] = []
+    real = reader._decompress
+
+    def counting(path, fields):
+        if reader._active().spill is not None:  # after the automatic parameters' sample
+            seen.append(path)
+        return real(path, fields)
+
+    monkeypatch.setattr(reader, "_decompress", counting)
+    with reader.tile_cache(one_tile, fields=ground._CHUNK_FIELDS):  # the job's own, smaller
+        small = ground_catalog.__wrapped__(paths, tmp_path / "small", workers=1, **opts)
+    assert _digests(small.outputs) == _digests(plain.outputs)
+    assert seen and len(set(seen)) == len(seen)  # once each at most
+    assert not (tmp_path / "small" / WORK_DIR).exists()

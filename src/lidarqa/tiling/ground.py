@@ -45,7 +45,7 @@ import numpy as np
 
 from .._arrays import colmin
 from ..errors import OptionError, OutputExistsError, TilingError
-from .reader import shared_tiles, tile_cache, unshare_tile
+from .reader import TILE_CACHE_BYTES, shared_tiles, tile_cache, unshare_tile
 
 if TYPE_CHECKING:
     from ..ground.auto import CloudMeasures
@@ -70,6 +70,8 @@ WORK_DIR = ".lidarqa-work"
 _AUTO_FIELDS = ("return_number", "number_of_returns", "scan_angle", "scan_angle_rank")
 #: the dimensions the filter reads (returns, classes for the noise and the evaluation)
 _CHUNK_FIELDS = (*_AUTO_FIELDS, "classification")
+#: bytes a point takes in the tile cache with these fields (xyz, returns, angle, class)
+_POINT_BYTES = 24 + 1 + 1 + 2 + 1
 
 
 @dataclass(frozen=True)
@@ -870,9 +872,14 @@ def ground_catalog(
                         ready.append(k)
             write_next()
 
-        # the local processes share the tiles they decompress: without it each would
-        # decompress nearly every tile, as every chunk's buffer reaches its neighbours
-        spill = str(work / "tiles") if engine.head_works and len(todo) > 1 else None
+        # The local processes share the tiles they decompress: without it each would
+        # decompress nearly every tile, as every chunk's buffer reaches its neighbours. A
+        # serial run whose tiles do not fit in its cache keeps them the same way: the 50-tile
+        # block's chunks decompressed 135 tiles through the cache alone (a chunk's
+        # neighbourhood is 3 x 3 tiles; the cache holds about 8)
+        fits = catalog.n_points * _POINT_BYTES <= TILE_CACHE_BYTES
+        local = engine.head_works or (engine.serial and not fits)
+        spill = str(work / "tiles") if local and len(todo) > 1 else None
         try:
             with shared_tiles(spill):
                 outcomes = run_chunks(
