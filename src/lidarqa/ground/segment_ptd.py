@@ -1354,6 +1354,25 @@ def _segment_ptd(
     ground |= seg_pt & is_ground_seg[lab_c]
     n_seed_points = int(ground.sum())
     thin_cell = par.min_edge_length / math.sqrt(2.0) if par.min_edge_length > 0 else 0.0
+
+    def densify_from(base: np.ndarray, open_: np.ndarray, progress: Any = None) -> DensifyState:
+        """Densify the TIN of the (thinned) `base` ground with the `open_` candidates."""
+        in_tin = np.zeros(n, dtype=bool)
+        in_tin[_thin(xyz, np.flatnonzero(base), thin_cell)] = True
+        st = DensifyState(ground=base.copy(), in_tin=in_tin, open_=open_, added=[])
+        tin = densify(
+            xyz,
+            st,
+            virtual,
+            crit,
+            max_iter=int(par.max_iter),
+            min_gain_frac=float(par.min_gain_frac),
+            progress=progress,
+            final_tin=par.final_distance > 0,
+        )
+        if par.final_distance > 0 and tin is not None:
+            final_pass(xyz, st, tin, par.final_distance)
+        return st
     seg_size = np.bincount(lab[seg_pt], minlength=n_seg)
     vetoed = np.zeros(n_seg, dtype=bool)  # raised segments, rejected for good
     accepted: list[int] = []
@@ -1364,24 +1383,10 @@ def _segment_ptd(
     for it in range(int(par.max_iter)):
         # iteration `it` reports into half of what remains of [0.1, 0.9] (unknown count)
         span = stage(progress, 0.9 - 0.8 * 0.5**it, 0.9 - 0.8 * 0.5 ** (it + 1))
-        in_tin = np.zeros(n, dtype=bool)
-        in_tin[_thin(xyz, np.flatnonzero(ground), thin_cell)] = True
         open_ = seg_pt & ~is_ground_seg[lab_c] & ~vetoed[lab_c]
         if par.unsegmented == "point_ptd":
             open_ |= unseg_pt & ~ground
-        st = DensifyState(ground=ground.copy(), in_tin=in_tin, open_=open_, added=[])
-        tin = densify(
-            xyz,
-            st,
-            virtual,
-            crit,
-            max_iter=int(par.max_iter),
-            min_gain_frac=float(par.min_gain_frac),
-            progress=span,
-            final_tin=par.final_distance > 0,
-        )
-        if par.final_distance > 0 and tin is not None:
-            final_pass(xyz, st, tin, par.final_distance)
+        st = densify_from(ground, open_, span)
         passed = st.ground & ~ground
         unseg_ground = passed & unseg_pt
         n_pass = np.bincount(lab[seg_pt & passed], minlength=n_seg)
@@ -1421,20 +1426,7 @@ def _segment_ptd(
         # judge them again, point-wise, against the TIN of the ground that remains
         if par.unsegmented == "point_ptd" and vetoed.any():
             base = ground & ~unseg_ground
-            in_tin = np.zeros(n, dtype=bool)
-            in_tin[_thin(xyz, np.flatnonzero(base), thin_cell)] = True
-            st = DensifyState(ground=base.copy(), in_tin=in_tin, open_=unseg_pt & ~base, added=[])
-            tin = densify(
-                xyz,
-                st,
-                virtual,
-                crit,
-                max_iter=int(par.max_iter),
-                min_gain_frac=float(par.min_gain_frac),
-                final_tin=par.final_distance > 0,
-            )
-            if par.final_distance > 0 and tin is not None:
-                final_pass(xyz, st, tin, par.final_distance)
+            st = densify_from(base, unseg_pt & ~base)
             unseg_ground = st.ground & ~base & unseg_pt
             n_pp = int(unseg_ground.sum())
             ground = base | unseg_ground
