@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-__all__ = ["centred_moments", "grid_keys"]
+__all__ = ["centred_moments", "grid_keys", "sort_runs_lex"]
 
 
 @njit(cache=True, nogil=True)
@@ -60,3 +60,45 @@ def grid_keys(x, y, cell, lo_x, lo_y, span_y):  # pragma: no cover - numba
             np.floor(y[i] / cell) - lo_y
         )
     return key
+
+
+@njit(cache=True, nogil=True)
+def _lex_less(pts, a, b):  # pragma: no cover - numba
+    if pts[a, 0] != pts[b, 0]:
+        return pts[a, 0] < pts[b, 0]
+    if pts[a, 1] != pts[b, 1] or pts.shape[1] < 3:
+        return pts[a, 1] < pts[b, 1]
+    return pts[a, 2] < pts[b, 2]
+
+
+@njit(cache=True, nogil=True)
+def sort_runs_lex(perm, key_sorted, pts):  # pragma: no cover - numba
+    """Sort each run of equal keys of `perm` by (x, y[, z]) in place (stable).
+
+    `pts` has 2 or 3 columns; `key_sorted` is the key of ``perm[i]``, sorted. Geometry's
+    canonical order and ground's Morton order both end with it.
+    """
+    n = perm.shape[0]
+    s = 0
+    while s < n:
+        e = s + 1
+        while e < n and key_sorted[e] == key_sorted[s]:
+            e += 1
+        if e - s > 16:
+            # sort the run by x first (O(g log g)); the insertion pass then only fixes x-ties
+            xs = np.empty(e - s)
+            for i in range(s, e):
+                xs[i - s] = pts[perm[i], 0]
+            o = np.argsort(xs, kind="mergesort")
+            tmp = perm[s:e].copy()
+            for i in range(e - s):
+                perm[s + i] = tmp[o[i]]
+        for i in range(s + 1, e):
+            v = perm[i]
+            j = i - 1
+            while j >= s and _lex_less(pts, v, perm[j]):
+                perm[j + 1] = perm[j]
+                j -= 1
+            perm[j + 1] = v
+        s = e
+    return perm

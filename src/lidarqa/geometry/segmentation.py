@@ -15,6 +15,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .._arrays import colmax, colmin
+from .._gridkernels import sort_runs_lex
 from .._progress import ProgressCallback, report, stage
 from .._validate import as_points, check_choice, check_positive, check_range
 from ..errors import OptionError
@@ -71,7 +72,7 @@ def canonical_points(points: np.ndarray, cell: float | None = None, *, anchored:
     key = (ijk[:, 0] * dims[1] + ijk[:, 1]) * dims[2] + ijk[:, 2]
     perm = np.argsort(key, kind="stable")
     # within a cell: lexicographic x, y, z (exact duplicates keep their input order)
-    perm = K.sort_runs_lex(perm, key[perm], points)
+    perm = sort_runs_lex(perm, key[perm], points)
     pts = np.ascontiguousarray(points[perm] - (lo + hi) / 2.0)
     return perm, pts
 

@@ -14,6 +14,7 @@ from numba import get_num_threads, njit, prange
 from scipy.spatial import Delaunay, QhullError
 
 from .._arrays import colmax, colmin
+from .._gridkernels import sort_runs_lex
 
 EPS = 1e-9
 #: vertex numbers below this fit the 21-bit fields of a facet key (judge_points(keys=True))
@@ -416,7 +417,7 @@ def spatial_order(xy: np.ndarray) -> np.ndarray:
     q = np.minimum(((xy - lo) / span * 65535.0).astype(np.int64), 65535)
     code = _interleave(q[:, 0]) | (_interleave(q[:, 1]) << 1)
     # = np.lexsort((xy[:, 1], xy[:, 0], code)), a third of its time on a million points
-    return _morton_sort(code, np.ascontiguousarray(xy[:, 0]), np.ascontiguousarray(xy[:, 1]))
+    return _morton_sort(code, np.ascontiguousarray(xy[:, :2], dtype=np.float64))
 
 
 def _interleave(v: np.ndarray) -> np.ndarray:
@@ -432,11 +433,12 @@ def _interleave(v: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True, nogil=True)
-def _morton_sort(code, x, y):  # pragma: no cover - numba
+def _morton_sort(code, xy):  # pragma: no cover - numba
     """The permutation sorting by (`code`, `x`, `y`), ties by index: a stable sort.
 
     `code` < 2**32: a stable radix sort of two 16-bit passes, then each run of equal
     codes (one or two points, almost always) sorted by (x, y) in place (stable).
+    `xy`: (n, 2) float64.
     """
     n = code.shape[0]
     perm = np.arange(n)
@@ -456,29 +458,7 @@ def _morton_sort(code, x, y):  # pragma: no cover - numba
             cnt[b] += 1
         perm, perm2 = perm2, perm
         key, key2 = key2, key
-    s = 0
-    while s < n:
-        e = s + 1
-        while e < n and key[e] == key[s]:
-            e += 1
-        if e - s > 16:
-            # by x first (stable, O(g log g)); the insertion pass then only fixes x-ties
-            xs = np.empty(e - s)
-            for i in range(s, e):
-                xs[i - s] = x[perm[i]]
-            o = np.argsort(xs, kind="mergesort")
-            tmp = perm[s:e].copy()
-            for i in range(e - s):
-                perm[s + i] = tmp[o[i]]
-        for i in range(s + 1, e):
-            v = perm[i]
-            j = i - 1
-            while j >= s and (x[v] < x[perm[j]] or (x[v] == x[perm[j]] and y[v] < y[perm[j]])):
-                perm[j + 1] = perm[j]
-                j -= 1
-            perm[j + 1] = v
-        s = e
-    return perm
+    return sort_runs_lex(perm, key, xy)
 
 
 @njit(cache=True, nogil=True, parallel=True)
