@@ -14,6 +14,18 @@ from lidarqa.tiling.reader import read_chunk, shared_tiles, tile_cache, unshare_
 FIELDS = ("return_number", "number_of_returns", "classification")
 
 
+class _Task:
+    """A chunk task that declares its fields (and a shared folder), as the ground task does."""
+
+    tile_fields = FIELDS
+
+    def __init__(self, spill: str | None = None) -> None:
+        self.tile_spill = spill
+
+    def __call__(self, data):
+        return data
+
+
 def _same(a, b, fields) -> None:
     np.testing.assert_array_equal(a.cloud.xyz, b.cloud.xyz)
     np.testing.assert_array_equal(a.point_index, b.point_index)
@@ -81,21 +93,15 @@ def test_a_worker_keeps_its_tiles_across_chunks(scene_tiles, monkeypatch):
     from lidarqa.tiling import reader
     from lidarqa.tiling.engine import run_task
 
-    class Task:
-        tile_fields = FIELDS
-
-        def __call__(self, data):
-            return data
-
     _, paths = scene_tiles
     cat = open_catalog(paths)
     chunks = make_chunks(cat, chunk_size=40.0, buffer=25.0)
     plain = [read_chunk(cat, c) for c in chunks]
     opened = _counting_reader(monkeypatch)
     try:
-        first = [run_task(cat, c, Task()) for c in chunks]
+        first = [run_task(cat, c, _Task()) for c in chunks]
         n_first = len(opened)
-        again = [run_task(cat, c, Task()) for c in chunks]
+        again = [run_task(cat, c, _Task()) for c in chunks]
         assert len(opened) == n_first == len(paths)  # each tile decompressed once
     finally:
         reader.clear_worker_tile_cache()
@@ -130,25 +136,18 @@ def test_processes_share_the_tiles_they_decompress(scene_tiles, tmp_path, monkey
     spill = tmp_path / "spill"
     spill.mkdir()
 
-    class Task:
-        tile_fields = FIELDS
-        tile_spill = str(spill)
-
-        def __call__(self, data):
-            return data
-
     _, paths = scene_tiles
     cat = open_catalog(paths)
     chunks = make_chunks(cat, chunk_size=40.0, buffer=25.0)
     plain = [read_chunk(cat, c) for c in chunks]
     opened = _counting_reader(monkeypatch)
     try:
-        first = [run_task(cat, c, Task()) for c in chunks]
+        first = [run_task(cat, c, _Task(str(spill))) for c in chunks]
         assert len(opened) == len(paths)
         assert len([p for p in spill.iterdir() if p.is_dir()]) == len(paths)
         assert not list(spill.glob("*.claim"))
         reader.clear_worker_tile_cache()  # another process: nothing in its memory
-        second = [run_task(cat, c, Task()) for c in chunks]
+        second = [run_task(cat, c, _Task(str(spill))) for c in chunks]
         assert len(opened) == len(paths)  # mapped, not decompressed again
     finally:
         reader.clear_worker_tile_cache()

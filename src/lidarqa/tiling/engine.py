@@ -709,23 +709,21 @@ def _drive(
         elif not here:
             start()
         with _one_thread() if head and not here else contextlib.nullcontext():
-            busy = idle is not None and head
+            # with nothing here to take, try idle() once per wake-up (a chunk settled)
+            try_idle = idle is not None and head
             while True:
                 with cond:
-                    while not failed and remaining and not (head and pending) and not busy:
+                    while not failed and remaining and not (head and pending) and not try_idle:
                         cond.wait(0.5)
-                        busy = idle is not None and head
+                        try_idle = idle is not None and head
                     if failed:
                         raise failed[0]
                     if not remaining:
                         break
-                    if not (head and pending):  # other work meanwhile
-                        i = -1
-                    else:
-                        i = pending.popleft()
-                if i < 0:
+                    i = pending.popleft() if head and pending else None
+                if i is None:
                     assert idle is not None
-                    busy = idle()
+                    try_idle = idle()  # False: no other work until the next wake-up
                     continue
                 ok, value = _attempt(call, i)
                 with cond:
