@@ -140,6 +140,7 @@ LABELS: dict[str, Label] = {
     ),
     "terrain_density": _l("terrain first: filtered on its lowest points, at (0 = off)", "pts/m²"),
     "terrain_distance": _l("ground kept up to this height above the terrain", M),
+    "terrain_band": _l("terrain first: lowest points filtered up to this height above it", M),
     "facade_distance": _l("façade points join the final ground within (0 = never)", M),
     "roof_ratio": _l("final roof check: raised share of a gable pair (0 = off)", PCT, 100.0),
     # plane segmentation and edges
