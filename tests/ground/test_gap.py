@@ -113,3 +113,18 @@ def test_parameter_validated_and_set_for_sparse_airborne_clouds_only():
     dense = np.column_stack([rng.uniform(0, 60, (36000, 2)), rng.normal(0, 0.02, 36000)])
     params, _, regime = auto_parameters(measure_cloud(dense), "segment-ptd")
     assert regime == "als-dense" and params.get("gap_step", 0.0) == 0.0
+
+
+@pytest.mark.parametrize("chunk", [1, 7, 64])
+def test_independent_of_the_chunk_size(monkeypatch, chunk):
+    # the tested points go in chunks (bounded memory): any chunk size, the same mask
+    p, _ = _valley_deck(4)
+    q, _ = ground_profile("deck", seed=5, spacing=SPACING, width=8.0)
+    p = np.vstack([p, q + [0.0, 100.0, 0.0]])  # a second deck, beside the first
+    ones = np.ones(len(p), dtype=bool)
+    cand = ones.copy()
+    cand[::5] = False  # fewer candidates than ground
+    whole = gap_mask(p, ones, cand, step=4.0)
+    assert whole.sum() > 10
+    monkeypatch.setattr(G, "CHUNK", chunk)
+    np.testing.assert_array_equal(gap_mask(p, ones, cand, step=4.0), whole)
