@@ -73,11 +73,11 @@ OPPOSITE = 0.5
 #: tested points per chunk: a chunk's drops are filtered, checked and summed per point
 #: before the next chunk's are searched, so memory stays bounded on large sparse tiles
 #: (the result does not depend on it)
-CHUNK = 8192
+CHUNK = 4096
 #: least cell size (m) of the neighbour grids
 _CELL = 4.0
 #: the most cells of a neighbour grid (a larger extent gets larger cells)
-_MAX_CELLS = 1 << 22
+_MAX_CELLS = 1 << 20
 #: margin (m) on the cells scanned around a disc or a corridor: the tests on each
 #: point are exact, the margin only keeps rounding from hiding a cell
 _MARGIN = 1e-3
