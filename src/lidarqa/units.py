@@ -98,7 +98,7 @@ KEY_UNITS: dict[str, str] = {
         iter_distance final_distance below_distance connect_distance min_edge_length
         grow_dist grow_radius terrain_grow_radius seed_dist seed_dz seed_radius raised_radius
         raised_step perched_step perched_radius join_distance terrain_distance terrain_band
-        facade_distance
+        facade_distance gap_step
         adjacency_dist near_dist max_dist min_length max_rmse instrument_height
         distance length rho rms rmse buffer tolerance cutoff gao_leung_tm gao_leung_mt
         hausdorff_tm hausdorff_mt grid map_spacing median_length median_sigma_line

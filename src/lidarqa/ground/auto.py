@@ -129,6 +129,9 @@ SENSORS = ("auto", "als", "mls")
 DENSE_ALS = 4.0
 #: storey height (m): the perched-surface test of airborne segment-PTD (both regimes)
 PERCHED_STEP = 2.0
+#: clearance (m) under a bridge deck: the gap test of sparse airborne segment-PTD
+#: (`gap_step`; twice the storey, about the 4.5 m headroom of a road under a bridge)
+GAP_STEP = 4.0
 #: points/m² dense airborne clouds are filtered at (lowest point per cell, the rest
 #: joined by a plane test; segment-PTD's `filter_density`), above 1.5 times it
 FILTER_DENSITY = 4.0
@@ -179,6 +182,7 @@ ALS_SEGMENT_PARAMS: dict[str, Any] = {
     "connect_ratio": 0.6,
     "below_pass": True,
     "perched_step": PERCHED_STEP,
+    "gap_step": GAP_STEP,  # bridge decks over an unsampled gap (sparse clouds)
     "facade_distance": 0.7,  # = iter_distance: steep banks grown into façade segments
     "roof_ratio": 0.15,  # final roof check: gable pairs with a raised border
 }

@@ -25,6 +25,7 @@ from .._gridkernels import centred_moments, grid_keys
 from .._progress import ProgressCallback, report, stage
 from .._validate import as_points, check_choice, check_positive, check_range
 from ..errors import DegenerateGeometryWarning, InvalidPointsError, OptionError
+from ._gap import gap_mask
 from ._perched import perched_mask
 from ._tin import TIN, build_tin, tree_workers, virtual_hull
 from .features import (
@@ -224,6 +225,18 @@ class SegmentPTD(TINParameters):
         point-wise ground on it are gone.
     perched_angle : float, default 45.0
     perched_radius : float, default 8.0
+    gap_step : float, default 0.0
+        Gap test, after the perched test (m; 0 disables; the clearance under a deck):
+        a bridge deck stands on piers, so between its edge and the lower ground beyond
+        it the cloud holds no return at an intermediate height, while an embankment's
+        side is a slope that carries returns. A drop of more than `gap_step` m to
+        accepted ground (a surface, not an outlier) within 12 m at a grade steeper
+        than 30° is clean when its corridor (1.5 m either side) holds no candidate in
+        the middle of the drop; accepted points whose drops are (nearly all) clean
+        and that have such an edge facing the other way within 12 m at their level
+        are rejected. Catches what the perched test cannot reach in sparse clouds
+        (2 m between points): a narrow deck over a valley; not a deck level with
+        ground that continues beside it. See :mod:`lidarqa.ground._gap`.
     filter_density : float, default 0.0
         Dense clouds (points/m²; 0 = off, the automatic parameters set it for dense
         airborne clouds): the filter runs on the lowest candidate of each XY cell of
@@ -356,6 +369,7 @@ class SegmentPTD(TINParameters):
     perched_step: float = 0.0
     perched_angle: float = 45.0
     perched_radius: float = 8.0
+    gap_step: float = 0.0
     filter_density: float = 0.0
     join_distance: float = 0.15
     join_below: bool = False
@@ -395,6 +409,7 @@ class SegmentPTD(TINParameters):
         check_positive(self.perched_step, "perched_step", allow_zero=True)
         check_range(self.perched_angle, "perched_angle", 0.0, 90.0, hi_open=True)
         check_positive(self.perched_radius, "perched_radius")
+        check_positive(self.gap_step, "gap_step", allow_zero=True)
         check_range(self.filter_density, "filter_density", 0.0, MAX_FILTER_DENSITY)
         check_positive(self.join_distance, "join_distance", allow_zero=True)
         check_range(self.terrain_density, "terrain_density", 0.0, MAX_FILTER_DENSITY)
@@ -1528,6 +1543,10 @@ def _segment_ptd(
             roof = cut & (n_b >= _ROOF_MIN_BORDER) & (n_up >= par.raised_ratio * n_b - 1e-9)
             is_ground_seg &= ~roof
             ground &= ~((lab >= 0) & roof[lab_c])
+    # 10. gap test: a raised surface whose sides drop, across an unsampled corridor, on
+    # opposite sides stands on piers (a bridge deck); only its two edges are rejected
+    if par.gap_step > 0 and ground.any():
+        ground &= ~gap_mask(points, ground, cand, step=float(par.gap_step))
     return SegmentPTDResult(
         ground,
         lab,

@@ -132,6 +132,7 @@ LABELS: dict[str, Label] = {
     "perched_step": _l("perched-surface test: drop on opposite sides (0 = off)", M),
     "perched_angle": _l("perched-surface test: steepest grade of terrain", DEG),
     "perched_radius": _l("perched-surface test: search radius", M),
+    "gap_step": _l("gap test: clearance under a deck, drop with no return in between (0 = off)", M),
     "filter_density": _l("dense cloud filtered on its lowest points, at (0 = all)", "pts/m²"),
     "join_distance": _l("other points of a ground cell join within", M),
     "join_below": _l("a cell whose lowest point lies below the ground joins its neighbours' plane"),
