@@ -665,8 +665,11 @@ def knn_grid(pts, k, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, order, rm
     Works cell by cell: the points of the 27 cells around a cell are gathered once
     into a contiguous buffer, and each point of the cell keeps its k nearest among
     them when the k-th distance is within one cell (exact); other points fall back
-    to expanding rings (:func:`_knn_one`). Rows are ordered by distance, ties in
-    gather order (`by_index`: by index, which does not depend on the grid).
+    to expanding rings (:func:`_knn_one`). Rows answered in one cell are ordered by
+    distance, ties in gather order (`by_index`: by index, which does not depend on the
+    grid); rows of the ring search hold their k nearest in gather order (strictly
+    closer ones first, then the ties at the k-th distance), not by distance, unless
+    `by_index`. The set of each row is the exact k nearest either way.
 
     The distances to all candidates are computed in one pass; only those within a
     guess of the k-th distance (the previous point's, a little wider) are ranked,
@@ -774,8 +777,10 @@ def knn_grid(pts, k, cell, cx, cy, cz, nyz, nz, cell_keys, cell_start, order, rm
 def knn(pts: np.ndarray, k: int, *, by_index: bool = False) -> np.ndarray:
     """Exact k nearest neighbours (including the point itself) of every point, (N, k) int64.
 
-    `by_index`: rows ordered by (distance, index), so ties do not depend on the grid
-    (the same neighbours for a point in any subset holding them, in the same order).
+    A row is the set of the k nearest; it is not always ordered by distance (see
+    :func:`knn_grid`). `by_index`: rows ordered by (distance, index), so ties do not
+    depend on the grid (the same neighbours for a point in any subset holding them, in
+    the same order).
 
     A hashed grid sized from the occupied-cell density answers most queries in one
     ring of cells (numba, parallel); the few points that need more rings are
