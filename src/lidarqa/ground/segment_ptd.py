@@ -911,14 +911,17 @@ def _terrain_model(
     xyz = pts - colmin(pts)
     virtual = virtual_hull(xyz, ti, 1.0, colmin(xyz[ti]), colmax(xyz[ti]))
     tin = build_tin(xyz, ti, virtual)
+    trees: list[Any] = []  # the terrain points' XY tree, built once when first needed
 
     def height(idx: np.ndarray) -> np.ndarray:
         h = _height_above_tin(tin, xyz[idx])
         rest = np.flatnonzero(np.isnan(h))
         if rest.size:
-            from scipy.spatial import cKDTree
+            if not trees:
+                from scipy.spatial import cKDTree
 
-            _, j = cKDTree(xyz[ti, :2]).query(xyz[idx[rest], :2], workers=tree_workers())
+                trees.append(cKDTree(xyz[ti, :2]))
+            _, j = trees[0].query(xyz[idx[rest], :2], workers=tree_workers())
             h[rest] = xyz[idx[rest], 2] - xyz[ti[j], 2]
         return h
 
