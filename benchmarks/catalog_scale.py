@@ -225,6 +225,11 @@ def main() -> None:
         )
         chunk = cat.tile_size() if a.chunk_size == "tile" else a.chunk_size
         peer = None if a.no_csf else run_csf(paths, tmp / "out-csf")
+        from _peers import warm_up
+
+        # untimed: the bytecode of what the CLI and its workers import (see timed_env)
+        warm_up([sys.executable, "-c", "import lidarqa.cli.main, lidarqa.ground, "
+                 "lidarqa.tiling, distributed"], _env())
         rows = []
         for w in [int(v) for v in a.workers.split(",")]:
             rows.append(run_ground(block, tmp / f"out-{w}", w, chunk))
