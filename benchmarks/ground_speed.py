@@ -20,10 +20,13 @@ CSF = cloth-simulation-filter (``pip install cloth-simulation-filter``), on the 
 - ``csf05`` the same with a 0.5 m cloth on the dense synthetic scene (slower).
 
 Times are read + filter + write (the imports the run needs included, not the
-interpreter start). Both methods run after ``import lidarqa``, which sets
-``OMP_WAIT_POLICY=PASSIVE``: CSF's OpenMP threads then sleep between parallel regions
-too (on 2 shared cores that took a quarter to a half of CSF's CPU time off on bcts_2
-and the Oakland set), so the CPU ratio compares the two without spinning threads.
+interpreter start); the summary also gives the median CPU seconds per phase (the start,
+the filter's imports, reading with the reader's imports, filtering with its first calls,
+writing). Both methods
+run after ``import lidarqa``, which sets ``OMP_WAIT_POLICY=PASSIVE``: CSF's OpenMP
+threads then sleep between parallel regions too (on 2 shared cores that took a quarter
+to a half of CSF's CPU time off on bcts_2 and the Oakland set), so the CPU ratio
+compares the two without spinning threads.
 Every module loads from bytecode, as in an installed package (``_peers.timed_env``;
 without it each lidarqa process compiled lidarqa's source again, 0.07 CPU-s of its
 2.0 s on bcts_2), and one untimed run of each method on each dataset comes first, so
@@ -86,27 +89,41 @@ def one(method: str, src: str, out: str, cloth: float = 0.5) -> dict:
     import lidarqa
 
     times = {"read_s": 0.0, "filter_s": 0.0, "write_s": 0.0}
+    # CPU seconds per phase: the start (lidarqa), the filter's imports, then reading (the
+    # LAS reader's imports on the first file), filtering (its first calls included) and
+    # writing, summed over the files
+    cpu = {"start": _cpu() - c0, "imports": 0.0, "read": 0.0, "filter": 0.0, "write": 0.0}
+    c1 = _cpu()
+    if method.startswith("csf"):
+        import CSF  # noqa: F401  (the wheel; imported by _peers.csf_ground)
+    else:
+        from lidarqa.ground import classify_ground
+    cpu["imports"] = _cpu() - c1
     n = n_ground = 0
     for k, path in enumerate(src.split(";")):
         t1 = time.perf_counter()
+        c1 = _cpu()
         cloud = lidarqa.read(path)
         t2 = time.perf_counter()
+        c2 = _cpu()
         if method.startswith("csf"):
             ground = _csf(cloud, 0.5 if method == "csf05" else 1.0)
         else:
-            from lidarqa.ground import classify_ground
-
             name, _, preset = method.partition("@")
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 ground = classify_ground(cloud, method=name, preset=preset or "auto").ground_mask
         t3 = time.perf_counter()
+        c3 = _cpu()
         from _peers import relabel
 
         cls = cloud.fields.get("classification", np.zeros(len(cloud), dtype=np.uint8))
         cloud.fields["classification"] = relabel(cls, ground)
         lidarqa.write(cloud, out.replace(".laz", f"-{k}.laz"), overwrite=True)
         t4 = time.perf_counter()
+        cpu["read"] += c2 - c1
+        cpu["filter"] += c3 - c2
+        cpu["write"] += _cpu() - c3
         times["read_s"] += t2 - t1
         times["filter_s"] += t3 - t2
         times["write_s"] += t4 - t3
@@ -118,6 +135,7 @@ def one(method: str, src: str, out: str, cloth: float = 0.5) -> dict:
         **times,
         "total_s": time.perf_counter() - t0,
         "cpu_s": _cpu() - c0,
+        "cpu_phases": cpu,
         "n_ground": n_ground,
         "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
     }
@@ -202,6 +220,11 @@ def main() -> None:
         cpu = {m: statistics.median(r["cpu_s"] for r in rs) for m, rs in res.items()}
         for m in med:
             print(f"{'':<22}{m}: median wall {med[m]:.2f} s, median CPU {cpu[m]:.2f} s")
+            phases = ", ".join(
+                f"{ph} {statistics.median(r['cpu_phases'][ph] for r in res[m]):.2f}"
+                for ph in res[m][0]["cpu_phases"]
+            )
+            print(f"{'':<24}median CPU s per phase: {phases}")
         for ref in ("csf", "csf05"):
             if ref not in med:
                 continue
